@@ -1,0 +1,233 @@
+"""``DrillString-v0``: the Gymnasium contract around the drill-string plant and nothing else."""
+
+from __future__ import annotations
+
+import math
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+import numpy.typing as npt
+
+from drill_env import kernel
+from drill_env.batch import StringBatch
+from drill_env.config import EnvConfig
+from drill_env.observation import OBS_BOUND, observation_size
+from drill_env.rewards import reward_terms, total_reward
+
+__all__ = ["DrillStringEnv", "validate_actions"]
+
+
+def validate_actions(
+    action: Any, num: int
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
+    """Check ``action`` (``num`` values in [-1, 1]) and clip it; returns (clipped, was_clipped).
+
+    Raises:
+        ValueError: naming ``action`` when it is not finite or not of the right shape.
+    """
+    try:
+        a = np.asarray(action, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"action must be numeric with shape ({num}, 1), got {action!r}") from None
+    if num == 1:
+        if a.shape not in ((1,), ()):
+            raise ValueError(f"action must have shape (1,), got shape {a.shape}")
+    elif a.shape not in ((num, 1), (num,)):
+        raise ValueError(f"action must have shape ({num}, 1), got shape {a.shape}")
+    a = a.reshape(num)
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"action must be finite, got {action!r}")
+    clipped = (a < -1.0) | (a > 1.0)
+    return np.clip(a, -1.0, 1.0), clipped
+
+
+class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
+    """Torsional stick-slip control of a 4-DOF drill string.
+
+    ## Description
+    A top drive turns a drill string of pipes, collars (BHA) and a bit; the bit rubs on rock
+    with Karnopp friction, which drops from the static ``T_a = mu_a WOB R`` to the sliding
+    ``T_0 = mu_0 WOB R``. The agent sets the top-drive torque so that the bit turns at the
+    reference speed without sticking. The plant is SPEC section 1 (Zribi, Sidhom & Gharib 2024,
+    eq. 27-29), integrated at 1 ms with event-located stick and break-away; the torque is held
+    over each ``control_dt_s`` decision period.
+
+    ## Action Space
+    ``Box(-1, 1, (1,), float32)``; out-of-range values are clipped and counted in ``info``, and
+    a NaN, infinite or wrongly shaped action raises ``ValueError``.
+
+    | mode | top-drive torque ``u`` (N m) |
+    |---|---|
+    | direct (``base_controller=None``) | ``min_torque + (a + 1) / 2 (max_torque - min_torque)`` |
+    | residual | ``clip(u_base + residual_scale_nm a, min_torque, max_torque)`` |
+
+    In residual mode the base controller computes ``u_base`` at every 1 ms plant step.
+
+    ## Observation Space
+    ``Box(-50, 50, (9,), float32)``, or ``(11,)`` in residual mode; each entry is a physical
+    value divided by its scale (``drill_env.observation``) and clipped to +-50.
+
+    | index | observation | scale |
+    |---|---|---|
+    | 0, 2, 4, 6 | measured speeds of top drive, pipes, collars, bit (noisy) | 20 rad/s |
+    | 1, 3, 5 | twists top drive-pipes, pipes-collars, collars-bit (exact) | 20 rad |
+    | 7 | reference bit speed | 20 rad/s |
+    | 8 | last applied top-drive torque | max(abs(min_torque), abs(max_torque)) |
+    | 9 | base controller torque (residual mode) | same as 8 |
+    | 10 | base controller sliding variable s (residual mode) | 20 rad/s |
+
+    ## Rewards
+    Per decision period, with ``e = V_ref - w_bit`` (true bit speed) at every plant step:
+
+    ``r = -(w_t T + w_c C + w_s S) / (w_t + w_c + w_s)``, in ``[-1, 0]``, where
+    ``T = mean(min(|e| / max(V_ref, 1 rad/s), 1))`` (tracking), ``C = min(TV(u) / 5000 N m, 1)``
+    (chattering: total variation of the applied torque) and ``S`` the share of plant steps with
+    the bit stuck. Weights ``RewardWeights(tracking=1, chattering=0.1, stuck=0.5)`` by default;
+    the terms are in ``info["reward_terms"]``. A diverged step gets -1.
+
+    ## Starting State
+    At rest, ``x = 0``, bit stuck. The scenario (WOB profile, reference, uncertainty) is drawn
+    from ``randomization`` at every reset when ``randomize=True`` (WOB U(60, 200) kN with a 50 %
+    chance of one step change at mid-episode, V_ref U(4, 16) rad/s, Delta1..3 U(0, 0.75) on the
+    plant), else taken from the keywords. Every draw comes from generators spawned from the
+    reset seed, one per component (``wob``, ``reference``, ``uncertainty``, ``noise``).
+
+    ## Episode End
+    Truncation after ``episode_s`` (the registered ``max_episode_steps`` is 2000 = 100 s / 0.05 s;
+    when you change ``episode_s`` or ``control_dt_s`` at ``make``, pass ``max_episode_steps``
+    too). Termination when the state is not finite or leaves the physical bounds (1000 rad/s,
+    1000 rad): ``info["termination_reason"] = "diverged"``, the observation stays finite.
+
+    ## Arguments
+    | keyword | meaning | default |
+    |---|---|---|
+    | ``parameters`` | preset name (``zribi2024``, ``navarro_lopez2007``) or parameters | ``zribi2024`` |
+    | ``randomize`` | draw the scenario at each reset | ``True`` |
+    | ``wob_n`` | weight on bit, N (``randomize=False``) | 97,347 |
+    | ``wob_step_time_s``, ``wob_final_n`` | one WOB step change (new rock layer) | none |
+    | ``reference_speed_rad_s`` | rad/s, or a ``SpeedProfile`` (steps, ramp) | 12 |
+    | ``uncertainty`` | ``nominal``, ``condition1..3`` or ``(D1, D2, D3)`` | ``nominal`` |
+    | ``uncertainty_reading`` | ``plant`` or ``controller`` | ``plant`` |
+    | ``noise_std_rad_s`` | measurement noise on the speeds, rad/s | 0.1 |
+    | ``episode_s`` | episode length, s | 100 |
+    | ``control_dt_s`` | decision period, multiple of 1 ms | 0.05 |
+    | ``base_controller`` | ``None``, a registered name or a controller object | ``None`` |
+    | ``residual_scale_nm`` | residual torque per unit action, N m | 5,000 |
+    | ``min_torque_nm``, ``max_torque_nm`` | torque limits, N m | 0, 50,000 |
+    | ``randomization`` | ``Randomization`` ranges | see Starting State |
+    | ``reward_weights`` | ``RewardWeights`` | see Rewards |
+
+    ``reset(options=...)`` takes the scenario keywords (``drill_env.batch.PER_EPISODE_KEYWORDS``)
+    for one episode; unknown keys are errors that list the valid ones.
+
+    ## Info
+    ``time_s``, ``bit_speed_rad_s``, ``top_drive_speed_rad_s``, ``reference_speed_rad_s``,
+    ``top_drive_torque_nm``, ``wob_n``, ``bit_stuck``, ``reward_terms``, ``action_clipped``,
+    ``actions_clipped_total``; in residual mode also ``base_torque_nm``, ``residual_torque_nm``,
+    ``sliding_variable_rad_s``, ``adaptive_gain``; ``termination_reason`` when terminated.
+
+    ## Version History
+    * v0: initial version.
+
+    ## Example
+    >>> import gymnasium as gym, drill_env
+    >>> env = gym.make("DrillString-v0", randomize=False, noise_std_rad_s=0.0)
+    >>> obs, info = env.reset(seed=0)
+    >>> obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+    """
+
+    metadata: dict[str, Any] = {"render_modes": []}  # noqa: RUF012
+
+    def __init__(self, **kwargs: Any) -> None:
+        self.config = EnvConfig.from_kwargs(kwargs)
+        self._batch = StringBatch(self.config, 1)
+        size = observation_size(self.config.residual)
+        self.observation_space = gym.spaces.Box(-OBS_BOUND, OBS_BOUND, (size,), np.float32)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
+        self._started = False
+
+    @property
+    def batch(self) -> StringBatch:
+        """The engine (a batch of one); its ``records`` hold the last step's plant samples."""
+        return self._batch
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[npt.NDArray[np.float32], dict[str, Any]]:
+        super().reset(seed=seed)
+        root = None
+        if seed is None and not self._started:
+            # Without any seed, derive the first episode from Gymnasium's own generator.
+            root = np.random.SeedSequence(int(self.np_random.integers(2**63)))
+        self._batch.reset_string(0, seed, options, previous_root=root)
+        self._started = True
+        obs = self._batch.observations()[0]
+        return obs, self._info(
+            reward_terms(0.0, 0.0, float(self._batch.mode[0] == 0), self._config)
+        )
+
+    @property
+    def _config(self) -> Any:
+        episode = self._batch.episodes[0]
+        assert episode is not None
+        return episode.config.reward_weights
+
+    def step(
+        self, action: Any
+    ) -> tuple[npt.NDArray[np.float32], SupportsFloat, bool, bool, dict[str, Any]]:
+        if not self._started:
+            raise RuntimeError("call reset() before step()")
+        a, clipped = validate_actions(action, 1)
+        b = self._batch
+        episode = b.episodes[0]
+        assert episode is not None
+        if b.status[0] != kernel.STATUS_OK:
+            raise RuntimeError("the episode has ended (diverged): call reset()")
+        episode.actions_clipped += int(clipped[0])
+        b.step(a)
+        weights = episode.config.reward_weights
+        summary = b.summary[0]
+        terms = reward_terms(
+            float(summary[kernel.SUM_TRACKING]),
+            float(summary[kernel.SUM_VARIATION]),
+            float(summary[kernel.SUM_STUCK]),
+            weights,
+        )
+        terminated = bool(b.status[0] != kernel.STATUS_OK)
+        reward = -1.0 if terminated else total_reward(terms, weights)
+        truncated = not terminated and b.step_index[0] >= round(episode.config.episode_s * 1000)
+        info = self._info(terms)
+        info["action_clipped"] = bool(clipped[0])
+        if terminated:
+            info["termination_reason"] = "diverged"
+        return b.observations()[0], reward, terminated, truncated, info
+
+    def _info(self, terms: dict[str, float]) -> dict[str, Any]:
+        b = self._batch
+        episode = b.episodes[0]
+        assert episode is not None
+        last = b.records[0, -1]
+        t = float(b.step_index[0]) * 1e-3
+        x = b.x[0]
+        info: dict[str, Any] = {
+            "time_s": t,
+            "bit_speed_rad_s": float(x[6]),
+            "top_drive_speed_rad_s": float(x[0]),
+            "reference_speed_rad_s": episode.scenario.reference.value(t),
+            "top_drive_torque_nm": float(b.last_u[0]),
+            "wob_n": float(last[kernel.REC_WOB]) if t > 0 else episode.scenario.wob.knots()[1][0],
+            "bit_stuck": bool(b.mode[0] == 0),
+            "reward_terms": terms,
+            "action_clipped": False,
+            "actions_clipped_total": episode.actions_clipped,
+        }
+        if b.residual:
+            base = float(last[kernel.REC_BASE_TORQUE]) if t > 0 else 0.0
+            info["base_torque_nm"] = base
+            info["residual_torque_nm"] = float(b.command[0])
+            info["sliding_variable_rad_s"] = float(b.law_state[0, 3])
+            info["adaptive_gain"] = float(b.law_state[0, 2])
+        if not math.isfinite(info["bit_speed_rad_s"]):  # pragma: no cover - kernel guards this
+            raise AssertionError("non-finite state escaped the kernel")
+        return info

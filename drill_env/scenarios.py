@@ -1,0 +1,296 @@
+"""Exogenous signals of an episode and every random draw: WOB profile, reference-speed
+profile, parametric uncertainty (SPEC section 2, Table 3) and measurement noise.
+
+Each random component draws from its own ``np.random.Generator``; :func:`spawn_generators`
+makes them from one ``np.random.SeedSequence``, so an episode's draws do not depend on how
+many numbers another component used.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Final, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from drill_env.parameters import DrillStringParameters, scale_uncertain
+
+__all__ = [
+    "COMPONENTS",
+    "check_range",
+    "UNCERTAINTY_CONDITIONS",
+    "EpisodeScenario",
+    "Randomization",
+    "SpeedProfile",
+    "WobProfile",
+    "resolve_uncertainty",
+    "spawn_generators",
+]
+
+MAX_KNOTS: Final = 16
+"""Largest number of knots of a profile."""
+
+UNCERTAINTY_CONDITIONS: Final[dict[str, tuple[float, float, float]]] = {
+    "nominal": (0.0, 0.0, 0.0),
+    "condition1": (0.40, 0.30, 0.30),
+    "condition2": (0.60, 0.50, 0.40),
+    "condition3": (0.75, 0.75, 0.75),
+}
+"""Table 3: relative increases (Delta1 of c_pi, Delta2 of k_pi, Delta3 of c_dt)."""
+
+UncertaintyReading = Literal["plant", "controller"]
+COMPONENTS: Final = ("wob", "reference", "uncertainty", "noise")
+"""The random components, in the order their generators are spawned."""
+
+
+def check_range(name: str, value: float, low: float, high: float) -> float:
+    """Return ``value`` as float if ``low <= value <= high``, else raise naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+        raise TypeError(f"{name} must be a real number, got {value!r}")
+    v = float(value)
+    if not (math.isfinite(v) and low <= v <= high):
+        raise ValueError(f"{name} = {value!r} is out of range: allowed [{low:g}, {high:g}]")
+    return v
+
+
+def check_interval(
+    name: str, bounds: Sequence[float], low: float, high: float
+) -> tuple[float, float]:
+    if len(bounds) != 2:
+        raise ValueError(f"{name} must be a (low, high) pair, got {bounds!r}")
+    lo = check_range(f"{name}[0]", bounds[0], low, high)
+    hi = check_range(f"{name}[1]", bounds[1], low, high)
+    if lo > hi:
+        raise ValueError(f"{name} = {tuple(bounds)!r} is inverted: low must be <= high")
+    return lo, hi
+
+
+MAX_WOB_N: Final = 1e6
+"""Largest accepted weight on bit, N."""
+MAX_REFERENCE_RAD_S: Final = 100.0
+"""Largest accepted reference bit speed, rad/s."""
+
+
+@dataclass(frozen=True)
+class WobProfile:
+    """Weight on bit: constant, or with one step change (a new rock layer).
+
+    Attributes:
+        initial_n: WOB from t = 0, N (> 0).
+        step_time_s: Time of the step change, s; ``None`` for a constant WOB.
+        final_n: WOB after the step, N (> 0); required with ``step_time_s``.
+    """
+
+    initial_n: float
+    step_time_s: float | None = None
+    final_n: float | None = None
+
+    def __post_init__(self) -> None:
+        check_range("wob_n", self.initial_n, 1e-9, MAX_WOB_N)
+        if (self.step_time_s is None) != (self.final_n is None):
+            raise ValueError("WobProfile needs both step_time_s and final_n, or neither")
+        if self.step_time_s is not None and self.final_n is not None:
+            check_range("wob_step_time_s", self.step_time_s, 0.0, math.inf)
+            check_range("wob_final_n", self.final_n, 1e-9, MAX_WOB_N)
+
+    def knots(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """Knot times (s) and values (N) of the piecewise-linear profile."""
+        if self.step_time_s is None or self.final_n is None:
+            return (0.0,), (float(self.initial_n),)
+        t = float(self.step_time_s)
+        return (t, t), (float(self.initial_n), float(self.final_n))
+
+
+@dataclass(frozen=True)
+class SpeedProfile:
+    """Reference bit speed through piecewise-linear knots (rad/s); a repeated time is a step.
+
+    Use :meth:`constant`, :meth:`steps` or :meth:`ramp` rather than the knots directly.
+    """
+
+    times_s: tuple[float, ...]
+    values_rad_s: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        if not 1 <= len(self.times_s) == len(self.values_rad_s) <= MAX_KNOTS:
+            raise ValueError(
+                f"reference profile needs 1 to {MAX_KNOTS} knots with one value per time, got "
+                f"{len(self.times_s)} times and {len(self.values_rad_s)} values"
+            )
+        for k, (t, v) in enumerate(zip(self.times_s, self.values_rad_s, strict=True)):
+            check_range(f"reference time[{k}]", t, 0.0, math.inf)
+            check_range(f"reference_speed_rad_s[{k}]", v, 0.0, MAX_REFERENCE_RAD_S)
+        if any(b < a for a, b in zip(self.times_s, self.times_s[1:], strict=False)):
+            raise ValueError(f"reference knot times must not decrease, got {self.times_s!r}")
+
+    @classmethod
+    def constant(cls, speed_rad_s: float) -> SpeedProfile:
+        """A constant reference, rad/s."""
+        return cls((0.0,), (float(speed_rad_s),))
+
+    @classmethod
+    def steps(cls, initial_rad_s: float, changes: Sequence[tuple[float, float]]) -> SpeedProfile:
+        """Start at ``initial_rad_s`` and jump to ``v`` at each ``(t, v)`` of ``changes``."""
+        times: list[float] = [0.0]
+        values: list[float] = [float(initial_rad_s)]
+        for t, v in changes:
+            times += [float(t), float(t)]
+            values += [values[-1], float(v)]
+        return cls(tuple(times), tuple(values))
+
+    @classmethod
+    def ramp(cls, start_rad_s: float, end_rad_s: float, t0_s: float, t1_s: float) -> SpeedProfile:
+        """Hold ``start_rad_s`` until ``t0_s``, ramp linearly to ``end_rad_s`` at ``t1_s``."""
+        if not t1_s > t0_s:
+            raise ValueError(f"ramp end time {t1_s!r} must be after its start time {t0_s!r}")
+        return cls((float(t0_s), float(t1_s)), (float(start_rad_s), float(end_rad_s)))
+
+    def value(self, t_s: float) -> float:
+        """Reference speed at time ``t_s``, rad/s."""
+        times, values = self.times_s, self.values_rad_s
+        if len(times) == 1 or t_s <= times[0]:
+            return values[0]
+        j = 0
+        while j + 1 < len(times) and t_s >= times[j + 1]:
+            j += 1
+        if j == len(times) - 1:
+            return values[-1]
+        frac = (t_s - times[j]) / (times[j + 1] - times[j])
+        return values[j] + (values[j + 1] - values[j]) * frac
+
+
+def resolve_uncertainty(value: str | Sequence[float]) -> tuple[float, float, float]:
+    """Table 3 condition name or an explicit ``(Delta1, Delta2, Delta3)``, each in [-0.9, 10]."""
+    if isinstance(value, str):
+        try:
+            return UNCERTAINTY_CONDITIONS[value]
+        except KeyError:
+            raise ValueError(
+                f"uncertainty = {value!r} is not a known condition: allowed "
+                f"{sorted(UNCERTAINTY_CONDITIONS)} or a (Delta1, Delta2, Delta3) tuple"
+            ) from None
+    try:
+        deltas = tuple(value)
+    except TypeError:
+        raise TypeError(
+            f"uncertainty must be a condition name or 3 numbers, got {value!r}"
+        ) from None
+    if len(deltas) != 3:
+        raise ValueError(f"uncertainty must have 3 entries (Delta1..3), got {len(deltas)}")
+    d1, d2, d3 = (check_range(f"uncertainty[{k}]", d, -0.9, 10.0) for k, d in enumerate(deltas))
+    return (d1, d2, d3)
+
+
+@dataclass(frozen=True)
+class Randomization:
+    """Ranges of the per-episode draws of ``DrillString-v0`` (uniform unless stated).
+
+    Attributes:
+        wob_range_n: Range of the WOB, N.
+        wob_step_probability: Chance of one WOB step change per episode, in [0, 1].
+        wob_step_time_fraction: Range of the step time as a fraction of the episode.
+        reference_range_rad_s: Range of the constant reference bit speed, rad/s.
+        delta_range: Range of each of Delta1..3 (relative increase of c_pi, k_pi, c_dt).
+    """
+
+    wob_range_n: tuple[float, float] = (60e3, 200e3)
+    wob_step_probability: float = 0.5
+    wob_step_time_fraction: tuple[float, float] = (0.5, 0.5)
+    reference_range_rad_s: tuple[float, float] = (4.0, 16.0)
+    delta_range: tuple[float, float] = (0.0, 0.75)
+
+    def __post_init__(self) -> None:
+        check_interval("wob_range_n", self.wob_range_n, 1e-9, MAX_WOB_N)
+        check_range("wob_step_probability", self.wob_step_probability, 0.0, 1.0)
+        check_interval("wob_step_time_fraction", self.wob_step_time_fraction, 0.0, 1.0)
+        check_interval(
+            "reference_range_rad_s", self.reference_range_rad_s, 0.0, MAX_REFERENCE_RAD_S
+        )
+        check_interval("delta_range", self.delta_range, -0.9, 10.0)
+
+
+def spawn_generators(seed_sequence: np.random.SeedSequence) -> dict[str, np.random.Generator]:
+    """One generator per random component (:data:`COMPONENTS`) from ``seed_sequence``."""
+    children = seed_sequence.spawn(len(COMPONENTS))
+    return {
+        name: np.random.default_rng(child) for name, child in zip(COMPONENTS, children, strict=True)
+    }
+
+
+@dataclass(frozen=True)
+class EpisodeScenario:
+    """Everything exogenous about one episode, resolved to numbers.
+
+    Attributes:
+        wob: WOB profile.
+        reference: Reference bit-speed profile.
+        deltas: Uncertainty ``(Delta1, Delta2, Delta3)``.
+        reading: ``"plant"``: the plant carries the deltas; ``"controller"``: the controller's
+            model does.
+        nominal: Nominal plant parameters.
+        noise_std_rad_s: Measurement noise on the speeds, rad/s.
+    """
+
+    wob: WobProfile
+    reference: SpeedProfile
+    deltas: tuple[float, float, float]
+    reading: UncertaintyReading
+    nominal: DrillStringParameters
+    noise_std_rad_s: float
+    plant: DrillStringParameters = field(init=False)
+    controller_model: DrillStringParameters = field(init=False)
+
+    def __post_init__(self) -> None:
+        scaled = scale_uncertain(self.nominal, self.deltas)
+        plant, model = (scaled, self.nominal) if self.reading == "plant" else (self.nominal, scaled)
+        object.__setattr__(self, "plant", plant)
+        object.__setattr__(self, "controller_model", model)
+
+    @classmethod
+    def draw(
+        cls,
+        randomization: Randomization,
+        generators: dict[str, np.random.Generator],
+        episode_s: float,
+        nominal: DrillStringParameters,
+        reading: UncertaintyReading,
+        noise_std_rad_s: float,
+    ) -> EpisodeScenario:
+        """Draw a scenario from ``randomization``, each component from its own generator."""
+        g = generators["wob"]
+        wob0 = float(g.uniform(*randomization.wob_range_n))
+        step_time: float | None = None
+        wob1: float | None = None
+        if g.random() < randomization.wob_step_probability:
+            step_time = float(g.uniform(*randomization.wob_step_time_fraction)) * episode_s
+            wob1 = float(g.uniform(*randomization.wob_range_n))
+        ref = float(generators["reference"].uniform(*randomization.reference_range_rad_s))
+        lo, hi = randomization.delta_range
+        d = generators["uncertainty"].uniform(lo, hi, size=3)
+        return cls(
+            wob=WobProfile(wob0, step_time, wob1),
+            reference=SpeedProfile.constant(ref),
+            deltas=(float(d[0]), float(d[1]), float(d[2])),
+            reading=reading,
+            nominal=nominal,
+            noise_std_rad_s=noise_std_rad_s,
+        )
+
+
+def knot_arrays(
+    profile: WobProfile | SpeedProfile,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], int]:
+    """Knot times and values padded to :data:`MAX_KNOTS`, and the knot count."""
+    times, values = (
+        profile.knots()
+        if isinstance(profile, WobProfile)
+        else (profile.times_s, profile.values_rad_s)
+    )
+    t = np.zeros(MAX_KNOTS)
+    v = np.zeros(MAX_KNOTS)
+    t[: len(times)] = times
+    v[: len(values)] = values
+    return t, v, len(times)
