@@ -1,0 +1,176 @@
+"""One code path to score any policy: ``rollout(env, policy, seed)`` then ``episode_metrics``.
+
+A policy is anything with SB3's ``predict(observation, state=None, episode_start=None,
+deterministic=True) -> (action, state)``: an SB3 model, :class:`baselines.ControllerPolicy`,
+a loaded residual agent, or :class:`ZeroAction` (the base controller alone in residual mode).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import gymnasium as gym
+import numpy as np
+import numpy.typing as npt
+
+from drill_env import kernel
+from drill_env.metrics import episode_metrics_from_samples
+from drill_env.parameters import PLANT_DT_S
+
+__all__ = ["Policy", "Trace", "ZeroAction", "episode_metrics", "rollout"]
+
+
+class Policy(Protocol):
+    """SB3's policy interface."""
+
+    def predict(
+        self,
+        observation: Any,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> tuple[Any, Any]: ...
+
+
+class ZeroAction:
+    """The policy that always acts 0: in residual mode, the base controller alone."""
+
+    def predict(
+        self,
+        observation: Any,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> tuple[npt.NDArray[np.float32], Any]:
+        obs = np.asarray(observation)
+        shape = (1,) if obs.ndim == 1 else (obs.shape[0], 1)
+        return np.zeros(shape, dtype=np.float32), state
+
+
+@dataclass(frozen=True)
+class Trace:
+    """One episode, sampled at every plant step (1 ms) and at every decision.
+
+    Plant-rate arrays (n samples at ``time_s = k * plant_dt_s``, the state at the start of the
+    step and the torque held over it): ``states`` (n, 7) true state (rad/s, rad),
+    ``torque_nm``, ``base_torque_nm`` (0 without a base controller), ``reference_rad_s``,
+    ``wob_n``, ``bit_stuck``, ``sliding_variable`` and ``adaptive_gain`` of the base
+    controller (0 when it has none).
+
+    Decision-rate arrays (m decisions): ``decision_time_s``, ``observations`` (m, obs_size),
+    ``actions`` (m, 1), ``rewards`` (m,).
+    """
+
+    time_s: npt.NDArray[np.float64]
+    states: npt.NDArray[np.float64]
+    torque_nm: npt.NDArray[np.float64]
+    base_torque_nm: npt.NDArray[np.float64]
+    reference_rad_s: npt.NDArray[np.float64]
+    wob_n: npt.NDArray[np.float64]
+    bit_stuck: npt.NDArray[np.bool_]
+    sliding_variable: npt.NDArray[np.float64]
+    adaptive_gain: npt.NDArray[np.float64]
+    decision_time_s: npt.NDArray[np.float64]
+    observations: npt.NDArray[np.float32]
+    actions: npt.NDArray[np.float32]
+    rewards: npt.NDArray[np.float64]
+    termination_reason: str | None
+    plant_dt_s: float = PLANT_DT_S
+
+    @property
+    def bit_speed_rad_s(self) -> npt.NDArray[np.float64]:
+        """True bit speed, rad/s."""
+        return self.states[:, 6]
+
+    @property
+    def top_drive_speed_rad_s(self) -> npt.NDArray[np.float64]:
+        """True top-drive speed, rad/s."""
+        return self.states[:, 0]
+
+    @property
+    def duration_s(self) -> float:
+        """Simulated length, s."""
+        return len(self.time_s) * self.plant_dt_s
+
+
+def rollout(
+    env: gym.Env[Any, Any],
+    policy: Policy,
+    seed: int | None,
+    options: dict[str, Any] | None = None,
+    deterministic: bool = True,
+) -> Trace:
+    """Run one episode of ``env`` (a ``DrillString-v0``, wrapped or not) under ``policy``.
+
+    Args:
+        env: The environment; its records of every plant step are collected.
+        policy: Anything with SB3's ``predict``.
+        seed: Reset seed.
+        options: Reset options (per-episode scenario keywords).
+        deterministic: Passed to ``predict``.
+
+    Returns:
+        The episode's :class:`Trace`.
+    """
+    batch = env.unwrapped.batch  # type: ignore[attr-defined]
+    obs, _ = env.reset(seed=seed, options=options)
+    chunks: list[npt.NDArray[np.float64]] = []
+    observations = [obs]
+    actions: list[npt.NDArray[np.float32]] = []
+    rewards: list[float] = []
+    times = [0.0]
+    reason: str | None = None
+    state: Any = None
+    start = True
+    while True:
+        action, state = policy.predict(
+            obs, state=state, episode_start=np.array([start]), deterministic=deterministic
+        )
+        start = False
+        action = np.asarray(action, dtype=np.float32).reshape(1)
+        obs, reward, terminated, truncated, info = env.step(action)
+        records = batch.records[0]
+        if terminated:
+            valid = ~np.isnan(records[:, 0])
+            records = records[valid]
+            reason = str(info.get("termination_reason", "terminated"))
+        chunks.append(records.copy())
+        actions.append(action)
+        rewards.append(float(reward))
+        if terminated or truncated:
+            break
+        observations.append(obs)
+        times.append(float(info["time_s"]))
+    rec = np.concatenate(chunks) if chunks else np.zeros((0, kernel.N_RECORD))
+    n = rec.shape[0]
+    return Trace(
+        time_s=np.arange(n) * PLANT_DT_S,
+        states=rec[:, kernel.REC_X0 : kernel.REC_X0 + 7],
+        torque_nm=rec[:, kernel.REC_TORQUE],
+        base_torque_nm=rec[:, kernel.REC_BASE_TORQUE],
+        reference_rad_s=rec[:, kernel.REC_REFERENCE],
+        wob_n=rec[:, kernel.REC_WOB],
+        bit_stuck=rec[:, kernel.REC_STUCK] > 0.5,
+        sliding_variable=rec[:, kernel.REC_SLIDING],
+        adaptive_gain=rec[:, kernel.REC_GAIN],
+        decision_time_s=np.array(times[: len(actions)]),
+        observations=np.array(observations[: len(actions)], dtype=np.float32),
+        actions=np.array(actions, dtype=np.float32),
+        rewards=np.array(rewards),
+        termination_reason=reason,
+    )
+
+
+def episode_metrics(trace: Trace) -> dict[str, Any]:
+    """The SPEC section 4 metrics of ``trace`` (see
+    :func:`drill_env.metrics.episode_metrics_from_samples`), plus ``diverged``."""
+    metrics = episode_metrics_from_samples(
+        trace.bit_speed_rad_s,
+        trace.reference_rad_s,
+        trace.torque_nm,
+        trace.bit_stuck,
+        trace.plant_dt_s,
+    )
+    metrics["diverged"] = trace.termination_reason == "diverged"
+    return metrics
