@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# The whole test suite: ruff (lint and format), mypy, then pytest without the slow tests.
+# Arguments are passed on to pytest (a later `-m slow` overrides the default `-m "not slow"`).
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+
+# 2-core machines: BLAS/OpenMP thread pools fight numba's threads.
+export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
+unset NUMBA_CACHE_DIR
+
+bash scripts/setup.sh
+
+echo "== ruff check"
+.venv/bin/ruff check .
+echo "== ruff format --check"
+.venv/bin/ruff format --check .
+echo "== mypy"
+.venv/bin/mypy
+echo "== pytest"
+.venv/bin/python -m pytest -m "not slow" -q "$@"
