@@ -126,7 +126,13 @@ class _StringEpisode:
     scenario: EpisodeScenario
     seed_root: np.random.SeedSequence
     noise_rng: np.random.Generator
+    noise_out: npt.NDArray[np.float64] | None  # where the step's noise is drawn; None: no noise
     actions_clipped: int = 0
+
+    @property
+    def duration_s(self) -> float:
+        """Episode length, s, rounded down to the plant step (so that a time compares exactly)."""
+        return round(self.config.episode_s / PLANT_DT_S) * PLANT_DT_S
 
 
 class StringBatch:
@@ -155,16 +161,20 @@ class StringBatch:
         self.ref_t = np.zeros((n, MAX_KNOTS))
         self.ref_v = np.zeros((n, MAX_KNOTS))
         self.ref_n = np.ones(n, dtype=np.int64)
-        self.noise = np.zeros((n, s + 1, 4))
+        # Noise is drawn in blocks: row noise_pos is the current measurement's, the rows after
+        # it the next steps'. A block holds several decision periods (fewer for big batches).
+        periods = max(1, min(2000, 200_000 // n) // s)
+        self.noise = np.zeros((n, periods * s + 1, 4))
+        self.noise_pos = np.zeros(n, dtype=np.int64)
         self.noise_std = np.zeros(n)
         self.law_id = LAW_NONE
         self.law_params = np.zeros((n, N_LAW_PARAMS))
         self.law_state = np.zeros((n, N_LAW_STATE))
         self.command = np.zeros(n)
         self.records = np.zeros((n, s, kernel.N_RECORD))
-        self.meas = np.zeros((n, 7))
         self.last_u = np.zeros(n)
-        self.summary = np.zeros((n, kernel.N_SUMMARY))
+        self.report = np.zeros((n, kernel.N_REPORT))
+        self.obs = np.zeros((n, self.obs_size), dtype=np.float32)
         self.episodes: list[_StringEpisode | None] = [None] * n
         self._obs_scale = np.empty(self.obs_size)
         self._obs_scale[:7] = 1.0 / state_scales()
@@ -172,6 +182,11 @@ class StringBatch:
         self._obs_scale[8:] = 1.0 / config.torque_scale_nm
         if self.residual:
             self._obs_scale[N_STATE_OBS + 1] = 1.0 / SPEED_SCALE_RAD_S
+        # Action to command torque: residual_scale * a, or min + (a + 1) / 2 * (max - min).
+        span = config.max_torque_nm - config.min_torque_nm
+        self._action_gain = config.residual_scale_nm if self.residual else 0.5 * span
+        self._action_offset = 0.0 if self.residual else config.min_torque_nm + 0.5 * span
+        self._args: tuple[Any, ...] | None = None
         self._advance = (
             kernel.advance_batch_parallel if n >= PARALLEL_THRESHOLD else kernel.advance_batch
         )
@@ -201,7 +216,13 @@ class StringBatch:
             root = np.random.SeedSequence()
         generators = spawn_generators(root)
         scenario = scenario_for(config, generators)
-        self.episodes[i] = _StringEpisode(config, scenario, root, generators["noise"])
+        noise_out = self.noise[i, 1:] if scenario.noise_std_rad_s > 0 else None
+        self.episodes[i] = _StringEpisode(config, scenario, root, generators["noise"], noise_out)
+        self.noise[i] = 0.0
+        if noise_out is not None:
+            generators["noise"].standard_normal(out=self.noise[i, 0])
+            generators["noise"].standard_normal(out=noise_out)
+        self.noise_pos[i] = 0
         self.x[i] = 0.0
         self.mode[i] = STUCK
         self.step_index[i] = 0
@@ -210,9 +231,7 @@ class StringBatch:
         self.wob_t[i], self.wob_v[i], self.wob_n[i] = knot_arrays(scenario.wob)
         self.ref_t[i], self.ref_v[i], self.ref_n[i] = knot_arrays(scenario.reference)
         self.noise_std[i] = scenario.noise_std_rad_s
-        self.noise[i, self.substeps] = self._draw_noise(i, 1)[0]
         self.last_u[i] = 0.0
-        self.summary[i] = 0.0
         self.records[i] = 0.0
         self.law_state[i] = 0.0
         if self.controllers:
@@ -220,108 +239,118 @@ class StringBatch:
             ctrl.reset()
             if self.compiled:
                 law: CompiledLaw = ctrl.compiled_law(scenario.controller_model)  # type: ignore[attr-defined]
-                self.law_id = law.law_id
+                if law.law_id != self.law_id:
+                    self.law_id = law.law_id
+                    self._args = None
                 self.law_params[i] = law.params
                 self.law_state[i] = law.initial_state
-        self.meas[i] = self.x[i]
-        self.meas[i, 0::2] += scenario.noise_std_rad_s * self.noise[i, self.substeps]
+        ref = scenario.reference.value(0.0)
+        x0 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        kernel.write_observation(
+            self.obs[i], self.measurement(i), ref, 0.0, 0.0, self.law_state[i, 3], self._obs_scale
+        )
+        self.report[i] = 0.0
+        kernel.write_report(
+            self.report[i], x0, STUCK, 0.0, ref, 0.0, scenario.wob.initial_n, 0.0,
+            self.law_state[i], float(kernel.STATUS_OK),
+        )  # fmt: skip
 
-    def _draw_noise(self, i: int, rows: int) -> npt.NDArray[np.float64]:
-        episode = self.episodes[i]
-        assert episode is not None
-        if episode.scenario.noise_std_rad_s == 0.0:
-            return np.zeros((rows, 4))
-        return episode.noise_rng.standard_normal((rows, 4))
+    def measurement(self, i: int) -> npt.NDArray[np.float64]:
+        """The measured state of string ``i`` now: true state plus its speed noise, (7,)."""
+        meas = self.x[i].copy()
+        meas[0::2] += self.noise_std[i] * self.noise[i, self.noise_pos[i]]
+        return meas
+
+    def _refill_noise(self) -> None:
+        """Start a new noise block for the strings whose block cannot hold the next period."""
+        s = self.substeps
+        rows = self.noise.shape[1]
+        if self.num == 1:
+            if self.noise_pos[0] + s < rows:
+                return
+            refill = [0]
+        else:
+            refill = np.flatnonzero(self.noise_pos + s >= rows).tolist()
+        for i in refill:
+            episode = self.episodes[i]
+            assert episode is not None
+            self.noise[i, 0] = self.noise[i, self.noise_pos[i]]
+            self.noise_pos[i] = 0
+            if episode.noise_out is not None:
+                episode.noise_rng.standard_normal(out=episode.noise_out)
 
     # ------------------------------------------------------------------- step
     def step(self, actions: npt.NDArray[np.float64]) -> None:
-        """Advance every string by one decision period under ``actions`` in [-1, 1], (num,)."""
-        cfg = self.config
-        if self.residual:
-            np.multiply(actions, cfg.residual_scale_nm, out=self.command)
+        """Advance every string by one decision period under ``actions`` in [-1, 1], (num,).
+
+        Strings whose status is not OK (diverged, or paused by the vector env while it resets
+        them) stay where they are.
+        """
+        if self.num == 1:
+            self.command[0] = float(actions[0]) * self._action_gain + self._action_offset
         else:
-            span = cfg.max_torque_nm - cfg.min_torque_nm
-            np.multiply(actions + 1.0, 0.5 * span, out=self.command)
-            self.command += cfg.min_torque_nm
-        s = self.substeps
-        self.noise[:, 0] = self.noise[:, s]
-        for i in range(self.num):
-            self.noise[i, 1:] = self._draw_noise(i, s)
+            np.multiply(actions, self._action_gain, out=self.command)
+            self.command += self._action_offset
+        self._refill_noise()
         if self.compiled or not self.controllers:
-            self._advance(
-                self.x, self.mode, self.step_index, self.status, self.plant,
-                self.wob_t, self.wob_v, self.wob_n, self.ref_t, self.ref_v, self.ref_n,
-                self.noise, self.noise_std, self.law_id, self.law_params, self.law_state,
-                self.command, cfg.min_torque_nm, cfg.max_torque_nm, s, PLANT_DT_S,
-                self.records, self.meas, self.last_u, self.summary,
-            )  # fmt: skip
+            self._advance(*self._kernel_args())
         else:
             self._step_python_controllers()
+
+    def _kernel_args(self) -> tuple[Any, ...]:
+        """The kernel's arguments: the batch's arrays (updated in place) and its constants."""
+        if self._args is None:
+            cfg = self.config
+            self._args = (
+                self.x, self.mode, self.step_index, self.status, self.plant,
+                self.wob_t, self.wob_v, self.wob_n, self.ref_t, self.ref_v, self.ref_n,
+                self.noise, self.noise_pos, self.noise_std, self.law_id, self.law_params,
+                self.law_state, self.command, cfg.min_torque_nm, cfg.max_torque_nm,
+                self.substeps, PLANT_DT_S, self.records, self.last_u, self.report,
+                self._obs_scale, self.obs,
+            )  # fmt: skip
+        return self._args
 
     def _step_python_controllers(self) -> None:
         """The slow path: call each Python controller at every plant step."""
         cfg = self.config
-        n, s = self.num, self.substeps
+        n = self.num
         records1 = np.zeros((n, 1, kernel.N_RECORD))
-        summary1 = np.zeros((n, kernel.N_SUMMARY))
-        totals = np.zeros((n, kernel.N_SUMMARY))
-        meas1 = np.zeros((n, 7))
+        totals = np.zeros((n, 3))
         residual = self.command.copy()
         command = np.zeros(n)
         base = np.zeros(n)
         done = np.zeros(n)
-        for j in range(s):
+        terms = slice(kernel.REP_TRACKING, kernel.REP_STUCK_FRACTION + 1)
+        for j in range(self.substeps):
             for i in range(n):
                 episode = self.episodes[i]
                 assert episode is not None
-                meas = self.x[i].copy()
-                meas[0::2] += self.noise_std[i] * self.noise[i, j]
-                t = self.step_index[i] * PLANT_DT_S
-                ref = episode.scenario.reference.value(t)
-                base[i] = float(self.controllers[i].torque(meas, ref, PLANT_DT_S))
+                ref = episode.scenario.reference.value(self.step_index[i] * PLANT_DT_S)
+                torque = self.controllers[i].torque(self.measurement(i), ref, PLANT_DT_S)
+                base[i] = float(torque)
                 command[i] = base[i] + residual[i] if math.isfinite(base[i]) else math.nan
             ok = self.status == kernel.STATUS_OK
             self._advance(
                 self.x, self.mode, self.step_index, self.status, self.plant,
                 self.wob_t, self.wob_v, self.wob_n, self.ref_t, self.ref_v, self.ref_n,
-                self.noise[:, j : j + 2], self.noise_std, LAW_NONE, self.law_params,
+                self.noise, self.noise_pos, self.noise_std, LAW_NONE, self.law_params,
                 self.law_state, command, cfg.min_torque_nm, cfg.max_torque_nm, 1, PLANT_DT_S,
-                records1, meas1, self.last_u, summary1,
+                records1, self.last_u, self.report, self._obs_scale, self.obs,
             )  # fmt: skip
-            records1[:, 0, kernel.REC_BASE_TORQUE] = base
+            records1[ok, 0, kernel.REC_BASE_TORQUE] = base[ok]
             self.records[:, j] = records1[:, 0]
-            totals[ok] += summary1[ok]
+            totals[ok] += self.report[ok, terms]
             done[ok] += 1
-        self.meas[:] = meas1
-        self.summary[:, kernel.SUM_TRACKING] = totals[:, kernel.SUM_TRACKING] / np.maximum(done, 1)
-        self.summary[:, kernel.SUM_VARIATION] = totals[:, kernel.SUM_VARIATION]
-        self.summary[:, kernel.SUM_STUCK] = totals[:, kernel.SUM_STUCK] / np.maximum(done, 1)
+        self.report[:, kernel.REP_TRACKING] = totals[:, 0] / np.maximum(done, 1)
+        self.report[:, kernel.REP_VARIATION] = totals[:, 1]
+        self.report[:, kernel.REP_STUCK_FRACTION] = totals[:, 2] / np.maximum(done, 1)
+        if self.residual:  # the kernel saw no base law: put the Python controllers' torque in
+            moved = done > 0
+            self.report[moved, kernel.REP_BASE_TORQUE] = base[moved]
+            self.obs[moved, 9] = np.clip(base[moved] * self._obs_scale[9], -OBS_BOUND, OBS_BOUND)
 
     # ---------------------------------------------------------------- outputs
     def observations(self) -> npt.NDArray[np.float32]:
-        """Scaled measured observations, (num, obs_size) float32, clipped to the bounds."""
-        n = self.num
-        raw = np.empty((n, self.obs_size))
-        raw[:, :7] = self.meas
-        raw[:, 7] = self.reference_now()
-        raw[:, 8] = self.last_u
-        if self.residual:
-            raw[:, 9] = self.records[:, -1, kernel.REC_BASE_TORQUE]
-            raw[:, 10] = self.law_state[:, 3]
-        raw *= self._obs_scale
-        np.nan_to_num(raw, copy=False, nan=0.0)
-        np.clip(raw, -OBS_BOUND, OBS_BOUND, out=raw)
-        return raw.astype(np.float32)
-
-    def reference_now(self) -> npt.NDArray[np.float64]:
-        """Reference bit speed of each string at its current time, rad/s."""
-        out = np.empty(self.num)
-        for i in range(self.num):
-            episode = self.episodes[i]
-            assert episode is not None
-            out[i] = episode.scenario.reference.value(self.step_index[i] * PLANT_DT_S)
-        return out
-
-    def time_s(self) -> npt.NDArray[np.float64]:
-        """Current simulated time of each string, s."""
-        return self.step_index * PLANT_DT_S
+        """Scaled measured observations, (num, obs_size) float32 (a copy)."""
+        return self.obs.copy()

@@ -25,7 +25,7 @@ def derivative(x, u: float, p, t_a: float, t_0: float, mode: int):
     Args:
         x: State 7-tuple (rad/s and rad).
         u: Top-drive torque, N m.
-        p: Plant parameter vector (length 17).
+        p: Plant parameter vector (:func:`drill_env.parameters.plant_parameter_vector`).
         t_a: Maximum static bit torque, N m.
         t_0: Sliding bit torque, N m.
         mode: Bit slip mode: 0 stuck (bit speed held at 0), +1/-1 slipping.
@@ -34,17 +34,17 @@ def derivative(x, u: float, p, t_a: float, t_0: float, mode: int):
         The 7-tuple ``dx/dt``.
     """
     x1, x2, x3, x4, x5, x6, x7 = x
-    j_dt, j_pi, j_co, j_bi = p[0], p[1], p[2], p[3]
+    inv_dt, inv_pi, inv_co, inv_bi = p[17], p[18], p[19], p[20]
     c_dt, c_pi, c_co, c_bi, c_bit = p[4], p[5], p[6], p[7], p[8]
     k_pi, k_co, k_bi = p[9], p[10], p[11]
-    d1 = (-(c_dt + c_pi) * x1 - k_pi * x2 + c_pi * x3 + u) / j_dt
-    d3 = (c_pi * x1 + k_pi * x2 - (c_pi + c_co) * x3 - k_co * x4 + c_co * x5) / j_pi
-    d5 = (c_co * x3 + k_co * x4 - (c_co + c_bi) * x5 - k_bi * x6 + c_bi * x7) / j_co
+    d1 = (-(c_dt + c_pi) * x1 - k_pi * x2 + c_pi * x3 + u) * inv_dt
+    d3 = (c_pi * x1 + k_pi * x2 - (c_pi + c_co) * x3 - k_co * x4 + c_co * x5) * inv_pi
+    d5 = (c_co * x3 + k_co * x4 - (c_co + c_bi) * x5 - k_bi * x6 + c_bi * x7) * inv_co
     if mode == STUCK:
         d7 = 0.0
     else:
         t_e = string_torque_on_bit(x5, x6, x7, c_bi, k_bi, c_bit)
-        d7 = (t_e - slip_torque(x7, mode, t_a, t_0, p[15])) / j_bi
+        d7 = (t_e - slip_torque(x7, mode, t_a, t_0, p[15])) * inv_bi
     return (d1, x1 - x3, d3, x3 - x5, d5, x5 - x7, d7)
 
 

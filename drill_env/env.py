@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -26,6 +25,10 @@ def validate_actions(
     Raises:
         ValueError: naming ``action`` when it is not finite or not of the right shape.
     """
+    if num == 1 and type(action) is np.ndarray and action.shape == (1,):  # the common case
+        v = float(action[0])
+        if -1.0 <= v <= 1.0:
+            return np.array([v]), np.zeros(1, dtype=bool)
     try:
         a = np.asarray(action, dtype=np.float64)
     except (TypeError, ValueError):
@@ -162,16 +165,12 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
             root = np.random.SeedSequence(int(self.np_random.integers(2**63)))
         self._batch.reset_string(0, seed, options, previous_root=root)
         self._started = True
-        obs = self._batch.observations()[0]
-        return obs, self._info(
-            reward_terms(0.0, 0.0, float(self._batch.mode[0] == 0), self._config)
-        )
-
-    @property
-    def _config(self) -> Any:
+        obs = self._batch.obs[0].copy()
         episode = self._batch.episodes[0]
         assert episode is not None
-        return episode.config.reward_weights
+        report = self._batch.report[0].tolist()
+        terms = reward_terms(0.0, 0.0, report[kernel.REP_BIT_STUCK], episode.config.reward_weights)
+        return obs, self._info(terms, report)
 
     def step(
         self, action: Any
@@ -184,50 +183,40 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         assert episode is not None
         if b.status[0] != kernel.STATUS_OK:
             raise RuntimeError("the episode has ended (diverged): call reset()")
-        episode.actions_clipped += int(clipped[0])
+        was_clipped = bool(clipped[0])
+        episode.actions_clipped += was_clipped
         b.step(a)
+        report = b.report[0].tolist()
         weights = episode.config.reward_weights
-        summary = b.summary[0]
-        terms = reward_terms(
-            float(summary[kernel.SUM_TRACKING]),
-            float(summary[kernel.SUM_VARIATION]),
-            float(summary[kernel.SUM_STUCK]),
-            weights,
-        )
-        terminated = bool(b.status[0] != kernel.STATUS_OK)
+        terms = reward_terms(report[0], report[1], report[2], weights)
+        terminated = report[kernel.REP_STATUS] != kernel.STATUS_OK
         reward = -1.0 if terminated else total_reward(terms, weights)
-        truncated = not terminated and b.step_index[0] >= round(episode.config.episode_s * 1000)
-        info = self._info(terms)
-        info["action_clipped"] = bool(clipped[0])
+        truncated = not terminated and report[kernel.REP_TIME] >= episode.duration_s
+        info = self._info(terms, report)
+        info["action_clipped"] = was_clipped
         if terminated:
             info["termination_reason"] = "diverged"
-        return b.observations()[0], reward, terminated, truncated, info
+        return b.obs[0].copy(), reward, terminated, truncated, info
 
-    def _info(self, terms: dict[str, float]) -> dict[str, Any]:
+    def _info(self, terms: dict[str, float], report: list[float]) -> dict[str, Any]:
         b = self._batch
         episode = b.episodes[0]
         assert episode is not None
-        last = b.records[0, -1]
-        t = float(b.step_index[0]) * 1e-3
-        x = b.x[0]
         info: dict[str, Any] = {
-            "time_s": t,
-            "bit_speed_rad_s": float(x[6]),
-            "top_drive_speed_rad_s": float(x[0]),
-            "reference_speed_rad_s": episode.scenario.reference.value(t),
-            "top_drive_torque_nm": float(b.last_u[0]),
-            "wob_n": float(last[kernel.REC_WOB]) if t > 0 else episode.scenario.wob.knots()[1][0],
-            "bit_stuck": bool(b.mode[0] == 0),
+            "time_s": report[kernel.REP_TIME],
+            "bit_speed_rad_s": report[kernel.REP_BIT_SPEED],
+            "top_drive_speed_rad_s": report[kernel.REP_TOP_DRIVE_SPEED],
+            "reference_speed_rad_s": report[kernel.REP_REFERENCE],
+            "top_drive_torque_nm": report[kernel.REP_TORQUE],
+            "wob_n": report[kernel.REP_WOB],
+            "bit_stuck": report[kernel.REP_BIT_STUCK] > 0.5,
             "reward_terms": terms,
             "action_clipped": False,
             "actions_clipped_total": episode.actions_clipped,
         }
         if b.residual:
-            base = float(last[kernel.REC_BASE_TORQUE]) if t > 0 else 0.0
-            info["base_torque_nm"] = base
+            info["base_torque_nm"] = report[kernel.REP_BASE_TORQUE]
             info["residual_torque_nm"] = float(b.command[0])
-            info["sliding_variable_rad_s"] = float(b.law_state[0, 3])
-            info["adaptive_gain"] = float(b.law_state[0, 2])
-        if not math.isfinite(info["bit_speed_rad_s"]):  # pragma: no cover - kernel guards this
-            raise AssertionError("non-finite state escaped the kernel")
+            info["sliding_variable_rad_s"] = report[kernel.REP_SLIDING]
+            info["adaptive_gain"] = report[kernel.REP_GAIN]
         return info

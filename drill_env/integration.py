@@ -124,7 +124,7 @@ def plant_step(x, mode: int, u: float, p, t_a: float, t_0: float, h: float):
         x: State 7-tuple (rad/s, rad).
         mode: Slip mode at the start of the step (0 stuck, +1/-1 slipping).
         u: Top-drive torque held over the step, N m.
-        p: Plant parameter vector (length 17).
+        p: Plant parameter vector (:func:`drill_env.parameters.plant_parameter_vector`).
         t_a: Maximum static bit torque, N m.
         t_0: Sliding bit torque, N m.
         h: Step, s.

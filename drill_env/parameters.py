@@ -158,9 +158,13 @@ P_J_DT, P_J_PI, P_J_CO, P_J_BI = 0, 1, 2, 3
 P_C_DT, P_C_PI, P_C_CO, P_C_BI, P_C_BIT = 4, 5, 6, 7, 8
 P_K_PI, P_K_CO, P_K_BI = 9, 10, 11
 P_R, P_MU_A, P_MU_0, P_XI, P_DW = 12, 13, 14, 15, 16
-N_PLANT_PARAMS: Final = 17
+P_INV_J_DT, P_INV_J_PI, P_INV_J_CO, P_INV_J_BI = 17, 18, 19, 20  # reciprocal inertias
+N_PLANT_PARAMS: Final = 21
 
 
 def plant_parameter_vector(params: DrillStringParameters) -> npt.NDArray[np.float64]:
-    """Pack ``params`` into the float64 vector (length 17, field order) the kernels read."""
-    return np.array([getattr(params, f.name) for f in dataclasses.fields(params)], dtype=np.float64)
+    """Pack ``params`` into the float64 vector the kernels read: the 17 fields in order, then
+    the reciprocals of the four inertias (1/(kg m^2)), so that the hot loop multiplies."""
+    fields = [float(getattr(params, f.name)) for f in dataclasses.fields(params)]
+    inverse = [1.0 / params.J_dt, 1.0 / params.J_pi, 1.0 / params.J_co, 1.0 / params.J_bi]
+    return np.array(fields + inverse, dtype=np.float64)

@@ -110,64 +110,36 @@ class DrillStringVectorEnv(VectorEnv):
             episode = b.episodes[int(i)]
             assert episode is not None
             episode.actions_clipped += 1
-        # Strings being reset stay put this step: step the others only when some are resetting.
-        active = ~resetting
-        if active.all():
-            b.step(a)
-        elif active.any():
-            self._step_subset(a, active)
-        s = b.summary
-        weights = [e.config.reward_weights for e in b.episodes if e is not None]
-        tracking = s[:, kernel.SUM_TRACKING]
+        # Strings starting a new episode (next-step autoreset) sit this step out.
+        b.status[resetting] = kernel.STATUS_PAUSED
+        b.step(a)
+        b.status[resetting] = kernel.STATUS_OK
+        report = b.report
+        episodes = [e for e in b.episodes if e is not None]
+        weights = [e.config.reward_weights for e in episodes]
+        tracking = report[:, kernel.REP_TRACKING]
         chattering = np.minimum(
-            s[:, kernel.SUM_VARIATION] / np.array([w.chattering_scale_nm for w in weights]), 1.0
+            report[:, kernel.REP_VARIATION] / np.array([w.chattering_scale_nm for w in weights]),
+            1.0,
         )
-        stuck = s[:, kernel.SUM_STUCK]
+        stuck = report[:, kernel.REP_STUCK_FRACTION]
         rewards = _weighted(weights, tracking, chattering, stuck)
-        terminated = (b.status != kernel.STATUS_OK) & active
+        terminated = b.status == kernel.STATUS_DIVERGED
         rewards[terminated] = -1.0
-        episode_steps = np.array(
-            [round(e.config.episode_s * 1000) for e in b.episodes if e is not None]
-        )
+        end_s = np.array([e.duration_s for e in episodes])
         if self.max_episode_steps is not None:
-            episode_steps = np.minimum(episode_steps, self.max_episode_steps * b.substeps)
-        truncated = (b.step_index >= episode_steps) & ~terminated & active
+            end_s = np.minimum(end_s, self.max_episode_steps * self.config.control_dt_s)
+        truncated = (report[:, kernel.REP_TIME] >= end_s - 1e-9) & ~terminated
         rewards[resetting] = 0.0
+        terminated &= ~resetting
+        truncated &= ~resetting
         self._needs_reset = terminated | truncated
         infos = self._infos(tracking, chattering, stuck)
         infos["action_clipped"] = clipped
         infos["_action_clipped"] = np.ones(self.num_envs, dtype=bool)
-        reasons = np.where(terminated, "diverged", "")
-        infos["termination_reason"] = reasons
+        infos["termination_reason"] = np.where(terminated, "diverged", "")
         infos["_termination_reason"] = terminated
         return b.observations(), rewards, terminated, truncated, infos
-
-    def _step_subset(self, a: npt.NDArray[np.float64], active: npt.NDArray[np.bool_]) -> None:
-        """Step only the ``active`` strings (the others are starting a new episode)."""
-        b = self._batch
-        saved = (
-            b.x.copy(), b.mode.copy(), b.step_index.copy(), b.status.copy(), b.law_state.copy(),
-            b.last_u.copy(), b.meas.copy(), b.noise[:, -1].copy(),
-        )  # fmt: skip
-        rngs_state = [
-            e.noise_rng.bit_generator.state if e is not None else None for e in b.episodes
-        ]
-        b.step(a)
-        idle = ~active
-        b.x[idle], b.mode[idle], b.step_index[idle], b.status[idle] = (
-            saved[0][idle], saved[1][idle], saved[2][idle], saved[3][idle],
-        )  # fmt: skip
-        b.law_state[idle], b.last_u[idle], b.meas[idle] = (
-            saved[4][idle],
-            saved[5][idle],
-            saved[6][idle],
-        )
-        b.noise[idle, -1] = saved[7][idle]
-        b.summary[idle] = 0.0
-        for i in np.flatnonzero(idle):
-            episode = b.episodes[int(i)]
-            assert episode is not None
-            episode.noise_rng.bit_generator.state = rngs_state[int(i)]  # type: ignore[assignment]
 
     def _infos(
         self,
@@ -176,40 +148,33 @@ class DrillStringVectorEnv(VectorEnv):
         stuck: npt.NDArray[np.float64],
     ) -> dict[str, Any]:
         b = self._batch
-        n = self.num_envs
-        mask = np.ones(n, dtype=bool)
-        started = b.step_index > 0
+        r = b.report
+        mask = np.ones(self.num_envs, dtype=bool)
         values: dict[str, Any] = {
-            "time_s": b.time_s(),
-            "bit_speed_rad_s": b.x[:, 6].copy(),
-            "top_drive_speed_rad_s": b.x[:, 0].copy(),
-            "reference_speed_rad_s": b.reference_now(),
-            "top_drive_torque_nm": b.last_u.copy(),
-            "wob_n": np.where(
-                started,
-                b.records[:, -1, kernel.REC_WOB],
-                np.array([e.scenario.wob.initial_n for e in b.episodes if e is not None]),
-            ),
-            "bit_stuck": b.mode == 0,
+            "time_s": r[:, kernel.REP_TIME].copy(),
+            "bit_speed_rad_s": r[:, kernel.REP_BIT_SPEED].copy(),
+            "top_drive_speed_rad_s": r[:, kernel.REP_TOP_DRIVE_SPEED].copy(),
+            "reference_speed_rad_s": r[:, kernel.REP_REFERENCE].copy(),
+            "top_drive_torque_nm": r[:, kernel.REP_TORQUE].copy(),
+            "wob_n": r[:, kernel.REP_WOB].copy(),
+            "bit_stuck": r[:, kernel.REP_BIT_STUCK] > 0.5,
             "actions_clipped_total": np.array(
                 [e.actions_clipped for e in b.episodes if e is not None]
             ),
         }
         if b.residual:
-            values["base_torque_nm"] = np.where(
-                started, b.records[:, -1, kernel.REC_BASE_TORQUE], 0.0
-            )
+            values["base_torque_nm"] = r[:, kernel.REP_BASE_TORQUE].copy()
             values["residual_torque_nm"] = b.command.copy()
-            values["sliding_variable_rad_s"] = b.law_state[:, 3].copy()
-            values["adaptive_gain"] = b.law_state[:, 2].copy()
+            values["sliding_variable_rad_s"] = r[:, kernel.REP_SLIDING].copy()
+            values["adaptive_gain"] = r[:, kernel.REP_GAIN].copy()
         infos: dict[str, Any] = {}
         for key, value in values.items():
             infos[key] = value
             infos["_" + key] = mask
         infos["reward_terms"] = {
-            "tracking": tracking,
+            "tracking": tracking.copy(),
             "chattering": chattering,
-            "stuck": stuck,
+            "stuck": stuck.copy(),
             "_tracking": mask,
             "_chattering": mask,
             "_stuck": mask,
