@@ -6,13 +6,19 @@ Importing this package registers ``DrillString-v0``.
 
 from __future__ import annotations
 
-from gymnasium.envs.registration import register, registry
+from pathlib import Path
 
-from drill_env.config import EnvConfig
-from drill_env.control import CompiledController, CompiledLaw, Controller
-from drill_env.parameters import PLANT_DT_S, PRESETS, DrillStringParameters
-from drill_env.rewards import RewardWeights
-from drill_env.scenarios import Randomization, SpeedProfile, WobProfile
+from drill_env._cache import invalidate_stale_cache
+
+invalidate_stale_cache(Path(__file__).parent)  # before any compiled module is imported
+
+from gymnasium.envs.registration import register, registry  # noqa: E402
+
+from drill_env.config import EnvConfig  # noqa: E402
+from drill_env.control import CompiledController, CompiledLaw, Controller  # noqa: E402
+from drill_env.parameters import PLANT_DT_S, PRESETS, DrillStringParameters  # noqa: E402
+from drill_env.rewards import RewardWeights  # noqa: E402
+from drill_env.scenarios import Randomization, SpeedProfile, WobProfile  # noqa: E402
 
 __all__ = [
     "PLANT_DT_S",
