@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -22,7 +23,22 @@ from drill_env.control import CompiledLaw
 from drill_env.control_laws import N_LAW_PARAMS, N_LAW_STATE, S_GAIN, S_SLIDING, smc_torque
 from drill_env.parameters import DrillStringParameters, resolve_parameters
 
-__all__ = ["SlidingModeController", "SurfaceGains", "check_gain"]
+__all__ = ["SlidingModeController", "SurfaceGains", "check_gain", "check_numbers"]
+
+
+def check_numbers(owner: object) -> None:
+    """Raise ``ValueError`` naming the first field of the dataclass ``owner`` that is not a
+    finite real number (run before the range checks, which compare the values)."""
+    for field in dataclasses.fields(owner):  # type: ignore[arg-type]
+        value = getattr(owner, field.name)
+        if (
+            isinstance(value, (bool, np.bool_))
+            or not isinstance(value, numbers.Real)
+            or not math.isfinite(value)
+        ):
+            raise ValueError(
+                f"{type(owner).__name__}.{field.name} must be a finite number, got {value!r}"
+            )
 
 
 def check_gain(owner: object, name: str, allowed: str, ok: bool) -> None:
@@ -50,6 +66,7 @@ class SurfaceGains:
     delta: float = 0.5
 
     def __post_init__(self) -> None:
+        check_numbers(self)
         check_gain(self, "lam", "> 0", self.lam > 0)
         check_gain(self, "delta", "> 0", self.delta > 0)
 

@@ -232,6 +232,7 @@ class StringBatch:
         self.ref_t[i], self.ref_v[i], self.ref_n[i] = knot_arrays(scenario.reference)
         self.noise_std[i] = scenario.noise_std_rad_s
         self.last_u[i] = 0.0
+        self.command[i] = 0.0
         self.records[i] = 0.0
         self.law_state[i] = 0.0
         if self.controllers:

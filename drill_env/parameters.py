@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 from dataclasses import dataclass
 from typing import Final
 
@@ -72,12 +73,13 @@ class DrillStringParameters:
     def __post_init__(self) -> None:
         for field in dataclasses.fields(self):
             value = getattr(self, field.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
                 raise TypeError(
                     f"{field.name} must be a real number, got {value!r} ({type(value).__name__})"
                 )
             if not math.isfinite(value):
                 raise ValueError(f"{field.name} must be finite, got {value!r}")
+            object.__setattr__(self, field.name, float(value))
         for name in ("J_dt", "J_pi", "J_co", "J_bi", "k_pi", "k_co", "k_bi", "R", "Dw"):
             _require(name, getattr(self, name), "> 0", getattr(self, name) > 0)
         for name in ("c_dt", "c_pi", "c_co", "c_bi", "c_bit", "xi"):
