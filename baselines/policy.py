@@ -79,12 +79,13 @@ class ControllerPolicy:
         if len(self._controllers) != n:
             self.reset(n)
         elif episode_start is not None:
-            for i in np.flatnonzero(np.atleast_1d(np.asarray(episode_start, dtype=bool))):
-                self._controllers[int(i)].reset()
+            starts = np.atleast_1d(np.asarray(episode_start, dtype=bool))
+            for index in np.flatnonzero(starts).tolist():
+                self._controllers[index].reset()
         meas, ref = unscale_measurement(batch)
         span = self.max_torque_nm - self.min_torque_nm
         actions = np.empty((n, 1), dtype=np.float32)
-        for i in range(n):
-            u = self._controllers[i].torque(meas[i], float(ref[i]), self.control_dt_s)
-            actions[i, 0] = np.clip(2.0 * (u - self.min_torque_nm) / span - 1.0, -1.0, 1.0)
+        for k, controller in enumerate(self._controllers):
+            u = controller.torque(meas[k], float(ref[k]), self.control_dt_s)
+            actions[k, 0] = np.clip(2.0 * (u - self.min_torque_nm) / span - 1.0, -1.0, 1.0)
         return (actions[0] if single else actions), state

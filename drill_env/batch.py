@@ -38,6 +38,7 @@ from drill_env.scenarios import (
     MAX_KNOTS,
     EpisodeScenario,
     SpeedProfile,
+    UncertaintyReading,
     WobProfile,
     knot_arrays,
     resolve_uncertainty,
@@ -99,7 +100,7 @@ def episode_config(base: EnvConfig, options: dict[str, Any] | None) -> EnvConfig
 def scenario_for(config: EnvConfig, generators: dict[str, np.random.Generator]) -> EpisodeScenario:
     """The episode's scenario: drawn when ``config.randomize``, exact otherwise."""
     nominal = resolve_parameters(config.parameters)
-    reading = "plant" if config.uncertainty_reading == "plant" else "controller"
+    reading: UncertaintyReading = "plant" if config.uncertainty_reading == "plant" else "controller"
     if config.randomize:
         return EpisodeScenario.draw(
             config.randomization,

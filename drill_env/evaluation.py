@@ -145,7 +145,7 @@ def rollout(
     rec = np.concatenate(chunks) if chunks else np.zeros((0, kernel.N_RECORD))
     n = rec.shape[0]
     return Trace(
-        time_s=np.arange(n) * PLANT_DT_S,
+        time_s=np.arange(n, dtype=np.float64) * PLANT_DT_S,
         states=rec[:, kernel.REC_X0 : kernel.REC_X0 + 7],
         torque_nm=rec[:, kernel.REC_TORQUE],
         base_torque_nm=rec[:, kernel.REC_BASE_TORQUE],

@@ -25,6 +25,7 @@ __all__ = [
     "EpisodeScenario",
     "Randomization",
     "SpeedProfile",
+    "UncertaintyReading",
     "WobProfile",
     "resolve_uncertainty",
     "spawn_generators",
