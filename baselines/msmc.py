@@ -5,7 +5,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from baselines.smc import SlidingModeController, SurfaceGains, check_gain
+from baselines.base import check_gain
+from baselines.smc import SlidingModeController, SurfaceGains
 from drill_env.control_laws import LAW_MSMC
 
 __all__ = ["MSMC", "MSMCGains"]

@@ -9,6 +9,9 @@ from baselines.asmc import ASMC
 from baselines.csmc import CSMC
 from baselines.msmc import MSMC
 from baselines.proposed import ProposedASMC
+from baselines.soft_speed import SoftSpeed
+from baselines.stiff_pi import StiffPI
+from baselines.z_torque import ZTorque
 from drill_env.control import Controller
 
 __all__ = ["CONTROLLERS", "controller_names", "make_controller", "register_controller"]
@@ -18,6 +21,9 @@ CONTROLLERS: dict[str, Callable[..., Controller]] = {
     "msmc": MSMC,
     "asmc": ASMC,
     "proposed": ProposedASMC,
+    "stiff_pi": StiffPI,
+    "soft_speed": SoftSpeed,
+    "z_torque": ZTorque,
 }
 """Factories by name; each takes gain keywords (and ``model``)."""
 

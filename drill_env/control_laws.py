@@ -16,7 +16,7 @@ Top-drive speed-loop family (the industry baselines ``stiff_pi``, ``soft_speed``
 ``z_torque`` of :mod:`baselines`), parameter layout::
 
     lp = [kp, ki, j_ff, z, k_pi, c_pi, tau_mean, u_min, u_max]
-    ls = [I, w_set_prev, 0, e_last, T_mean, started]
+    ls = [I, w_set_prev, 0, x1 - w_set, T_mean, started]
 
 See :func:`speed_loop_torque`.
 """
@@ -166,6 +166,6 @@ def control_torque(law: int, lp, ls, m, ref: float, dt: float) -> float:
     """Dispatch to the compiled law ``law``; ``LAW_NONE`` gives 0 N m."""
     if law == LAW_NONE:
         return 0.0
-    if law == LAW_STIFF_PI or law == LAW_SOFT_SPEED or law == LAW_Z_TORQUE:
+    if LAW_STIFF_PI <= law <= LAW_Z_TORQUE:
         return speed_loop_torque(lp, ls, m, ref, dt)
     return smc_torque(law, lp, ls, m, ref, dt)

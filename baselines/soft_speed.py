@@ -1,0 +1,103 @@
+"""``soft_speed``: a PI speed loop tuned to damp the string's lowest torsional mode.
+
+NOV's SoftSpeed (Kyllingstad & Nessjoen 2009, SPE/IADC 119660; the SoftTorque idea goes back
+to Kyllingstad & Halsey 1988) keeps the rig's ordinary PI speed controller but tunes it so
+that, at the stick-slip frequency, the top drive behaves as a pure damper matched to the drill
+pipe and absorbs the torsional waves coming up the string instead of reflecting them. The
+mechanical impedance a PI-controlled drive of inertia ``J`` presents to the string is
+(:func:`baselines.string_modes.top_drive_impedance`)::
+
+    Z_td(w) = kp + c_dt + i (w J_dt - ki / w)
+
+Tuning from the controller's model of the string:
+
+* ``ki = w_s^2 J_dt`` cancels the drive's inertia at the stick-slip frequency ``w_s`` (the
+  lowest clamped-top, stuck-bit mode, :func:`baselines.string_modes.stick_slip_frequency`), so
+  ``Z_td(w_s)`` is real;
+* ``kp = impedance_factor * Z - c_dt``: the drive's whole resistance at ``w_s`` (controller
+  plus the drive's own damping ``c_dt``) equals ``impedance_factor`` times the pipe impedance
+  ``Z = sqrt(k_pi J_pi)``; with the default factor 1 the reflection coefficient at ``w_s`` is 0;
+* inertia compensation: the set-point acceleration is fed forward, ``J_dt d(ref)/dt``, so that
+  the drive follows set-point changes without loading the (soft) PI loop.
+
+So ``u = kp (ref - x1) + ki integral(ref - x1) + J_dt d(ref)/dt``. For ``zribi2024``:
+``w_s = 0.6258 rad/s`` (period 10.0 s), ``Z = 1,393.6 N m s/rad``, ``kp = 968.6 N m s/rad``,
+``ki = 364.2 N m/rad``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from baselines.base import check_gain, check_numbers
+from baselines.speed_loop import DriveLimits, SpeedLoopController, SpeedLoopTuning
+from baselines.string_modes import pipe_impedance, stick_slip_frequency
+from drill_env.control_laws import LAW_SOFT_SPEED
+from drill_env.parameters import DrillStringParameters
+
+__all__ = ["SoftSpeed", "SoftSpeedGains"]
+
+
+@dataclass(frozen=True)
+class SoftSpeedGains:
+    """Tuning knobs of the soft speed loop.
+
+    Attributes:
+        impedance_factor: The drive's resistance at the stick-slip frequency as a multiple of
+            the pipe impedance, dimensionless (in (0, 100]; must exceed ``c_dt / Z``).
+        frequency_factor: Tuning frequency as a multiple of the stick-slip frequency,
+            dimensionless (in (0, 100]).
+        inertia_compensation: Feed the set-point acceleration forward through ``J_dt``.
+        limits: Drive torque limits for anti-windup.
+    """
+
+    impedance_factor: float = 1.0
+    frequency_factor: float = 1.0
+    inertia_compensation: bool = True
+    limits: DriveLimits = field(default_factory=DriveLimits)
+
+    def __post_init__(self) -> None:
+        check_numbers(self)
+        check_gain(self, "impedance_factor", "(0, 100]", 0 < self.impedance_factor <= 100)
+        check_gain(self, "frequency_factor", "(0, 100]", 0 < self.frequency_factor <= 100)
+        if not isinstance(self.inertia_compensation, bool):
+            raise TypeError(
+                "SoftSpeedGains.inertia_compensation must be True or False, got "
+                f"{self.inertia_compensation!r}"
+            )
+        if not isinstance(self.limits, DriveLimits):
+            raise TypeError(f"SoftSpeedGains.limits must be a DriveLimits, got {self.limits!r}")
+
+
+class SoftSpeed(SpeedLoopController):
+    """PI speed loop tuned as a matched damper at the stick-slip frequency (SoftSpeed)."""
+
+    name = "soft_speed"
+    law_id = LAW_SOFT_SPEED
+    gains_type = SoftSpeedGains
+
+    def tuning(self, model: DrillStringParameters | None = None) -> SpeedLoopTuning:
+        """``kp = impedance_factor Z - c_dt``, ``ki = (frequency_factor w_s)^2 J_dt``,
+        ``j_ff = J_dt`` (when compensating).
+
+        Raises:
+            ValueError: when ``impedance_factor Z <= c_dt`` (no positive ``kp`` matches).
+        """
+        m = self.model if model is None else model
+        g: SoftSpeedGains = self.gains
+        z = pipe_impedance(m)
+        w_s = stick_slip_frequency(m)
+        kp = g.impedance_factor * z - m.c_dt
+        if not kp > 0:
+            raise ValueError(
+                f"SoftSpeedGains.impedance_factor = {g.impedance_factor!r} is out of range for "
+                f"this model: allowed > c_dt / Z = {m.c_dt / z:.4g}"
+            )
+        ki = (g.frequency_factor * w_s) ** 2 * m.J_dt
+        return SpeedLoopTuning(
+            kp=kp,
+            ki=ki,
+            j_ff=m.J_dt if g.inertia_compensation else 0.0,
+            pipe_impedance=z,
+            stick_slip_rad_s=w_s,
+        )

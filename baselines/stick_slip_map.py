@@ -1,0 +1,522 @@
+"""``drill-gym map``: the stick-slip map of a controller over WOB x reference speed.
+
+Drilling engineers read stick-slip as a map: for every pair of weight on bit and rotary speed,
+does the bit turn steadily or stick and slip? Each cell of the grid is one run of the closed
+loop from rest (bit stuck) for ``duration_s`` seconds with a constant WOB and a constant
+reference bit speed, the controller running inside the plant loop at every 1 ms step. After
+the start-up transient, over the last ``window_s`` seconds (40 s by default, longer than the
+13-36 s stick-slip periods of SPEC section 6), two numbers are kept per cell:
+
+* ``stick_slip_severity = (max x7 - min x7) / (2 mean x7)`` of the true bit speed (the SPEC
+  section 4 definition, 1.0 when the bit does not turn on average); about 1 or more is
+  stick-slip, near 0 steady rotation;
+* ``stuck_fraction``: the share of plant steps with the bit stuck.
+
+All cells run together on the batched engine (:class:`drill_env.batch.StringBatch`, numba
+threads), in chunks of up to 1 s; only running maxima, minima and sums over the window are
+kept, so memory does not grow with the run length.
+
+Command line (see ``drill-gym map --help``)::
+
+    drill-gym map --controller stiff_pi soft_speed z_torque proposed --out results/
+
+writes per controller ``stick_slip_map_<name>.csv`` (columns ``wob_n``,
+``reference_speed_rad_s``, ``stick_slip_severity``, ``stuck_fraction``) and
+``stick_slip_map_<name>.png`` (severity and stuck-fraction heatmaps), and with several
+controllers also ``stick_slip_maps.png`` with all of them side by side.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Final
+
+import numpy as np
+import numpy.typing as npt
+from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.colors import Normalize
+from matplotlib.figure import Figure
+from tqdm import tqdm
+
+from baselines.registry import controller_names
+from drill_env import kernel
+from drill_env.batch import StringBatch
+from drill_env.config import EnvConfig
+from drill_env.parameters import PLANT_DT_S, PRESETS
+from drill_env.scenarios import MAX_REFERENCE_RAD_S, MAX_WOB_N
+
+__all__ = [
+    "CSV_COLUMNS",
+    "StickSlipMap",
+    "compute_map",
+    "grid_values",
+    "main",
+    "plot_map",
+    "plot_maps",
+    "write_csv",
+]
+
+CSV_COLUMNS: Final = ("wob_n", "reference_speed_rad_s", "stick_slip_severity", "stuck_fraction")
+"""Columns of the map CSV, one row per cell."""
+
+DEFAULT_WINDOW_S: Final = 40.0
+"""Analysis window at the end of each run, s (longer than one stick-slip period)."""
+MAX_CHUNK_STEPS: Final = 1000
+"""Plant steps per compiled call (1 s): bounds the memory of the per-step records."""
+SEVERITY_LIMIT: Final = 2.0
+"""Upper end of the severity colour scale (larger values show in the top colour)."""
+UNSTABLE_SEVERITY: Final = 0.5
+"""A cell counts as stick-slipping when its severity exceeds this or its bit ever sticks."""
+DPI: Final = 80
+
+
+@dataclass(frozen=True)
+class StickSlipMap:
+    """The stick-slip map of one controller.
+
+    Attributes:
+        controller: Registered controller name.
+        wob_n: WOB of each grid row, (n_wob,), N.
+        reference_speed_rad_s: Reference bit speed of each grid column, (n_speed,), rad/s.
+        severity: ``(max - min) / (2 mean)`` of the bit speed over the window,
+            (n_wob, n_speed); NaN where the run diverged.
+        stuck_fraction: Share of the window with the bit stuck, (n_wob, n_speed); NaN where the
+            run diverged.
+        duration_s: Length of each run, s.
+        window_s: Analysis window at the end of each run, s.
+        noise_std_rad_s: Measurement noise on the speeds, rad/s.
+        seed: Seed of cell 0 (cell ``i`` uses ``seed + i``).
+        parameters: Plant preset name.
+        wall_time_s: Wall-clock time of the simulation, s.
+    """
+
+    controller: str
+    wob_n: npt.NDArray[np.float64]
+    reference_speed_rad_s: npt.NDArray[np.float64]
+    severity: npt.NDArray[np.float64]
+    stuck_fraction: npt.NDArray[np.float64]
+    duration_s: float
+    window_s: float
+    noise_std_rad_s: float
+    seed: int
+    parameters: str
+    wall_time_s: float
+
+    @property
+    def cells(self) -> int:
+        """Number of grid cells."""
+        return int(self.severity.size)
+
+    @property
+    def diverged(self) -> npt.NDArray[np.bool_]:
+        """Cells whose run diverged, (n_wob, n_speed)."""
+        return np.isnan(self.severity)
+
+    def unstable(self, severity_limit: float = UNSTABLE_SEVERITY) -> npt.NDArray[np.bool_]:
+        """Cells in stick-slip: the bit stuck at some point of the window or the severity is
+        above ``severity_limit`` (diverged cells count as unstable), (n_wob, n_speed)."""
+        with np.errstate(invalid="ignore"):
+            return (self.stuck_fraction > 0.0) | (self.severity > severity_limit) | self.diverged
+
+    def rows(self) -> list[tuple[float, float, float, float]]:
+        """One ``CSV_COLUMNS`` tuple per cell, WOB-major."""
+        return [
+            (
+                float(w),
+                float(v),
+                float(self.severity[i, j]),
+                float(self.stuck_fraction[i, j]),
+            )
+            for i, w in enumerate(self.wob_n)
+            for j, v in enumerate(self.reference_speed_rad_s)
+        ]
+
+
+def grid_values(name: str, low: float, high: float, count: int, upper: float) -> np.ndarray:
+    """``count`` evenly spaced values from ``low`` to ``high``, validated.
+
+    Args:
+        name: Argument name for messages (``"wob"`` or ``"speed"``).
+        low, high: Range ends (> 0, at most ``upper``); ``low < high`` unless ``count == 1``,
+            when ``low <= high`` and the grid is ``[low]``.
+        count: Number of values (an integer >= 1).
+        upper: Largest allowed value.
+
+    Raises:
+        ValueError: naming ``--{name}-min``, ``--{name}-max`` or ``--{name}-n``.
+    """
+    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
+        raise ValueError(f"--{name}-n = {count!r} is out of range: allowed an integer >= 1")
+    for end, value in (("min", low), ("max", high)):
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and 0 < value <= upper):
+            raise ValueError(f"--{name}-{end} = {value!r} is out of range: allowed (0, {upper:g}]")
+    if high < low:
+        raise ValueError(
+            f"--{name}-min = {low!r} and --{name}-max = {high!r}: the range is inverted "
+            "(min must be <= max)"
+        )
+    if high == low and count > 1:
+        raise ValueError(
+            f"--{name}-min = --{name}-max = {low!r}: the range is empty; widen it or use "
+            f"--{name}-n 1"
+        )
+    return np.linspace(low, high, int(count))
+
+
+def _chunk_steps(total_steps: int) -> int:
+    """The largest divisor of ``total_steps`` up to ``MAX_CHUNK_STEPS``."""
+    for d in range(min(MAX_CHUNK_STEPS, total_steps), 0, -1):
+        if total_steps % d == 0:
+            return d
+    return 1  # pragma: no cover - d = 1 always divides
+
+
+def compute_map(
+    controller: str,
+    wob_n: npt.ArrayLike,
+    reference_speed_rad_s: npt.ArrayLike,
+    duration_s: float = 100.0,
+    window_s: float = DEFAULT_WINDOW_S,
+    noise_std_rad_s: float = 0.0,
+    seed: int = 0,
+    parameters: str = "zribi2024",
+    progress: bool = True,
+) -> StickSlipMap:
+    """Run every (WOB, reference speed) cell from rest and measure its stick-slip.
+
+    Args:
+        controller: Registered controller name (:func:`baselines.controller_names`).
+        wob_n: WOB values of the rows, N (each > 0).
+        reference_speed_rad_s: Reference bit speeds of the columns, rad/s (each > 0).
+        duration_s: Length of each run, s (a multiple of 0.1 s, at most 10,000 s).
+        window_s: Analysis window at the end of each run, s (in (0, duration_s]).
+        noise_std_rad_s: Measurement noise on the speeds, rad/s (0 for a deterministic map).
+        seed: Seed of cell 0; cell ``i`` (WOB-major) is reset with ``seed + i``.
+        parameters: Plant preset name.
+        progress: Show a tqdm progress bar (on stderr).
+
+    Returns:
+        The :class:`StickSlipMap`.
+
+    Raises:
+        ValueError: naming the argument that is out of range or unknown.
+    """
+    names = controller_names()
+    if controller not in names:
+        raise ValueError(f"unknown controller {controller!r}: valid names are {', '.join(names)}")
+    if parameters not in PRESETS:
+        raise ValueError(f"parameters = {parameters!r} is not a known preset: {sorted(PRESETS)}")
+    wobs = np.atleast_1d(np.asarray(wob_n, dtype=np.float64))
+    speeds = np.atleast_1d(np.asarray(reference_speed_rad_s, dtype=np.float64))
+    for label, values, upper in (
+        ("wob_n", wobs, MAX_WOB_N),
+        ("reference_speed_rad_s", speeds, MAX_REFERENCE_RAD_S),
+    ):
+        if values.ndim != 1 or values.size == 0:
+            raise ValueError(f"{label} must be a non-empty 1-D sequence, got shape {values.shape}")
+        if not (np.all(np.isfinite(values)) and np.all(values > 0) and np.all(values <= upper)):
+            raise ValueError(
+                f"{label} = {values.tolist()!r} is out of range: allowed (0, {upper:g}]"
+            )
+    if not (math.isfinite(duration_s) and 0 < duration_s <= 1e4):
+        raise ValueError(f"duration_s = {duration_s!r} is out of range: allowed (0, 10000]")
+    total_steps = round(duration_s / PLANT_DT_S)
+    if total_steps % 100 or abs(total_steps * PLANT_DT_S - duration_s) > 1e-9:
+        raise ValueError(
+            f"duration_s = {duration_s!r} is out of range: allowed a multiple of 0.1 s"
+        )
+    if not (math.isfinite(window_s) and 0 < window_s <= duration_s):
+        raise ValueError(
+            f"window_s = {window_s!r} is out of range: allowed (0, duration_s = {duration_s:g}]"
+        )
+    if not (math.isfinite(noise_std_rad_s) and 0 <= noise_std_rad_s <= 10):
+        raise ValueError(f"noise_std_rad_s = {noise_std_rad_s!r} is out of range: allowed [0, 10]")
+
+    chunk = _chunk_steps(total_steps)
+    config = EnvConfig(
+        parameters=parameters,
+        randomize=False,
+        base_controller=controller,
+        control_dt_s=chunk * PLANT_DT_S,
+        episode_s=total_steps * PLANT_DT_S,
+        noise_std_rad_s=float(noise_std_rad_s),
+    )
+    cells = [(float(w), float(v)) for w in wobs for v in speeds]
+    n = len(cells)
+    started = time.perf_counter()
+    batch = StringBatch(config, n)
+    for i, (w, v) in enumerate(cells):
+        batch.reset_string(i, seed + i, {"wob_n": w, "reference_speed_rad_s": v})
+    window_start = total_steps - round(window_s / PLANT_DT_S)
+    high = np.full(n, -np.inf)
+    low = np.full(n, np.inf)
+    total = np.zeros(n)
+    stuck = np.zeros(n)
+    actions = np.zeros(n)
+    n_chunks = total_steps // chunk
+    bar = tqdm(
+        total=n_chunks,
+        desc=f"map {controller} ({n} cells)",
+        unit="chunk",
+        disable=not progress,
+        leave=False,
+    )
+    with bar:
+        for k in range(n_chunks):
+            batch.step(actions)
+            bar.update()
+            first = max(window_start - k * chunk, 0)
+            if first >= chunk:
+                continue
+            rec = batch.records[:, first:]
+            bit = rec[:, :, kernel.REC_X0 + 6]
+            np.maximum(high, bit.max(axis=1), out=high)
+            np.minimum(low, bit.min(axis=1), out=low)
+            total += bit.sum(axis=1)
+            stuck += rec[:, :, kernel.REC_STUCK].sum(axis=1)
+    samples = total_steps - window_start
+    mean = total / samples
+    with np.errstate(divide="ignore", invalid="ignore"):
+        severity = np.where(mean > 0, (high - low) / (2.0 * mean), 1.0)
+    stuck_fraction = stuck / samples
+    bad = batch.status != kernel.STATUS_OK
+    severity[bad] = np.nan
+    stuck_fraction[bad] = np.nan
+    shape = (wobs.size, speeds.size)
+    return StickSlipMap(
+        controller=controller,
+        wob_n=wobs,
+        reference_speed_rad_s=speeds,
+        severity=severity.reshape(shape),
+        stuck_fraction=stuck_fraction.reshape(shape),
+        duration_s=total_steps * PLANT_DT_S,
+        window_s=samples * PLANT_DT_S,
+        noise_std_rad_s=float(noise_std_rad_s),
+        seed=int(seed),
+        parameters=parameters,
+        wall_time_s=time.perf_counter() - started,
+    )
+
+
+def write_csv(result: StickSlipMap, path: str | Path) -> Path:
+    """Write the map as CSV (``CSV_COLUMNS``, one row per cell) and return the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(CSV_COLUMNS)
+        for row in result.rows():
+            writer.writerow([f"{v:.6g}" for v in row])
+    return path
+
+
+def _edges(values: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """Cell edges around grid centres (a unit-wide cell around a single value)."""
+    if values.size == 1:
+        half = 0.05 * values[0]
+        return np.array([values[0] - half, values[0] + half])
+    mid = 0.5 * (values[1:] + values[:-1])
+    return np.concatenate(([2 * values[0] - mid[0]], mid, [2 * values[-1] - mid[-1]]))
+
+
+def _heatmap(ax: Axes, result: StickSlipMap, quantity: str, title: str) -> object:
+    if quantity == "severity":
+        data, norm, cmap = result.severity, Normalize(0.0, SEVERITY_LIMIT), "magma"
+    else:
+        data, norm, cmap = result.stuck_fraction, Normalize(0.0, 1.0), "viridis"
+    mesh = ax.pcolormesh(
+        _edges(result.reference_speed_rad_s),
+        _edges(result.wob_n) / 1e3,
+        np.ma.masked_invalid(data),
+        cmap=cmap,
+        norm=norm,
+        shading="flat",
+    )
+    unstable = result.unstable()
+    if unstable.any() and not unstable.all() and min(data.shape) > 1:
+        ax.contour(
+            result.reference_speed_rad_s,
+            result.wob_n / 1e3,
+            unstable.astype(float),
+            levels=[0.5],
+            colors="white",
+            linewidths=1.0,
+        )
+    ax.set_title(title, fontsize=9)
+    ax.set_xlabel("reference bit speed (rad/s)")
+    ax.set_ylabel("WOB (kN)")
+    return mesh
+
+
+def plot_map(result: StickSlipMap, path: str | Path) -> Path:
+    """Severity and stuck-fraction heatmaps of one map in one PNG; returns the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig = Figure(figsize=(9.0, 3.6), dpi=DPI, layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, 2)
+    labels = {"severity": "stick-slip severity", "stuck": "stuck fraction"}
+    for ax, quantity in zip(axes, ("severity", "stuck"), strict=True):
+        mesh = _heatmap(ax, result, quantity, f"{result.controller}: {labels[quantity]}")
+        fig.colorbar(mesh, ax=ax, extend="max" if quantity == "severity" else "neither")  # type: ignore[arg-type]
+    fig.suptitle(_caption(result), fontsize=8)
+    fig.savefig(path)
+    return path
+
+
+def plot_maps(results: Sequence[StickSlipMap], path: str | Path) -> Path:
+    """All maps side by side: one column per controller, severity above stuck fraction."""
+    if not results:
+        raise ValueError("plot_maps needs at least one map")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    n = len(results)
+    fig = Figure(figsize=(2.9 * n + 1.2, 5.6), dpi=DPI, layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = np.asarray(fig.subplots(2, n, squeeze=False, sharex=True, sharey=True))
+    meshes = []
+    for col, result in enumerate(results):
+        meshes.append(_heatmap(axes[0, col], result, "severity", f"{result.controller}"))
+        last = _heatmap(axes[1, col], result, "stuck", f"{result.controller}")
+        if col:
+            axes[0, col].set_ylabel("")
+            axes[1, col].set_ylabel("")
+        axes[0, col].set_xlabel("")
+    fig.colorbar(meshes[-1], ax=list(axes[0]), extend="max", label="stick-slip severity")  # type: ignore[arg-type]
+    fig.colorbar(last, ax=list(axes[1]), label="stuck fraction")  # type: ignore[arg-type]
+    fig.suptitle(_caption(results[0]) + "; white line: stick-slip boundary", fontsize=8)
+    fig.savefig(path)
+    return path
+
+
+def _caption(result: StickSlipMap) -> str:
+    return (
+        f"{result.parameters}, runs of {result.duration_s:g} s from rest, last "
+        f"{result.window_s:g} s analysed, noise {result.noise_std_rad_s:g} rad/s"
+    )
+
+
+# ---------------------------------------------------------------------------- command line
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="drill-gym map",
+        description=(
+            "Stick-slip map of a controller: for each (WOB, reference bit speed) cell, run "
+            "from rest and report the stick-slip severity and the stuck fraction after the "
+            "start-up transient. Writes a CSV and a heatmap PNG per controller."
+        ),
+    )
+    parser.add_argument(
+        "--controller",
+        nargs="+",
+        default=["stiff_pi"],
+        metavar="NAME",
+        help=f"controller name(s): {', '.join(controller_names())} (default: stiff_pi)",
+    )
+    parser.add_argument("--wob-min", type=float, default=40e3, help="lowest WOB, N (default 40000)")
+    parser.add_argument(
+        "--wob-max", type=float, default=200e3, help="highest WOB, N (default 200000)"
+    )
+    parser.add_argument("--wob-n", type=int, default=20, help="number of WOB values (default 20)")
+    parser.add_argument(
+        "--speed-min", type=float, default=1.0, help="lowest reference bit speed, rad/s (default 1)"
+    )
+    parser.add_argument(
+        "--speed-max",
+        type=float,
+        default=16.0,
+        help="highest reference bit speed, rad/s (default 16)",
+    )
+    parser.add_argument("--speed-n", type=int, default=16, help="number of speeds (default 16)")
+    parser.add_argument(
+        "--duration", type=float, default=100.0, help="length of each run, s (default 100)"
+    )
+    parser.add_argument(
+        "--window",
+        type=float,
+        default=DEFAULT_WINDOW_S,
+        help=f"analysis window at the end of each run, s (default {DEFAULT_WINDOW_S:g})",
+    )
+    parser.add_argument(
+        "--noise",
+        type=float,
+        default=0.0,
+        metavar="STD",
+        help="measurement noise on the speeds, rad/s (default 0: deterministic)",
+    )
+    parser.add_argument(
+        "--parameters", default="zribi2024", choices=sorted(PRESETS), help="plant preset"
+    )
+    parser.add_argument("--out", type=Path, default=Path("results"), help="output folder")
+    parser.add_argument("--seed", type=int, default=0, help="seed of cell 0 (default 0)")
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``drill-gym map``: compute, write and plot the maps; returns the exit code.
+
+    Bad arguments end with an argparse error (exit code 2) naming the argument.
+    """
+    parser = _parser()
+    args = parser.parse_args(argv)
+    names = controller_names()
+    unknown = [c for c in args.controller if c not in names]
+    if unknown:
+        parser.error(
+            f"argument --controller: unknown controller(s) {', '.join(map(repr, unknown))}: "
+            f"valid names are {', '.join(names)}"
+        )
+    try:
+        wobs = grid_values("wob", args.wob_min, args.wob_max, args.wob_n, MAX_WOB_N)
+        speeds = grid_values(
+            "speed", args.speed_min, args.speed_max, args.speed_n, MAX_REFERENCE_RAD_S
+        )
+    except ValueError as err:
+        parser.error(f"argument {err}")
+    for flag, value, ok, allowed in (
+        ("--duration", args.duration, 0 < args.duration <= 1e4, "(0, 10000] s"),
+        ("--window", args.window, 0 < args.window <= args.duration, "(0, --duration]"),
+        ("--noise", args.noise, 0 <= args.noise <= 10, "[0, 10] rad/s"),
+    ):
+        if not (math.isfinite(value) and ok):
+            parser.error(f"argument {flag}: {value!r} is out of range: allowed {allowed}")
+    if abs(round(args.duration * 10) - args.duration * 10) > 1e-6:
+        parser.error(f"argument --duration: {args.duration!r} must be a multiple of 0.1 s")
+    results = []
+    for name in dict.fromkeys(args.controller):
+        result = compute_map(
+            name,
+            wobs,
+            speeds,
+            duration_s=args.duration,
+            window_s=args.window,
+            noise_std_rad_s=args.noise,
+            seed=args.seed,
+            parameters=args.parameters,
+            progress=not args.no_progress,
+        )
+        csv_path = write_csv(result, args.out / f"stick_slip_map_{name}.csv")
+        png_path = plot_map(result, args.out / f"stick_slip_map_{name}.png")
+        simulated = result.cells * result.duration_s
+        print(
+            f"{name}: {result.cells} cells x {result.duration_s:g} s in "
+            f"{result.wall_time_s:.1f} s ({simulated / result.wall_time_s:,.0f} simulated s per "
+            f"wall s); {int(result.unstable().sum())} cells in stick-slip; wrote {csv_path} and "
+            f"{png_path}"
+        )
+        results.append(result)
+    if len(results) > 1:
+        print(f"wrote {plot_maps(results, args.out / 'stick_slip_maps.png')}")
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())
