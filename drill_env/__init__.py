@@ -12,6 +12,9 @@ from drill_env._cache import invalidate_stale_cache
 
 invalidate_stale_cache(Path(__file__).parent)  # before any compiled module is imported
 
+from typing import Any  # noqa: E402
+
+import gymnasium as gym  # noqa: E402
 from gymnasium.envs.registration import register, registry  # noqa: E402
 
 from drill_env.config import EnvConfig  # noqa: E402
@@ -32,11 +35,24 @@ __all__ = [
     "RewardWeights",
     "SpeedProfile",
     "WobProfile",
+    "make",
 ]
 
 __version__ = "0.1.0"
 
 ENV_ID = "DrillString-v0"
+
+
+def make(**kwargs: Any) -> gym.Env[Any, Any]:
+    """``gym.make("DrillString-v0", **kwargs)`` with the time limit set from the keywords.
+
+    ``gym.make`` applies the registered limit of 2000 decisions (100 s at 50 ms) whatever
+    ``episode_s`` and ``control_dt_s`` say; this sets ``max_episode_steps`` to
+    ``episode_s / control_dt_s`` (the env also truncates itself at ``episode_s``).
+    """
+    config = EnvConfig.from_kwargs(kwargs)
+    return gym.make(ENV_ID, max_episode_steps=config.max_steps, **kwargs)
+
 
 if ENV_ID not in registry:
     register(

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import importlib
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 __all__ = ["main"]
 
@@ -41,7 +42,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"drill-gym: unknown subcommand {name!r}\n\n{_usage()}", file=sys.stderr)
         return 2
     module = importlib.import_module(SUBCOMMANDS[name][0])
+    if name == "compare":
+        return int(module.main(rest, agent_loader=_agent_loader()) or 0)
     return int(module.main(rest) or 0)
+
+
+def _agent_loader() -> Callable[[], Any] | None:
+    """``agents.load_default_policy`` when the agents package imports, else ``None``.
+
+    The command line is where the packages meet: ``baselines`` never imports ``agents``."""
+    try:
+        agents = importlib.import_module("agents")
+    except ImportError as exc:
+        print(f"drill-gym: no learned agent ({exc})", file=sys.stderr)
+        return None
+    loader: Callable[[], Any] | None = getattr(agents, "load_default_policy", None)
+    return loader
 
 
 if __name__ == "__main__":  # pragma: no cover

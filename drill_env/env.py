@@ -97,9 +97,10 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
     reset seed, one per component (``wob``, ``reference``, ``uncertainty``, ``noise``).
 
     ## Episode End
-    Truncation after ``episode_s`` (the registered ``max_episode_steps`` is 2000 = 100 s / 0.05 s;
-    when you change ``episode_s`` or ``control_dt_s`` at ``make``, pass ``max_episode_steps``
-    too). Termination when the state is not finite or leaves the physical bounds (1000 rad/s,
+    Truncation after ``episode_s``. The registered ``max_episode_steps`` is 2000 = 100 s / 0.05 s,
+    and ``gym.make`` applies it whatever the keywords say: when you change ``episode_s`` or
+    ``control_dt_s``, use ``drill_env.make(**kwargs)`` (which sets the limit from them) or pass
+    ``max_episode_steps=-1`` (no wrapper; the env still truncates itself at ``episode_s``). Termination when the state is not finite or leaves the physical bounds (1000 rad/s,
     1000 rad): ``info["termination_reason"] = "diverged"``, the observation stays finite.
 
     ## Arguments

@@ -55,7 +55,8 @@ class Trace:
     Plant-rate arrays (n samples at ``time_s = k * plant_dt_s``, the state at the start of the
     step and the torque held over it): ``states`` (n, 7) true state (rad/s, rad),
     ``torque_nm``, ``base_torque_nm`` (0 without a base controller), ``reference_rad_s``,
-    ``wob_n``, ``bit_stuck``, ``sliding_variable`` and ``adaptive_gain`` of the base
+    ``wob_n``, ``bit_stuck``, ``sliding_variable`` (s at the step) and ``adaptive_gain`` (the
+    gain the step's torque used) of the base
     controller (0 when it has none).
 
     Decision-rate arrays (m decisions): ``decision_time_s``, ``observations`` (m, obs_size),

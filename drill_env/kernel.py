@@ -56,8 +56,8 @@ REC_REFERENCE: Final = 8  # reference bit speed, rad/s
 REC_BASE_TORQUE: Final = 9  # base controller torque before the command, N m
 REC_STUCK: Final = 10  # 1.0 when the bit is stuck at the start of the step
 REC_WOB: Final = 11  # weight on bit, N
-REC_SLIDING: Final = 12  # the law's sliding variable (or 0), rad/s
-REC_GAIN: Final = 13  # the law's adaptive gain (or 0)
+REC_SLIDING: Final = 12  # the law's sliding variable at this step (or 0), rad/s
+REC_GAIN: Final = 13  # the law's adaptive gain used at this step (or 0)
 N_RECORD: Final = 14
 
 # Columns of the per-string report written at the end of every call (one .tolist() gives the
@@ -150,6 +150,7 @@ def _advance_one(
         wob = profile_value(wob_t[i], wob_v[i], wob_n[i], t)
         ref = profile_value(ref_t[i], ref_v[i], ref_n[i], t)
         m = _measure(xi, noise_std[i], noise[i, row + j])
+        gain = ls[2]  # the adaptive gain this step's torque uses (the law advances it)
         u_base = control_torque(law, lp, ls, m, ref, dt)
         u = min(max(u_base + command[i], u_min), u_max)
         for c in range(7):
@@ -160,7 +161,7 @@ def _advance_one(
         records[i, j, REC_STUCK] = 1.0 if mi == STUCK else 0.0
         records[i, j, REC_WOB] = wob
         records[i, j, REC_SLIDING] = ls[3]
-        records[i, j, REC_GAIN] = ls[2]
+        records[i, j, REC_GAIN] = gain
         tracking += min(abs(ref - xi[6]) / max(ref, 1.0), 1.0)
         variation += abs(u - u_prev)
         u_prev = u

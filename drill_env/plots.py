@@ -3,8 +3,10 @@ and the agent evaluation.
 
 Every function draws one PNG with matplotlib's object-oriented API on the Agg canvas (no
 ``pyplot``, no global state, safe in worker processes) and returns the path it wrote. Traces
-are :class:`drill_env.evaluation.Trace` objects; pass them through :func:`downsample` first:
-a 150 s run has 150,000 plant-rate samples, more than a figure can show.
+are :class:`drill_env.evaluation.Trace` objects; a 150 s run has 150,000 plant-rate samples,
+so keep :func:`downsample` (or :func:`time_window`) copies for figures. Long series are drawn
+with peak detection (each bin's minimum and maximum), never by plain striding, which would
+alias a torque that switches at every 1 ms step into a flat line.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ __all__ = [
     "plot_metric_bars",
     "plot_panels",
     "plot_speed_and_torque",
+    "time_window",
 ]
 
 METRIC_LABELS: Final[dict[str, str]] = {
@@ -48,12 +51,32 @@ METRIC_LABELS: Final[dict[str, str]] = {
 DPI: Final = 80
 """Resolution of every figure, dots per inch (small files, quick to write)."""
 
+_MARGINS: Final = {"left": 0.1, "right": 0.97, "bottom": 0.1, "top": 0.9, "hspace": 0.12}
+
+
+def _peaks(values: npt.NDArray[np.float64], every: int) -> npt.NDArray[np.float64]:
+    """One value per bin of ``every`` samples: the bin's maximum in even bins, its minimum in
+    odd ones ("peak detect"), so a line through them spans what the signal spans."""
+    n = values.shape[0]
+    bins = -(-n // every)
+    padded = np.empty(bins * every)
+    padded[:n] = values
+    padded[n:] = values[-1] if n else 0.0
+    grid = padded.reshape(bins, every)
+    out = grid.max(axis=1)
+    out[1::2] = grid[1::2].min(axis=1)
+    return out
+
 
 def downsample(trace: Trace, every: int) -> Trace:
-    """Keep every ``every``-th plant-rate sample of ``trace`` (decision-rate arrays are kept).
+    """A lighter trace for figures: one sample per bin of ``every`` plant steps.
 
-    The result's ``plant_dt_s`` is ``every`` times the original, so ``time_s`` and
-    ``duration_s`` stay right. For plotting only: metrics need every sample.
+    Speeds, twists and the other smooth channels keep the first sample of each bin; the torques
+    (``torque_nm``, ``base_torque_nm``) keep each bin's extreme, alternately its maximum and its
+    minimum, so a torque that switches at every 1 ms step (chattering) still shows as a band
+    instead of aliasing to a flat line. The result's ``plant_dt_s`` is ``every`` times the
+    original, so ``time_s`` and ``duration_s`` stay right. For plotting only: metrics need
+    every sample.
 
     Raises:
         ValueError: if ``every`` is not a positive integer.
@@ -67,8 +90,8 @@ def downsample(trace: Trace, every: int) -> Trace:
         trace,
         time_s=trace.time_s[cut].copy(),
         states=trace.states[cut].copy(),
-        torque_nm=trace.torque_nm[cut].copy(),
-        base_torque_nm=trace.base_torque_nm[cut].copy(),
+        torque_nm=_peaks(trace.torque_nm, every),
+        base_torque_nm=_peaks(trace.base_torque_nm, every),
         reference_rad_s=trace.reference_rad_s[cut].copy(),
         wob_n=trace.wob_n[cut].copy(),
         bit_stuck=trace.bit_stuck[cut].copy(),
@@ -78,9 +101,32 @@ def downsample(trace: Trace, every: int) -> Trace:
     )
 
 
-def _figure(rows: int, cols: int = 1, size: tuple[float, float] = (8.0, 5.5)) -> Figure:
-    fig = Figure(figsize=size, dpi=DPI, layout="constrained")
+def time_window(trace: Trace, start_s: float, end_s: float | None = None) -> Trace:
+    """The plant-rate samples of ``trace`` with ``start_s <= time_s < end_s`` (to the end when
+    ``end_s`` is ``None``), at full rate; decision-rate arrays are kept whole."""
+    t = trace.time_s
+    lo = int(np.searchsorted(t, start_s))
+    hi = len(t) if end_s is None else int(np.searchsorted(t, end_s))
+    cut = slice(lo, hi)
+    return dataclasses.replace(
+        trace,
+        time_s=trace.time_s[cut].copy(),
+        states=trace.states[cut].copy(),
+        torque_nm=trace.torque_nm[cut].copy(),
+        base_torque_nm=trace.base_torque_nm[cut].copy(),
+        reference_rad_s=trace.reference_rad_s[cut].copy(),
+        wob_n=trace.wob_n[cut].copy(),
+        bit_stuck=trace.bit_stuck[cut].copy(),
+        sliding_variable=trace.sliding_variable[cut].copy(),
+        adaptive_gain=trace.adaptive_gain[cut].copy(),
+    )
+
+
+def _figure(size: tuple[float, float], **margins: float) -> Figure:
+    # Fixed margins rather than a layout engine: constrained layout draws every figure twice.
+    fig = Figure(figsize=size, dpi=DPI)
     FigureCanvasAgg(fig)
+    fig.subplots_adjust(**{**_MARGINS, **margins})
     return fig
 
 
@@ -91,14 +137,25 @@ def _save(fig: Figure, path: str | Path) -> Path:
     return out
 
 
-def _window(
-    trace: Trace, window_s: tuple[float, float] | None
-) -> tuple[npt.NDArray[np.float64], slice]:
-    t = trace.time_s
-    if window_s is None:
-        return t, slice(None)
-    lo, hi = np.searchsorted(t, window_s[0]), np.searchsorted(t, window_s[1], side="right")
-    return t, slice(int(lo), int(hi))
+MAX_POINTS: Final = 4000
+"""Most points drawn per line; longer series are reduced by peak detection."""
+
+
+def _series(
+    t: npt.NDArray[np.float64],
+    y: npt.NDArray[np.float64],
+    window_s: tuple[float, float] | None = None,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """The points to draw: the samples within ``window_s``, reduced to at most about
+    ``MAX_POINTS`` by keeping each bin's extremes (so chattering and spikes stay visible)."""
+    if window_s is not None:
+        lo = int(np.searchsorted(t, window_s[0]))
+        hi = int(np.searchsorted(t, window_s[1], side="right"))
+        t, y = t[lo:hi], y[lo:hi]
+    if t.shape[0] <= MAX_POINTS:
+        return t, y
+    every = math.ceil(2 * t.shape[0] / MAX_POINTS)
+    return t[::every], _peaks(y, every)
 
 
 def plot_speed_and_torque(
@@ -119,21 +176,25 @@ def plot_speed_and_torque(
     Returns:
         ``path``.
     """
-    fig = _figure(2)
+    fig = _figure((8.0, 5.5))
     ax_w, ax_u = fig.subplots(2, 1, sharex=True)
     reference_drawn = False
     for label, trace in traces.items():
-        t, cut = _window(trace, window_s)
-        ax_w.plot(t[cut], trace.bit_speed_rad_s[cut], lw=1.0, label=label)
-        ax_u.plot(t[cut], trace.torque_nm[cut] / 1e3, lw=0.8, label=label)
-        if not reference_drawn and len(t[cut]):
-            ax_w.plot(t[cut], trace.reference_rad_s[cut], "k--", lw=0.8, label="reference")
+        t = trace.time_s
+        ax_w.plot(*_series(t, trace.bit_speed_rad_s, window_s), lw=1.0, label=label)
+        tu, u = _series(t, trace.torque_nm, window_s)
+        ax_u.plot(tu, u / 1e3, lw=0.8, label=label)
+        if not reference_drawn and len(tu):
+            ax_w.plot(
+                *_series(t, trace.reference_rad_s, window_s), "k--", lw=0.8, label="reference"
+            )
             reference_drawn = True
     ax_w.set_ylabel("bit speed (rad/s)")
     ax_u.set_ylabel("top-drive torque (kN m)")
     ax_u.set_xlabel("time (s)")
     for ax in (ax_w, ax_u):
         ax.grid(True, alpha=0.3)
+        ax.ticklabel_format(axis="x", useOffset=False)
     ax_w.legend(fontsize="small", ncol=min(len(traces) + 1, 3))
     if title:
         fig.suptitle(title)
@@ -181,22 +242,33 @@ def plot_panels(
         ``path``.
 
     Raises:
-        ValueError: for an unknown ``quantity`` or no panels.
+        ValueError: for an unknown ``quantity``, no panels or a panel without traces.
     """
     if quantity not in _QUANTITIES:
         raise ValueError(f"quantity = {quantity!r} is not valid: allowed {list(_QUANTITIES)}")
     if not panels:
         raise ValueError("panels is empty: nothing to plot")
+    empty = [name for name, traces in panels.items() if not traces]
+    if empty:
+        raise ValueError(f"panel(s) {', '.join(map(repr, empty))} have no traces")
     ylabel, factor = _QUANTITIES[quantity]
     ncols = max(1, min(ncols, len(panels)))
     nrows = math.ceil(len(panels) / ncols)
-    fig = _figure(nrows, ncols, size=(4.2 * ncols + 0.5, 2.4 * nrows + 0.6))
+    fig = _figure(
+        (4.2 * ncols + 0.5, 2.4 * nrows + 0.8),
+        left=0.8 / (4.2 * ncols + 0.5),
+        bottom=0.5 / (2.4 * nrows + 0.8),
+        top=1 - 0.55 / (2.4 * nrows + 0.8),
+        hspace=0.35,
+        wspace=0.25,
+    )
     axes = fig.subplots(nrows, ncols, squeeze=False, sharex=True).ravel()
     for ax, (name, traces) in zip(axes, panels.items(), strict=False):
         for label, trace in traces.items():
-            t, cut = _window(trace, window_s)
-            ax.plot(t[cut], _quantity(trace, quantity)[cut] * factor, lw=0.8, label=label)
+            t, y = _series(trace.time_s, _quantity(trace, quantity), window_s)
+            ax.plot(t, y * factor, lw=0.8, label=label)
         ax.set_title(name, fontsize="medium")
+        ax.ticklabel_format(axis="x", useOffset=False)
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize="x-small")
     for ax in axes[len(panels) :]:
@@ -221,14 +293,14 @@ def plot_adaptive_gains(traces: Mapping[str, Trace], path: str | Path, title: st
     Returns:
         ``path``.
     """
-    fig = _figure(1, size=(8.0, 4.0))
+    fig = _figure((8.0, 4.0), bottom=0.13)
     ax = fig.subplots()
     drawn = 0
     for label, trace in traces.items():
         gain = trace.adaptive_gain
         if not np.any(gain != 0.0):
             continue
-        ax.plot(trace.time_s, gain, lw=1.0, label=label)
+        ax.plot(*_series(trace.time_s, gain), lw=1.0, label=label)
         drawn += 1
     if drawn:
         ax.set_yscale("log")
@@ -237,7 +309,7 @@ def plot_adaptive_gains(traces: Mapping[str, Trace], path: str | Path, title: st
         ax.text(0.5, 0.5, "no adaptive gains", ha="center", va="center", transform=ax.transAxes)
     ax.set_xlabel("time (s)")
     ax.set_ylabel("adaptive gain (N m)")
-    ax.grid(True, alpha=0.3, which="both")
+    ax.grid(True, alpha=0.3)
     if title:
         ax.set_title(title)
     return _save(fig, path)
@@ -266,7 +338,7 @@ def _bars(
     ax.set_ylabel(METRIC_LABELS.get(metric, metric))
     if log:
         ax.set_yscale("log")
-    ax.grid(True, axis="y", alpha=0.3, which="both")
+    ax.grid(True, axis="y", alpha=0.3)
 
 
 def plot_metric_bars(
@@ -300,7 +372,8 @@ def plot_metric_bars(
     if not rows:
         raise ValueError("rows is empty: nothing to plot")
     metrics = [metric] if isinstance(metric, str) else list(metric)
-    fig = _figure(1, len(metrics), size=(4.5 * len(metrics) + 1.5, 4.0))
+    width = 4.5 * len(metrics) + 1.5
+    fig = _figure((width, 4.0), left=0.8 / width, bottom=0.2, wspace=0.3)
     axes = fig.subplots(1, len(metrics), squeeze=False)[0]
     for ax, m in zip(axes, metrics, strict=True):
         _bars(ax, rows, m, group, hue, log)

@@ -10,10 +10,9 @@ Run: .venv/bin/python examples/custom_controller.py
 
 from __future__ import annotations
 
-import gymnasium as gym
 import numpy as np
 
-import drill_env  # noqa: F401
+import drill_env
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout
 
 
@@ -33,15 +32,13 @@ class SpeedPI:
         return self.feedforward_nm + self.kp * error + self.ki * self.integral
 
 
-env = gym.make(
-    "DrillString-v0",
+env = drill_env.make(
     randomize=False,
     base_controller=SpeedPI(),
     reference_speed_rad_s=5.0,
     wob_n=150_000.0,
     episode_s=40.0,
     control_dt_s=1.0,
-    max_episode_steps=None,
 )
 metrics = episode_metrics(rollout(env, ZeroAction(), seed=0))
 print({k: round(v, 3) if isinstance(v, float) else v for k, v in metrics.items()})

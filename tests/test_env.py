@@ -439,3 +439,17 @@ def test_python_controller_matches_compiled_controller() -> None:
         assert rew_p == pytest.approx(rew_c, rel=1e-9, abs=1e-12)
         for key in ("bit_speed_rad_s", "top_drive_torque_nm", "base_torque_nm"):
             assert info_p[key] == pytest.approx(info_c[key], rel=1e-9, abs=1e-9)
+
+
+def test_make_sets_the_time_limit_from_the_keywords() -> None:
+    """``drill_env.make`` truncates at ``episode_s``, not at the registered 2000 decisions."""
+    env = drill_env.make(randomize=False, episode_s=3.0, control_dt_s=0.001)
+    env.reset(seed=0)
+    steps = 0
+    truncated = False
+    while not truncated:
+        _, _, terminated, truncated, info = env.step(np.zeros(1, dtype=np.float32))
+        assert not terminated
+        steps += 1
+    assert steps == 3000
+    assert info["time_s"] == pytest.approx(3.0)

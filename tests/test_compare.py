@@ -1,0 +1,265 @@
+"""``drill-gym compare`` (``baselines.compare``): a short smoke run and the files it writes."""
+
+from __future__ import annotations
+
+import csv
+import json
+import sys
+import types
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import drill_env  # noqa: F401  (registers DrillString-v0)
+from baselines import compare
+from baselines.compare import ROW_KEYS, decision_period, default_controllers, main
+from drill_env.cli import main as cli_main
+from drill_env.evaluation import ZeroAction, episode_metrics, rollout
+from drill_env.metrics import METRIC_KEYS
+
+SHORT = ["--duration", "2", "--conditions", "nominal", "--no-agent", "--no-progress"]
+
+FIGURES = (
+    "speed_torque_csmc.png",
+    "speed_torque_proposed.png",
+    "noise_speed_torque.png",
+    "noise_torque_zoom.png",
+    "bars_rmse.png",
+    "bars_ise_iae.png",
+    "bars_rmsd.png",
+    "bars_chattering.png",
+    "adaptive_gains.png",
+)
+
+
+@pytest.fixture(scope="module")
+def smoke(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("compare")
+    argv = ["--controllers", "csmc", "proposed", "--noise", "0", *SHORT, "--out", str(out)]
+    assert main(argv) == 0
+    return out
+
+
+def read_csv(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
+class TestSmokeRun:
+    def test_csv(self, smoke: Path) -> None:
+        rows = read_csv(smoke / "compare.csv")
+        assert [(r["controller"], r["condition"], r["noise_std_rad_s"]) for r in rows] == [
+            ("csmc", "nominal", "0.0"),
+            ("proposed", "nominal", "0.0"),
+        ]
+        assert tuple(rows[0]) == ROW_KEYS
+        assert float(rows[0]["rmsd_nm"]) > 5_000
+        assert rows[0]["settling_time_s"] == ""  # never settles within 2 s: empty cell
+
+    def test_json(self, smoke: Path) -> None:
+        rows = json.loads((smoke / "compare.json").read_text())
+        assert len(rows) == 2
+        for row in rows:
+            assert tuple(row) == ROW_KEYS
+            assert set(METRIC_KEYS) <= set(row)
+            assert row["settling_time_s"] is None  # JSON null
+            assert row["diverged"] is False
+            assert row["gains"] == "paper"
+            assert row["uncertainty_reading"] == "plant"
+            assert row["duration_s"] == 2.0
+
+    def test_figures(self, smoke: Path) -> None:
+        for name in FIGURES:
+            path = smoke / "figures" / name
+            assert path.is_file(), name
+            assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
+            assert path.stat().st_size > 1000, name
+
+    def test_same_numbers_as_one_rollout(self, smoke: Path) -> None:
+        # compare runs the one scoring path: rollout + episode_metrics of a DrillString-v0.
+        env = gym.make(
+            "DrillString-v0",
+            randomize=False,
+            base_controller="proposed",
+            noise_std_rad_s=0.0,
+            episode_s=2.0,
+            control_dt_s=0.05,
+            max_episode_steps=-1,
+        )
+        expected = episode_metrics(rollout(env, ZeroAction(), seed=0))
+        row = json.loads((smoke / "compare.json").read_text())[1]
+        for key in METRIC_KEYS:
+            assert row[key] == expected[key], key
+
+
+def test_table_and_noise_levels(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    argv = ["--controllers", "asmc", "--noise", "0", "0.1", "--no-plots", *SHORT]
+    assert main([*argv, "--out", str(tmp_path)]) == 0
+    text = capsys.readouterr().out
+    assert "| controller | condition | noise (rad/s) | ISE | IAE |" in text
+    assert "| asmc | nominal | 0.1 |" in text
+    rows = json.loads((tmp_path / "compare.json").read_text())
+    assert [r["noise_std_rad_s"] for r in rows] == [0.0, 0.1]
+    assert rows[1]["chattering_nm_per_s"] > 20 * rows[0]["chattering_nm_per_s"]
+    assert not (tmp_path / "figures").exists()
+
+
+def test_through_the_cli(tmp_path: Path) -> None:
+    argv = ["compare", "--controllers", "msmc", "--noise", "0", "--no-plots", *SHORT]
+    assert cli_main([*argv, "--out", str(tmp_path)]) == 0
+    assert len(read_csv(tmp_path / "compare.csv")) == 1
+
+
+def test_rescaled_gains(tmp_path: Path) -> None:
+    argv = ["--controllers", "csmc", "--noise", "0", "--gains", "rescaled", "--no-plots", *SHORT]
+    assert main([*argv, "--out", str(tmp_path)]) == 0
+    row = json.loads((tmp_path / "compare.json").read_text())[0]
+    assert row["gains"] == "rescaled"
+    assert compare.RESCALED_GAINS["csmc"] == {"k1": pytest.approx(3.0 * 930.0)}
+
+
+def test_controller_reading(tmp_path: Path) -> None:
+    argv = ["--controllers", "csmc", "--noise", "0", "--reading", "controller", "--no-plots"]
+    assert main([*argv, *SHORT, "--conditions", "condition3", "--out", str(tmp_path)]) == 0
+    row = json.loads((tmp_path / "compare.json").read_text())[-1]
+    assert (row["condition"], row["uncertainty_reading"]) == ("condition3", "controller")
+
+
+class FakeAgent:
+    """Stands in for ``agents.load_default_policy()``: a zero residual on the proposed SMC."""
+
+    name = "fake_agent"
+    env_kwargs: dict[str, Any] = {"base_controller": "proposed", "control_dt_s": 0.05}  # noqa: RUF012
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):  # type: ignore[no-untyped-def]
+        assert np.asarray(observation).shape == (11,)
+        return np.zeros(1, dtype=np.float32), state
+
+
+def test_agent_row(tmp_path: Path) -> None:
+    argv = ["--controllers", "proposed", "--noise", "0", "--no-plots", "--duration", "2"]
+    argv += ["--conditions", "nominal", "--out", str(tmp_path)]
+    assert main(argv, agent_loader=FakeAgent) == 0
+    rows = json.loads((tmp_path / "compare.json").read_text())
+    assert [r["controller"] for r in rows] == ["proposed", "fake_agent"]
+    assert rows[1]["gains"] == "agent"
+    # A zero residual on the proposed SMC is the proposed SMC.
+    for key in METRIC_KEYS:
+        assert rows[1][key] == rows[0][key], key
+
+
+def test_no_agent_when_none_shipped(tmp_path: Path) -> None:
+    argv = ["--controllers", "csmc", "--noise", "0", "--no-plots", "--duration", "1"]
+    argv += ["--conditions", "nominal", "--out", str(tmp_path)]
+    assert main(argv, agent_loader=lambda: None) == 0
+    assert len(json.loads((tmp_path / "compare.json").read_text())) == 1
+
+
+def test_command_line_passes_the_agent_loader(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``drill-gym compare`` looks the agent up in ``agents`` (baselines does not)."""
+    fake = types.ModuleType("agents")
+    fake.load_default_policy = FakeAgent  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "agents", fake)
+    argv = ["compare", "--controllers", "proposed", "--noise", "0", "--no-plots"]
+    argv += ["--duration", "1", "--conditions", "nominal", "--out", str(tmp_path)]
+    assert cli_main(argv) == 0
+    rows = json.loads((tmp_path / "compare.json").read_text())
+    assert [r["controller"] for r in rows] == ["proposed", "fake_agent"]
+
+
+class TestArguments:
+    def test_default_controllers(self) -> None:
+        names = default_controllers()
+        assert names[:4] == ["csmc", "msmc", "asmc", "proposed"]
+        assert len(names) == len(set(names))
+
+    def test_unknown_controller(self, capsys: pytest.CaptureFixture[str]) -> None:
+        with pytest.raises(SystemExit) as exc:
+            main(["--controllers", "pid", "--no-agent"])
+        assert exc.value.code == 2
+        assert "unknown controller(s) pid: valid names are csmc, msmc, asmc, proposed" in (
+            capsys.readouterr().err
+        )
+
+    def test_unknown_condition(self, capsys: pytest.CaptureFixture[str]) -> None:
+        with pytest.raises(SystemExit):
+            main(["--conditions", "condition4"])
+        assert "invalid choice: 'condition4'" in capsys.readouterr().err
+
+    @pytest.mark.parametrize("noise", ["-0.1", "nan"])
+    def test_bad_noise(self, noise: str, capsys: pytest.CaptureFixture[str]) -> None:
+        with pytest.raises(SystemExit):
+            main(["--noise", noise])
+        assert "noise must be a finite number >= 0" in capsys.readouterr().err
+
+    @pytest.mark.parametrize("duration", ["0", "-5", "0.0005"])
+    def test_bad_duration(self, duration: str, capsys: pytest.CaptureFixture[str]) -> None:
+        with pytest.raises(SystemExit):
+            main(["--duration", duration, "--no-agent"])
+        assert "duration = " in capsys.readouterr().err
+
+    @pytest.mark.parametrize(
+        ("duration", "period"), [(150.0, 1.0), (2.5, 0.5), (0.3, 0.1), (1.234, 0.002)]
+    )
+    def test_decision_period(self, duration: float, period: float) -> None:
+        assert decision_period(duration) == period
+
+
+@pytest.fixture(scope="module")
+def short_trace():  # type: ignore[no-untyped-def]
+    """1 s of CSMC in residual mode (1,000 plant steps)."""
+    env = gym.make(
+        "DrillString-v0",
+        randomize=False,
+        base_controller="csmc",
+        episode_s=1.0,
+        control_dt_s=0.5,
+        max_episode_steps=-1,
+    )
+    return rollout(env, ZeroAction(), seed=0)
+
+
+class TestFigureHelpers:
+    """The figure helpers of drill_env.plots that the comparison relies on."""
+
+    def test_downsample_keeps_chattering(self, short_trace) -> None:  # type: ignore[no-untyped-def]
+        import dataclasses
+
+        from drill_env.plots import downsample
+
+        # A torque switching by +-1 kN m at every step must not alias to a flat line.
+        chatter = 13_000.0 + 1_000.0 * (-1.0) ** np.arange(1000)
+        small = downsample(dataclasses.replace(short_trace, torque_nm=chatter), 10)
+        assert small.time_s.shape == (100,)
+        assert small.plant_dt_s == pytest.approx(0.01)
+        assert small.duration_s == pytest.approx(short_trace.duration_s)
+        np.testing.assert_array_equal(small.torque_nm[0::2], 14_000.0)
+        np.testing.assert_array_equal(small.torque_nm[1::2], 12_000.0)
+        np.testing.assert_array_equal(small.bit_speed_rad_s, short_trace.bit_speed_rad_s[::10])
+
+    def test_downsample_bad_factor(self, short_trace) -> None:  # type: ignore[no-untyped-def]
+        from drill_env.plots import downsample
+
+        with pytest.raises(ValueError, match=r"every = 0 is out of range"):
+            downsample(short_trace, 0)
+
+    def test_time_window(self, short_trace) -> None:  # type: ignore[no-untyped-def]
+        from drill_env.plots import time_window
+
+        tail = time_window(short_trace, 0.8)
+        assert tail.time_s.shape == (200,)
+        assert tail.time_s[0] == pytest.approx(0.8)
+        np.testing.assert_array_equal(tail.torque_nm, short_trace.torque_nm[800:])
+
+    def test_panel_without_traces(self, short_trace, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+        from drill_env.plots import plot_panels
+
+        with pytest.raises(ValueError, match=r"panel\(s\) 'csmc' have no traces"):
+            plot_panels({"csmc": {}, "msmc": {"a": short_trace}}, tmp_path / "x.png")
+        with pytest.raises(ValueError, match=r"quantity = 'power' is not valid"):
+            plot_panels({"msmc": {"a": short_trace}}, tmp_path / "x.png", quantity="power")
