@@ -18,14 +18,17 @@ __all__ = ["DrillStringEnv", "validate_actions"]
 
 
 def validate_actions(
-    action: Any, num: int
+    action: Any, num: int, batched: bool = False
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
     """Check ``action`` (``num`` values in [-1, 1]) and clip it; returns (clipped, was_clipped).
+
+    A single env takes shape ``(1,)`` (or a scalar); a vector env (``batched``) takes
+    ``(num, 1)`` (or ``(num,)``).
 
     Raises:
         ValueError: naming ``action`` when it is not finite or not of the right shape.
     """
-    if num == 1 and type(action) is np.ndarray and action.shape == (1,):  # the common case
+    if not batched and type(action) is np.ndarray and action.shape == (1,):  # the common case
         v = float(action[0])
         if -1.0 <= v <= 1.0:
             return np.array([v]), np.zeros(1, dtype=bool)
@@ -33,7 +36,7 @@ def validate_actions(
         a = np.asarray(action, dtype=np.float64)
     except (TypeError, ValueError):
         raise ValueError(f"action must be numeric with shape ({num}, 1), got {action!r}") from None
-    if num == 1:
+    if not batched:
         if a.shape not in ((1,), ()):
             raise ValueError(f"action must have shape (1,), got shape {a.shape}")
     elif a.shape not in ((num, 1), (num,)):

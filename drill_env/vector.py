@@ -66,6 +66,19 @@ class DrillStringVectorEnv(VectorEnv):
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[npt.NDArray[np.float32], dict[str, Any]]:
+        """Reset every string, or only those of ``options["reset_mask"]`` (a bool array of
+        ``num_envs``, Gymnasium's partial reset); the other options apply to the strings reset.
+        Seeds: ``s`` gives string ``i`` the seed ``s + i``; a list gives each its own."""
+        mask = np.ones(self.num_envs, dtype=bool)
+        if options and "reset_mask" in options:
+            options = dict(options)
+            mask = np.asarray(options.pop("reset_mask"))
+            if mask.shape != (self.num_envs,) or mask.dtype != np.bool_:
+                raise ValueError(
+                    f"reset_mask must be a bool array of shape ({self.num_envs},), got {mask!r}"
+                )
+            if not self._started and not mask.all():
+                raise ValueError("the first reset must reset every string (reset_mask all True)")
         if seed is None:
             seeds: list[int | None] = [None] * self.num_envs
         elif isinstance(seed, int):
@@ -79,11 +92,13 @@ class DrillStringVectorEnv(VectorEnv):
                 seed if isinstance(seed, int) else None
             )
         for i, s in enumerate(seeds):
+            if not mask[i]:
+                continue
             root = None
             if s is None and self._batch.episodes[i] is None:
                 root = np.random.SeedSequence(int(self.np_random.integers(2**63)))
             self._batch.reset_string(i, s, options, previous_root=root)
-        self._needs_reset[:] = False
+        self._needs_reset[mask] = False
         self._started = True
         zeros = np.zeros(self.num_envs)
         return self._batch.observations(), self._infos(zeros, zeros, zeros)
@@ -99,7 +114,7 @@ class DrillStringVectorEnv(VectorEnv):
     ]:
         if not self._started:
             raise RuntimeError("call reset() before step()")
-        a, clipped = validate_actions(actions, self.num_envs)
+        a, clipped = validate_actions(actions, self.num_envs, batched=True)
         b = self._batch
         resetting = self._needs_reset.copy()
         for i in np.flatnonzero(resetting):

@@ -453,3 +453,38 @@ def test_make_sets_the_time_limit_from_the_keywords() -> None:
         steps += 1
     assert steps == 3000
     assert info["time_s"] == pytest.approx(3.0)
+
+
+def test_vector_env_of_one_takes_its_batched_action_shape() -> None:
+    """``make_vec(num_envs=1)`` steps with actions of its own space's shape (1, 1)."""
+    venv = gym.make_vec("DrillString-v0", num_envs=1)
+    venv.reset(seed=0)
+    assert venv.action_space.shape == (1, 1)
+    obs, *_ = venv.step(np.zeros((1, 1), dtype=np.float32))
+    assert obs.shape == (1, 9)
+    with pytest.raises(ValueError, match=r"action must have shape \(1, 1\)"):
+        venv.step(np.zeros((2, 1), dtype=np.float32))
+
+
+def test_vector_env_partial_reset_matches_a_single_env() -> None:
+    """``reset(options={"reset_mask": m})`` starts new episodes only where ``m`` is True; a
+    string so reset continues exactly like a single env reset without a seed."""
+    venv = gym.make_vec("DrillString-v0", num_envs=2)
+    single = gym.make("DrillString-v0")
+    venv.reset(seed=10)
+    single.reset(seed=11)
+    action = np.full((2, 1), 0.1, dtype=np.float32)
+    for _ in range(5):
+        obs_before, *_ = venv.step(action)
+        single.step(action[1])
+    obs, info = venv.reset(options={"reset_mask": np.array([False, True])})
+    single_obs, single_info = single.reset()
+    np.testing.assert_array_equal(obs[0], obs_before[0])  # string 0 untouched
+    np.testing.assert_array_equal(obs[1], single_obs)
+    assert info["wob_n"][1] == single_info["wob_n"]
+    for _ in range(5):
+        obs, *_ = venv.step(action)
+        single_obs, *_ = single.step(action[1])
+    np.testing.assert_array_equal(obs[1], single_obs)
+    with pytest.raises(ValueError, match="reset_mask must be a bool array of shape"):
+        venv.reset(options={"reset_mask": np.array([1, 0])})
