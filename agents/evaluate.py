@@ -1,0 +1,458 @@
+"""``drill-gym evaluate [MODEL ...]``: trained agents against every registered controller on a
+held-out scenario set.
+
+The set (:data:`HELD_OUT`) is an explicit list of 20 scenarios, none of them a training draw:
+WOB 60-200 kN (eight with one step change at 40, 50 or 60 s), V_ref 4-16 rad/s, the four
+Table 3 conditions, 0.1 rad/s measurement noise, 100 s from rest, each with its own fixed reset
+seed (the noise). Every controller and every agent runs through the one scoring path::
+
+    env = gym.make("DrillString-v0", **scenario, **policy.env_kwargs)   # agent
+    env = gym.make("DrillString-v0", **scenario, base_controller=name)  # controller, ZeroAction
+    episode_metrics(rollout(env, policy, seed))
+
+so the base controller alone and the base controller plus the residual see the same plant,
+the same WOB and reference profiles and the same noise samples.
+
+Outputs (``--out``, default ``results/evaluate``): ``heldout.csv`` and ``heldout.json`` (one
+row per scenario and controller), ``summary.json`` (means per controller and the goal check of
+issue 4) and figures under ``figures/`` (bit speed and torque, base controller against
+residual agent, on the same seeds); a markdown table on standard output.
+
+Examples::
+
+    drill-gym evaluate                              # the shipped models in agents/models/
+    drill-gym evaluate runs/residual_ppo__1/model   # a model of your own
+    drill-gym evaluate --controllers proposed --no-figures
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any, Final
+
+import gymnasium as gym
+import numpy as np
+
+import drill_env  # noqa: F401  (registers DrillString-v0)
+from agents.policy import (
+    DEFAULT_MODEL_DIR,
+    DEFAULT_MODEL_NAME,
+    MODEL_FILE,
+    ResidualPolicy,
+    load_policy,
+)
+from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics, rollout
+from drill_env.metrics import METRIC_KEYS
+
+__all__ = [
+    "BASE_CONTROLLER",
+    "EPISODE_S",
+    "HELD_OUT",
+    "evaluate",
+    "main",
+    "stick_slip_prone",
+    "summarize",
+]
+
+EPISODE_S: Final = 100.0
+"""Length of every held-out run, s."""
+BASE_CONTROLLER: Final = "proposed"
+"""The controller the goal is measured against."""
+NOISE_STD_RAD_S: Final = 0.1
+"""Measurement noise on the speeds, rad/s."""
+
+
+def _scenario(
+    k: int,
+    ref: float,
+    wob_kn: float,
+    condition: str,
+    step: tuple[float, float] | None = None,
+) -> dict[str, Any]:
+    scenario: dict[str, Any] = {
+        "id": f"h{k:02d}",
+        "seed": 9_000 + k,
+        "reference_speed_rad_s": ref,
+        "wob_n": wob_kn * 1e3,
+        "uncertainty": condition,
+    }
+    if step is not None:
+        scenario["wob_step_time_s"] = step[0]
+        scenario["wob_final_n"] = step[1] * 1e3
+    return scenario
+
+
+HELD_OUT: Final[tuple[dict[str, Any], ...]] = (
+    _scenario(1, 4.0, 60.0, "nominal"),
+    _scenario(2, 4.0, 120.0, "condition1", (50.0, 180.0)),
+    _scenario(3, 5.0, 90.0, "condition2"),
+    _scenario(4, 5.0, 160.0, "condition3", (60.0, 100.0)),
+    _scenario(5, 6.0, 200.0, "nominal"),
+    _scenario(6, 6.0, 70.0, "condition2", (40.0, 150.0)),
+    _scenario(7, 7.0, 130.0, "condition1"),
+    _scenario(8, 8.0, 100.0, "nominal", (50.0, 190.0)),
+    _scenario(9, 8.0, 175.0, "condition3"),
+    _scenario(10, 9.0, 65.0, "condition1"),
+    _scenario(11, 10.0, 110.0, "condition2", (60.0, 70.0)),
+    _scenario(12, 10.0, 185.0, "nominal"),
+    _scenario(13, 11.0, 140.0, "condition3", (40.0, 200.0)),
+    _scenario(14, 12.0, 97.347, "nominal"),
+    _scenario(15, 12.0, 155.0, "condition2"),
+    _scenario(16, 13.0, 80.0, "condition1", (50.0, 130.0)),
+    _scenario(17, 14.0, 195.0, "condition1"),
+    _scenario(18, 14.0, 60.0, "condition3"),
+    _scenario(19, 15.0, 125.0, "nominal", (50.0, 165.0)),
+    _scenario(20, 16.0, 170.0, "condition2"),
+)
+"""The held-out scenarios: ``id``, reset ``seed`` and ``DrillString-v0`` keywords (WOB in N).
+Each runs ``EPISODE_S`` seconds from rest with ``NOISE_STD_RAD_S`` noise, ``randomize=False``."""
+
+FIGURE_SCENARIOS: Final = ("h01", "h02", "h08", "h14")
+"""Scenarios drawn one by one (bit speed and torque, base against residual)."""
+
+
+def stick_slip_prone(scenario: Mapping[str, Any]) -> bool:
+    """V_ref <= 6 rad/s, or a WOB of at least 150 kN at some time of the run."""
+    wob_max = max(float(scenario["wob_n"]), float(scenario.get("wob_final_n") or 0.0))
+    return float(scenario["reference_speed_rad_s"]) <= 6.0 or wob_max >= 150e3
+
+
+def _env_kwargs(scenario: Mapping[str, Any]) -> dict[str, Any]:
+    kwargs = {k: v for k, v in scenario.items() if k not in ("id", "seed")}
+    return {
+        **kwargs,
+        "randomize": False,
+        "episode_s": EPISODE_S,
+        "noise_std_rad_s": NOISE_STD_RAD_S,
+    }
+
+
+def run_scenario(
+    scenario: Mapping[str, Any], policy: Policy, env_kwargs: Mapping[str, Any]
+) -> Trace:
+    """One held-out run of ``policy`` in ``DrillString-v0(**scenario, **env_kwargs)``."""
+    kwargs = {**_env_kwargs(scenario), **env_kwargs}
+    # No TimeLimit wrapper: the env truncates itself after episode_s, whatever the period.
+    env = gym.make("DrillString-v0", max_episode_steps=-1, **kwargs)
+    try:
+        return rollout(env, policy, int(scenario["seed"]))
+    finally:
+        env.close()
+
+
+def evaluate(
+    agents: Sequence[ResidualPolicy],
+    controllers: Sequence[str] | None = None,
+    scenarios: Sequence[Mapping[str, Any]] = HELD_OUT,
+    keep_traces: Sequence[str] = (),
+    progress: bool = False,
+) -> tuple[list[dict[str, Any]], dict[tuple[str, str], Trace]]:
+    """Score every controller and agent on every scenario.
+
+    Args:
+        agents: Trained agents (their ``env_kwargs`` set the decision period etc.).
+        controllers: Registered controller names (run as base controller with a zero residual);
+            default all of them.
+        scenarios: The scenarios (default :data:`HELD_OUT`).
+        keep_traces: Labels (controller names or agent names) whose traces are returned.
+        progress: Show a progress bar.
+
+    Returns:
+        One row per (scenario, controller or agent) with the scenario, ``prone`` and the metrics;
+        and the kept traces by (scenario id, label).
+    """
+    from baselines import controller_names
+
+    names = list(controller_names() if controllers is None else controllers)
+    # Controllers run with the first agent's decision period: the same noise stream, and a
+    # zero residual is then exactly the agent's base controller.
+    common = {
+        k: v for k, v in (agents[0].env_kwargs if agents else {}).items() if k != "base_controller"
+    }
+    jobs: list[tuple[str, Policy, dict[str, Any]]] = [
+        (name, ZeroAction(), {**common, "base_controller": name}) for name in names
+    ]
+    jobs += [(agent.name, agent, dict(agent.env_kwargs)) for agent in agents]
+    rows: list[dict[str, Any]] = []
+    traces: dict[tuple[str, str], Trace] = {}
+    total = len(scenarios) * len(jobs)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=total, desc="held-out runs", unit="run")
+    for scenario in scenarios:
+        for label, policy, kwargs in jobs:
+            trace = run_scenario(scenario, policy, kwargs)
+            metrics = episode_metrics(trace)
+            rows.append(
+                {
+                    "scenario": scenario["id"],
+                    "controller": label,
+                    "reference_speed_rad_s": scenario["reference_speed_rad_s"],
+                    "wob_n": scenario["wob_n"],
+                    "wob_step_time_s": scenario.get("wob_step_time_s"),
+                    "wob_final_n": scenario.get("wob_final_n"),
+                    "uncertainty": scenario["uncertainty"],
+                    "seed": scenario["seed"],
+                    "prone": stick_slip_prone(scenario),
+                    **metrics,
+                }
+            )
+            if label in keep_traces:
+                traces[(str(scenario["id"]), label)] = trace
+            if bar is not None:
+                bar.update()
+    if bar is not None:
+        bar.close()
+    return rows, traces
+
+
+def _mean(values: Sequence[float | None]) -> float:
+    clean = [float(v) for v in values if v is not None and math.isfinite(float(v))]
+    return float(np.mean(clean)) if clean else math.nan
+
+
+def summarize(rows: Sequence[Mapping[str, Any]], base: str = BASE_CONTROLLER) -> dict[str, Any]:
+    """Means per controller, ratios to ``base`` and the goal check of issue 4.
+
+    The goal, per agent: mean IAE at most 0.7 x the base controller's, mean RMSD no higher, and
+    a lower mean stick-slip severity over the stick-slip-prone scenarios.
+    """
+    labels = list(dict.fromkeys(r["controller"] for r in rows))
+    means: dict[str, dict[str, float]] = {}
+    for label in labels:
+        mine = [r for r in rows if r["controller"] == label]
+        prone = [r for r in mine if r["prone"]]
+        entry = {key: _mean([r[key] for r in mine]) for key in METRIC_KEYS}
+        entry["severity_prone"] = _mean([r["stick_slip_severity"] for r in prone])
+        entry["unsettled"] = float(sum(r["settling_time_s"] is None for r in mine))
+        entry["diverged"] = float(sum(bool(r["diverged"]) for r in mine))
+        means[label] = entry
+    summary: dict[str, Any] = {"base_controller": base, "means": means, "goal": {}}
+    if base in means:
+        ref = means[base]
+        for label in labels:
+            m = means[label]
+            iae_ratio = m["iae"] / ref["iae"]
+            rmsd_ratio = m["rmsd_nm"] / ref["rmsd_nm"]
+            sev_ratio = m["severity_prone"] / ref["severity_prone"]
+            summary["goal"][label] = {
+                "iae_ratio": iae_ratio,
+                "rmsd_ratio": rmsd_ratio,
+                "severity_prone_ratio": sev_ratio,
+                "met": bool(iae_ratio <= 0.7 and rmsd_ratio <= 1.0 and sev_ratio < 1.0),
+            }
+    return summary
+
+
+def markdown_table(summary: Mapping[str, Any]) -> str:
+    """The per-controller means as a markdown table (ratios to the base controller)."""
+    lines = [
+        "| controller | IAE (rad) | vs proposed | RMSD (kN m) | vs proposed | severity, prone | "
+        "severity, all | overshoot (%) | unsettled | stuck | chattering (kN m/s) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    goal = summary.get("goal", {})
+    for label, m in summary["means"].items():
+        g = goal.get(label, {})
+        iae_r = f"{(g['iae_ratio'] - 1) * 100:+.1f} %" if g else ""
+        rmsd_r = f"{(g['rmsd_ratio'] - 1) * 100:+.1f} %" if g else ""
+        lines.append(
+            f"| {label} | {m['iae']:.1f} | {iae_r} | {m['rmsd_nm'] / 1e3:.2f} | {rmsd_r} | "
+            f"{m['severity_prone']:.3f} | {m['stick_slip_severity']:.3f} | "
+            f"{m['overshoot_pct']:.1f} | {int(m['unsettled'])} | {m['stuck_fraction']:.3f} | "
+            f"{m['chattering_nm_per_s'] / 1e3:.0f} |"
+        )
+    return "\n".join(lines)
+
+
+def per_scenario_table(rows: Sequence[Mapping[str, Any]], labels: Sequence[str]) -> str:
+    """IAE and severity per scenario for ``labels`` (markdown)."""
+    head = "| scenario | V_ref | WOB (kN) | condition | prone | " + " | ".join(
+        f"IAE {label} | sev. {label}" for label in labels
+    )
+    lines = [head + " |", "|" + "---|" * (5 + 2 * len(labels))]
+    by_key = {(r["scenario"], r["controller"]): r for r in rows}
+    for scenario in dict.fromkeys(r["scenario"] for r in rows):
+        first = next(r for r in rows if r["scenario"] == scenario)
+        wob = f"{first['wob_n'] / 1e3:.0f}"
+        if first["wob_final_n"] is not None:
+            wob += f" -> {first['wob_final_n'] / 1e3:.0f} @ {first['wob_step_time_s']:.0f} s"
+        cells = [
+            scenario,
+            f"{first['reference_speed_rad_s']:g}",
+            wob,
+            first["uncertainty"],
+            "yes" if first["prone"] else "",
+        ]
+        for label in labels:
+            r = by_key.get((scenario, label))
+            cells += (
+                ["", ""] if r is None else [f"{r['iae']:.0f}", f"{r['stick_slip_severity']:.2f}"]
+            )
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def write_outputs(
+    rows: Sequence[Mapping[str, Any]], summary: Mapping[str, Any], out: Path
+) -> list[Path]:
+    """``heldout.csv``, ``heldout.json`` and ``summary.json`` in ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    keys = list(rows[0]) if rows else []
+    with (out / "heldout.csv").open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=keys)
+        writer.writeheader()
+        writer.writerows(rows)
+    (out / "heldout.json").write_text(json.dumps(list(rows), indent=1) + "\n")
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return [out / "heldout.csv", out / "heldout.json", out / "summary.json"]
+
+
+def write_figures(
+    rows: Sequence[Mapping[str, Any]],
+    traces: Mapping[tuple[str, str], Trace],
+    labels: Sequence[str],
+    out: Path,
+) -> list[Path]:
+    """Bit speed and torque (base against agents) per chosen scenario, small multiples of all
+    scenarios, and IAE per scenario."""
+    from drill_env.plots import downsample, plot_metric_bars, plot_panels, plot_speed_and_torque
+
+    paths: list[Path] = []
+    scenario_ids = list(dict.fromkeys(r["scenario"] for r in rows))
+    for sid in FIGURE_SCENARIOS:
+        chosen = {
+            label: downsample(traces[(sid, label)], 10)
+            for label in labels
+            if (sid, label) in traces
+        }
+        if len(chosen) < 2:
+            continue
+        first = next(r for r in rows if r["scenario"] == sid)
+        wob = f"{first['wob_n'] / 1e3:.0f} kN"
+        if first["wob_final_n"] is not None:
+            wob += f" -> {first['wob_final_n'] / 1e3:.0f} kN at {first['wob_step_time_s']:g} s"
+        title = (
+            f"{sid}: V_ref {first['reference_speed_rad_s']:g} rad/s, WOB {wob}, "
+            f"{first['uncertainty']}"
+        )
+        paths.append(plot_speed_and_torque(chosen, out / f"speed_torque_{sid}.png", title))
+    for quantity in ("bit_speed", "torque"):
+        panels = {
+            sid: {
+                label: downsample(traces[(sid, label)], 50)
+                for label in labels
+                if (sid, label) in traces
+            }
+            for sid in scenario_ids
+        }
+        panels = {k: v for k, v in panels.items() if v}
+        if panels:
+            paths.append(
+                plot_panels(
+                    panels,
+                    out / f"heldout_{quantity}.png",
+                    f"held-out set: {quantity.replace('_', ' ')}",
+                    quantity=quantity,
+                    ncols=4,
+                )
+            )
+    chosen_rows = [r for r in rows if r["controller"] in labels]
+    if chosen_rows:
+        paths.append(
+            plot_metric_bars(
+                chosen_rows,
+                ["iae", "stick_slip_severity"],
+                out / "heldout_iae_severity.png",
+                group="scenario",
+                hue="controller",
+                title="held-out set: IAE and stick-slip severity per scenario",
+            )
+        )
+    return paths
+
+
+def shipped_models() -> list[Path]:
+    """Model folders under ``agents/models/`` (the default residual agent first)."""
+    if not DEFAULT_MODEL_DIR.is_dir():
+        return []
+    found = sorted(p.parent for p in DEFAULT_MODEL_DIR.glob(f"*/{MODEL_FILE}"))
+    found.sort(key=lambda p: p.name != DEFAULT_MODEL_NAME)
+    return found
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``drill-gym evaluate [MODEL ...] [--out DIR] [--controllers ...] [--no-figures]``."""
+    parser = argparse.ArgumentParser(
+        prog="drill-gym evaluate",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument(
+        "models",
+        nargs="*",
+        help="model folders (model.zip, obs_norm.npz, config.json); default: every model "
+        "shipped under agents/models/",
+    )
+    parser.add_argument("--out", default="results/evaluate", help="output folder")
+    parser.add_argument(
+        "--controllers", nargs="+", default=None, help="registered controllers (default: all)"
+    )
+    parser.add_argument("--no-figures", action="store_true", help="skip the figures")
+    parser.add_argument(
+        "--scenarios", nargs="+", default=None, help="only these scenario ids (e.g. h01 h14)"
+    )
+    args = parser.parse_args(list(argv) if argv is not None else None)
+
+    paths = [Path(p) for p in args.models] or shipped_models()
+    if not paths:
+        parser.error(f"no MODEL given and no model shipped under {DEFAULT_MODEL_DIR}")
+    agents = [load_policy(p) for p in paths]
+    labels = [a.name for a in agents]
+    if len(set(labels)) != len(labels):
+        for a, p in zip(agents, paths, strict=True):
+            a.name = f"{a.name}:{p}"
+        labels = [a.name for a in agents]
+    scenarios: Sequence[Mapping[str, Any]] = HELD_OUT
+    if args.scenarios:
+        known = {s["id"] for s in HELD_OUT}
+        unknown = sorted(set(args.scenarios) - known)
+        if unknown:
+            parser.error(f"unknown scenario id(s) {unknown}: valid {sorted(known)}")
+        scenarios = [s for s in HELD_OUT if s["id"] in args.scenarios]
+    out = Path(args.out)
+    t0 = time.perf_counter()
+    base_names = sorted({a.env_kwargs.get("base_controller") or BASE_CONTROLLER for a in agents})
+    controllers = args.controllers
+    if controllers is not None:
+        controllers = list(dict.fromkeys([*controllers, *base_names]))
+    keep = [*base_names, *labels]
+    rows, traces = evaluate(agents, controllers, scenarios, keep_traces=keep, progress=True)
+    summary = summarize(rows)
+    summary["seconds"] = round(time.perf_counter() - t0, 1)
+    summary["models"] = {a.name: str(p) for a, p in zip(agents, paths, strict=True)}
+    written = write_outputs(rows, summary, out)
+    if not args.no_figures:
+        written += write_figures(rows, traces, keep, out / "figures")
+    print(markdown_table(summary))
+    print()
+    print(per_scenario_table(rows, keep))
+    print()
+    for label, g in summary["goal"].items():
+        if label in labels:
+            print(
+                f"{label}: IAE {(g['iae_ratio'] - 1) * 100:+.1f} %, RMSD "
+                f"{(g['rmsd_ratio'] - 1) * 100:+.1f} %, severity (prone) "
+                f"{(g['severity_prone_ratio'] - 1) * 100:+.1f} % vs {summary['base_controller']}: "
+                f"goal {'met' if g['met'] else 'NOT met'}"
+            )
+    print(f"\nwrote {len(written)} files to {out} in {summary['seconds']} s")
+    return 0

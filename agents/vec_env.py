@@ -1,0 +1,138 @@
+"""A Gymnasium ``VectorEnv`` seen through Stable-Baselines3's ``VecEnv`` API.
+
+The two APIs differ in how an episode ends. Gymnasium's native vector env of
+``DrillString-v0`` (``gym.make_vec``) autoresets in *next-step* mode: the step that ends an
+episode returns its last observation, and the following ``step`` call resets that string
+(ignoring its action, reward 0). SB3 expects *same-step* autoreset: the step that ends an
+episode returns ``done=True``, the first observation of the next episode, and the last one in
+``infos[i]["terminal_observation"]``.
+
+:class:`GymnasiumVecEnv` converts by resetting the strings that ended at once, with
+Gymnasium's partial reset ``reset(options={"reset_mask": done})`` (no seed: each string
+continues its own seed sequence, exactly as the vector env's own autoreset would). The vector
+env then has nothing left to autoreset, so no step is lost and no transition is approximate.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import numpy.typing as npt
+from gymnasium.vector import AutoresetMode, VectorEnv
+from stable_baselines3.common.vec_env.base_vec_env import (
+    VecEnv,
+    VecEnvIndices,
+    VecEnvObs,
+    VecEnvStepReturn,
+)
+
+__all__ = ["GymnasiumVecEnv"]
+
+
+class GymnasiumVecEnv(VecEnv):
+    """SB3 ``VecEnv`` over a Gymnasium ``VectorEnv`` with next-step autoreset and partial
+    reset (``reset(options={"reset_mask": mask})``).
+
+    Args:
+        env: The vector env (``gym.make_vec("DrillString-v0", num_envs=N, ...)``); this adapter
+            owns it and closes it.
+        info_keys: Keys of the vector env's ``infos`` copied into SB3's per-env info dicts (a
+            few scalars; converting every key at every step costs time).
+        reward_fn: Optional ``reward_fn(env, rewards) -> rewards``, called after every step of
+            the vector env and before any reset, to reshape the rewards from the env's state
+            (for example from the plant samples in ``env.batch.records``).
+    """
+
+    def __init__(
+        self,
+        env: VectorEnv,
+        info_keys: Sequence[str] = (),
+        reward_fn: Callable[[VectorEnv, npt.NDArray[np.float32]], npt.NDArray[np.float32]]
+        | None = None,
+    ) -> None:
+        mode = env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP)
+        if mode != AutoresetMode.NEXT_STEP:
+            raise ValueError(
+                f"GymnasiumVecEnv needs a vector env with autoreset mode NEXT_STEP, got {mode}"
+            )
+        self.env = env
+        self.info_keys = tuple(info_keys)
+        self.reward_fn = reward_fn
+        self._actions: npt.NDArray[np.float32] | None = None
+        super().__init__(env.num_envs, env.single_observation_space, env.single_action_space)
+
+    # ------------------------------------------------------------------ SB3 API
+    def reset(self) -> VecEnvObs:
+        seeds = list(self._seeds)
+        # The native vector env takes one seed per string (a list), as SyncVectorEnv does.
+        seed: Any = None if all(s is None for s in seeds) else seeds
+        options = self._options[0] or None
+        obs, _ = self.env.reset(seed=seed, options=options)
+        self._reset_seeds()
+        self._reset_options()
+        self.reset_infos = [{} for _ in range(self.num_envs)]
+        return np.asarray(obs)
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = np.asarray(actions, dtype=np.float32).reshape(self.num_envs, -1)
+
+    def step_wait(self) -> VecEnvStepReturn:
+        assert self._actions is not None, "step_async() must come first"
+        obs, rewards, terminated, truncated, infos = self.env.step(self._actions)
+        self._actions = None
+        obs = np.asarray(obs)
+        rewards = np.asarray(rewards, dtype=np.float32)
+        if self.reward_fn is not None:
+            rewards = np.asarray(self.reward_fn(self.env, rewards), dtype=np.float32)
+        terminated = np.asarray(terminated, dtype=bool)
+        truncated = np.asarray(truncated, dtype=bool)
+        dones = terminated | truncated
+        info_list: list[dict[str, Any]] = [
+            {key: infos[key][i] for key in self.info_keys if key in infos}
+            for i in range(self.num_envs)
+        ]
+        if dones.any():
+            for i in np.flatnonzero(dones):
+                info_list[i]["terminal_observation"] = obs[i].copy()
+                info_list[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
+            obs, _ = self.env.reset(options={"reset_mask": dones})
+            obs = np.asarray(obs)
+        return obs, rewards, dones, info_list
+
+    def close(self) -> None:
+        self.env.close()
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        if attr_name == "render_mode":
+            return [None for _ in self._get_indices(indices)]
+        value = getattr(self.env, attr_name)
+        return [value for _ in self._get_indices(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        raise AttributeError(
+            f"cannot set {attr_name!r} on single strings of a native vector env; "
+            "set it on the vector env itself"
+        )
+
+    def env_method(
+        self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **kwargs: Any
+    ) -> list[Any]:
+        raise AttributeError(
+            f"cannot call {method_name!r} on single strings of a native vector env; "
+            "call it on the vector env itself"
+        )
+
+    def env_is_wrapped(
+        self, wrapper_class: type[gym.Wrapper[Any, Any, Any, Any]], indices: VecEnvIndices = None
+    ) -> list[bool]:
+        return [False for _ in self._get_indices(indices)]
+
+    def _get_indices(self, indices: VecEnvIndices) -> Iterable[int]:
+        if indices is None:
+            return range(self.num_envs)
+        if isinstance(indices, int):
+            return [indices]
+        return indices
