@@ -282,3 +282,20 @@ def test_fourth_order_in_smooth_slip(torque_nm: float) -> None:
     fine = np.abs(_final_state(torque_nm, 1e-3, 5.0) - _final_state(torque_nm, 5e-4, 5.0)).max()
     predicted = d2 * (1e-3 / 0.0125) ** 4
     assert fine <= max(4.0 * predicted, 1e-12)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_accuracy_monte_carlo(name: str) -> None:
+    """Monte-Carlo over the open-loop regime (slow): 40 seeded random cases per preset, WOB
+    U(40, 200) kN and torque U(0.8, 1.6) T_a for 30 s, meet the SPEC section 1 goal."""
+    rng = np.random.default_rng(2024)
+    worst = 0.0
+    for _ in range(40):
+        wob_n = float(rng.uniform(40e3, 200e3))
+        t_a, _ = _friction_levels(name, wob_n)
+        torque_nm = float(rng.uniform(0.8, 1.6)) * t_a
+        _, _, err = _open_loop_errors(name, torque_nm, wob_n, T_OPEN_LOOP_S)
+        worst = max(worst, float(err[:, 6].max()))
+    print(f"{name}: worst bit-speed error over 40 random cases {worst:.2e} rad/s")
+    assert worst <= GOAL_RAD_S
