@@ -41,6 +41,7 @@ from drill_env.scenarios import (
     UncertaintyReading,
     WobProfile,
     knot_arrays,
+    profile_value,
     resolve_uncertainty,
     spawn_generators,
 )
@@ -326,9 +327,8 @@ class StringBatch:
         terms = slice(kernel.REP_TRACKING, kernel.REP_STUCK_FRACTION + 1)
         for j in range(self.substeps):
             for i in range(n):
-                episode = self.episodes[i]
-                assert episode is not None
-                ref = episode.scenario.reference.value(self.step_index[i] * PLANT_DT_S)
+                t = self.step_index[i] * PLANT_DT_S
+                ref = profile_value(self.ref_t[i], self.ref_v[i], self.ref_n[i], t)
                 torque = self.controllers[i].torque(self.measurement(i), ref, PLANT_DT_S)
                 base[i] = float(torque)
                 command[i] = base[i] + residual[i] if math.isfinite(base[i]) else math.nan

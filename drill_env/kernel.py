@@ -28,6 +28,7 @@ from drill_env.control_laws import control_torque
 from drill_env.friction import STUCK
 from drill_env.integration import plant_step
 from drill_env.observation import OBS_BOUND
+from drill_env.scenarios import profile_value
 
 __all__ = [
     "MAX_SPEED_RAD_S",
@@ -37,7 +38,6 @@ __all__ = [
     "STATUS_OK",
     "advance_batch",
     "advance_batch_parallel",
-    "profile_value",
 ]
 
 MAX_SPEED_RAD_S: Final = 1000.0
@@ -77,20 +77,6 @@ REP_SLIDING: Final = 11  # the law's sliding variable, rad/s
 REP_GAIN: Final = 12  # the law's adaptive gain
 REP_STATUS: Final = 13  # STATUS_* as a float
 N_REPORT: Final = 14
-
-
-@njit(cache=True)
-def profile_value(times, values, n: int, t: float) -> float:
-    """Piecewise-linear profile through ``n`` knots; constant outside, right-continuous steps."""
-    if n == 1 or t <= times[0]:
-        return values[0]
-    j = 0
-    while j + 1 < n and t >= times[j + 1]:
-        j += 1
-    if j == n - 1:
-        return values[n - 1]
-    span = times[j + 1] - times[j]
-    return values[j] + (values[j + 1] - values[j]) * (t - times[j]) / span
 
 
 @njit(cache=True)

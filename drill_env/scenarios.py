@@ -15,12 +15,14 @@ from typing import Final, Literal
 
 import numpy as np
 import numpy.typing as npt
+from numba import njit
 
 from drill_env.parameters import DrillStringParameters, scale_uncertain
 
 __all__ = [
     "COMPONENTS",
     "check_range",
+    "profile_value",
     "UNCERTAINTY_CONDITIONS",
     "EpisodeScenario",
     "Randomization",
@@ -30,6 +32,23 @@ __all__ = [
     "resolve_uncertainty",
     "spawn_generators",
 ]
+
+
+@njit(cache=True)
+def profile_value(times, values, n: int, t: float) -> float:
+    """Value at time ``t`` (s) of the piecewise-linear profile through the first ``n`` knots
+    ``(times, values)``: constant outside them, a repeated knot time is a step (right-continuous).
+    Compiled, so that the plant loop reads WOB and reference profiles at every step."""
+    if n == 1 or t <= times[0]:
+        return values[0]
+    j = 0
+    while j + 1 < n and t >= times[j + 1]:
+        j += 1
+    if j == n - 1:
+        return values[n - 1]
+    span = times[j + 1] - times[j]
+    return values[j] + (values[j + 1] - values[j]) * (t - times[j]) / span
+
 
 MAX_KNOTS: Final = 16
 """Largest number of knots of a profile."""
@@ -151,16 +170,8 @@ class SpeedProfile:
 
     def value(self, t_s: float) -> float:
         """Reference speed at time ``t_s``, rad/s."""
-        times, values = self.times_s, self.values_rad_s
-        if len(times) == 1 or t_s <= times[0]:
-            return values[0]
-        j = 0
-        while j + 1 < len(times) and t_s >= times[j + 1]:
-            j += 1
-        if j == len(times) - 1:
-            return values[-1]
-        frac = (t_s - times[j]) / (times[j + 1] - times[j])
-        return values[j] + (values[j + 1] - values[j]) * frac
+        times, values, n = knot_arrays(self)
+        return float(profile_value(times, values, n, float(t_s)))
 
 
 def resolve_uncertainty(value: str | Sequence[float]) -> tuple[float, float, float]:
