@@ -3,9 +3,16 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import TypeVar
+
+import numpy as np
+import numpy.typing as npt
 
 __all__ = ["RewardWeights", "reward_terms", "total_reward"]
+
+Term = TypeVar("Term", float, npt.NDArray[np.float64])
 
 
 @dataclass(frozen=True)
@@ -55,8 +62,10 @@ def reward_terms(
     }
 
 
-def total_reward(terms: dict[str, float], weights: RewardWeights) -> float:
-    """``-(w_t tracking + w_c chattering + w_s stuck) / (w_t + w_c + w_s)``, in [-1, 0]."""
+def total_reward(terms: Mapping[str, Term], weights: RewardWeights) -> Term:
+    """``-(w_t tracking + w_c chattering + w_s stuck) / (w_t + w_c + w_s)``, in [-1, 0].
+
+    The terms are floats (one env) or arrays (a vector env, elementwise)."""
     num = (
         weights.tracking * terms["tracking"]
         + weights.chattering * terms["chattering"]

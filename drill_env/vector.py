@@ -21,7 +21,7 @@ from drill_env.batch import StringBatch
 from drill_env.config import EnvConfig
 from drill_env.env import validate_actions
 from drill_env.observation import OBS_BOUND, observation_size
-from drill_env.rewards import RewardWeights
+from drill_env.rewards import total_reward
 
 __all__ = ["DrillStringVectorEnv"]
 
@@ -131,14 +131,12 @@ class DrillStringVectorEnv(VectorEnv):
         b.status[resetting] = kernel.STATUS_OK
         report = b.report
         episodes = [e for e in b.episodes if e is not None]
-        weights = [e.config.reward_weights for e in episodes]
+        weights = self.config.reward_weights  # fixed at make: the same for every string
         tracking = report[:, kernel.REP_TRACKING]
-        chattering = np.minimum(
-            report[:, kernel.REP_VARIATION] / np.array([w.chattering_scale_nm for w in weights]),
-            1.0,
-        )
+        chattering = np.minimum(report[:, kernel.REP_VARIATION] / weights.chattering_scale_nm, 1.0)
         stuck = report[:, kernel.REP_STUCK_FRACTION]
-        rewards = _weighted(weights, tracking, chattering, stuck)
+        terms = {"tracking": tracking, "chattering": chattering, "stuck": stuck}
+        rewards = total_reward(terms, weights)
         terminated = b.status == kernel.STATUS_DIVERGED
         rewards[terminated] = -1.0
         end_s = np.array([e.duration_s for e in episodes])
@@ -196,15 +194,3 @@ class DrillStringVectorEnv(VectorEnv):
         }
         infos["_reward_terms"] = mask
         return infos
-
-
-def _weighted(
-    weights: list[RewardWeights],
-    tracking: npt.NDArray[np.float64],
-    chattering: npt.NDArray[np.float64],
-    stuck: npt.NDArray[np.float64],
-) -> npt.NDArray[np.float64]:
-    wt = np.array([w.tracking for w in weights])
-    wc = np.array([w.chattering for w in weights])
-    ws = np.array([w.stuck for w in weights])
-    return -(wt * tracking + wc * chattering + ws * stuck) / (wt + wc + ws)
