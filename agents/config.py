@@ -88,14 +88,13 @@ class TrainConfig:
     stuck bit as a full error; an extra weight made the agent prefer spinning the bit far
     above a low reference to ever sticking)."""
     reward_torque: float = 0.0
-    """Training-only penalty ``reward_torque * mean(u^2) / max_torque^2`` per decision on the
-    applied torque (the paper's RMSD measure, from every plant step), subtracted from the
-    env's reward."""
+    """Weight of the env's torque term ``mean(u^2) / max_torque^2`` per decision (the paper's
+    RMSD measure, from every plant step), subtracted from the reward."""
     reward_residual: float = 0.5
-    """Training-only penalty ``reward_residual * mean((u - u_base)^2) / residual_scale_nm^2``
-    per decision on the torque the residual adds (after the torque limits), subtracted from
-    the env's reward: it trades some of the IAE gain for a lower torque (RMSD). Residual mode
-    only (ignored with ``base_controller none``)."""
+    """Weight of the env's residual term ``mean((u - u_base)^2) / residual_scale_nm^2`` per
+    decision (the torque the residual adds, after the torque limits), subtracted from the
+    reward: it trades some of the IAE gain for a lower torque (RMSD). Residual mode only
+    (ignored with ``base_controller none``)."""
 
     # ------------------------------------------------------------------------- PPO
     learning_rate: float = 3e-4

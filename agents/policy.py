@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 import numpy.typing as npt
 
-from drill_env.observation import observation_size
+from drill_env.layout import observation_size
 
 if TYPE_CHECKING:  # pragma: no cover
     from stable_baselines3 import PPO

@@ -40,6 +40,7 @@ from agents.config import TrainConfig, parse_config
 from agents.policy import ResidualPolicy, save_policy
 from drill_env import RewardWeights
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout
+from drill_env.limits import DEFAULT_TORQUE_LIMITS
 
 __all__ = [
     "VALIDATION_SEED",
@@ -70,16 +71,20 @@ def policy_env_kwargs(config: TrainConfig) -> dict[str, Any]:
         "base_controller": base,
         "control_dt_s": config.control_dt_s,
         "residual_scale_nm": config.residual_scale_nm,
-        "min_torque_nm": 0.0,
-        "max_torque_nm": 50_000.0,
+        "min_torque_nm": DEFAULT_TORQUE_LIMITS.min_nm,
+        "max_torque_nm": DEFAULT_TORQUE_LIMITS.max_nm,
     }
 
 
 def env_kwargs(config: TrainConfig) -> dict[str, Any]:
     """The ``DrillString-v0`` keywords of training: randomised scenarios (the env's default
-    ranges: WOB 60-200 kN with a 50 % chance of a step, V_ref 4-16 rad/s, Delta 0-0.75)."""
+    ranges: WOB 60-200 kN with a 50 % chance of a step, V_ref 4-16 rad/s, Delta 0-0.75) and the
+    reward weights of the configuration (the torque and residual penalties are terms of the
+    env's reward, :mod:`drill_env.rewards`)."""
+    kwargs = policy_env_kwargs(config)
+    residual = kwargs["base_controller"] is not None
     return {
-        **policy_env_kwargs(config),
+        **kwargs,
         "randomize": True,
         "episode_s": config.episode_s,
         "noise_std_rad_s": config.noise_std_rad_s,
@@ -88,6 +93,9 @@ def env_kwargs(config: TrainConfig) -> dict[str, Any]:
             chattering=config.reward_chattering,
             stuck=config.reward_stuck,
             chattering_scale_nm=config.reward_chattering_scale_nm,
+            torque=config.reward_torque,
+            # Without a base controller there is no residual: the whole torque is the agent's.
+            residual=config.reward_residual if residual else 0.0,
         ),
     }
 
@@ -155,31 +163,6 @@ def _learning_rate(config: TrainConfig) -> Any:
     return (lambda progress: lr * progress) if config.anneal_lr else lr
 
 
-def _torque_penalty(config: TrainConfig) -> Any:
-    """``reward_fn`` of :class:`agents.vec_env.GymnasiumVecEnv`: subtract
-    ``reward_torque * mean(u^2) / max_torque^2 + reward_residual * mean((u - u_base)^2) /
-    residual_scale^2`` over the plant steps of the decision (from the plant samples)."""
-    from drill_env import kernel
-
-    w_torque = config.reward_torque / policy_env_kwargs(config)["max_torque_nm"] ** 2
-    residual = policy_env_kwargs(config)["base_controller"] is not None
-    # Without a base controller there is no residual: the whole torque is the agent's.
-    w_residual = (
-        config.reward_residual / max(config.residual_scale_nm, 1.0) ** 2 if residual else 0.0
-    )
-
-    def reward_fn(env: Any, rewards: np.ndarray) -> np.ndarray:
-        records = env.batch.records
-        torque = records[:, :, kernel.REC_TORQUE]
-        added = torque - records[:, :, kernel.REC_BASE_TORQUE]
-        with np.errstate(invalid="ignore"):
-            penalty = w_torque * np.nanmean(torque * torque, axis=1)
-            penalty += w_residual * np.nanmean(added * added, axis=1)
-        return rewards - np.nan_to_num(penalty, nan=0.0)
-
-    return reward_fn
-
-
 def make_training_env(config: TrainConfig, vecnormalize_file: Path | None = None) -> Any:
     """The training environment: ``num_envs`` randomised strings in one native vector env,
     seen through SB3's API, with episode statistics and observation (and reward)
@@ -194,10 +177,7 @@ def make_training_env(config: TrainConfig, vecnormalize_file: Path | None = None
         max_episode_steps=round(config.episode_s / config.control_dt_s),
         **env_kwargs(config),
     )
-    residual = policy_env_kwargs(config)["base_controller"] is not None
-    shaped = config.reward_torque > 0 or (config.reward_residual > 0 and residual)
-    reward_fn = _torque_penalty(config) if shaped else None
-    venv: Any = VecMonitor(GymnasiumVecEnv(vector_env, reward_fn=reward_fn))
+    venv: Any = VecMonitor(GymnasiumVecEnv(vector_env))
     if vecnormalize_file is not None:
         venv = VecNormalize.load(str(vecnormalize_file), venv)
         venv.training = True

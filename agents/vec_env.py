@@ -15,7 +15,7 @@ env then has nothing left to autoreset, so no step is lost and no transition is 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -41,17 +41,12 @@ class GymnasiumVecEnv(VecEnv):
             owns it and closes it.
         info_keys: Keys of the vector env's ``infos`` copied into SB3's per-env info dicts (a
             few scalars; converting every key at every step costs time).
-        reward_fn: Optional ``reward_fn(env, rewards) -> rewards``, called after every step of
-            the vector env and before any reset, to reshape the rewards from the env's state
-            (for example from the plant samples in ``env.batch.records``).
     """
 
     def __init__(
         self,
         env: VectorEnv,
         info_keys: Sequence[str] = (),
-        reward_fn: Callable[[VectorEnv, npt.NDArray[np.float32]], npt.NDArray[np.float32]]
-        | None = None,
     ) -> None:
         mode = env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP)
         if mode != AutoresetMode.NEXT_STEP:
@@ -60,7 +55,6 @@ class GymnasiumVecEnv(VecEnv):
             )
         self.env = env
         self.info_keys = tuple(info_keys)
-        self.reward_fn = reward_fn
         self._actions: npt.NDArray[np.float32] | None = None
         super().__init__(env.num_envs, env.single_observation_space, env.single_action_space)
 
@@ -85,8 +79,6 @@ class GymnasiumVecEnv(VecEnv):
         self._actions = None
         obs = np.asarray(obs)
         rewards = np.asarray(rewards, dtype=np.float32)
-        if self.reward_fn is not None:
-            rewards = np.asarray(self.reward_fn(self.env, rewards), dtype=np.float32)
         terminated = np.asarray(terminated, dtype=bool)
         truncated = np.asarray(truncated, dtype=bool)
         dones = terminated | truncated

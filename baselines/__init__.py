@@ -9,22 +9,32 @@ policy through :class:`ControllerPolicy`.
 
 from __future__ import annotations
 
-from baselines.asmc import ASMC, ASMCGains
-from baselines.base import CompiledLawController
-from baselines.csmc import CSMC, CSMCGains
-from baselines.msmc import MSMC, MSMCGains
-from baselines.policy import ControllerPolicy
-from baselines.proposed import ProposedASMC, ProposedGains
-from baselines.registry import CONTROLLERS, controller_names, make_controller, register_controller
-from baselines.smc import SlidingModeController, SurfaceGains
-from baselines.soft_speed import SoftSpeed, SoftSpeedGains
-from baselines.speed_loop import DriveLimits, SpeedLoopController, SpeedLoopTuning
-from baselines.stiff_pi import StiffPI, StiffPIGains
-from baselines.z_torque import ZTorque, ZTorqueGains
+from pathlib import Path
+
+import drill_env
+from drill_env._cache import invalidate_stale_cache
+
+# before any compiled module is imported; the laws call compiled code of the core
+invalidate_stale_cache(Path(__file__).parent, Path(drill_env.__file__).parent)
+
+from baselines.asmc import ASMC, ASMCGains  # noqa: E402
+from baselines.base import CompiledLawController  # noqa: E402
+from baselines.csmc import CSMC, CSMCGains  # noqa: E402
+from baselines.msmc import MSMC, MSMCGains  # noqa: E402
+from baselines.policy import ControllerPolicy  # noqa: E402
+from baselines.proposed import ProposedASMC, ProposedGains  # noqa: E402
+from baselines.registry import BUILT_IN, COMPILED_LAWS  # noqa: E402
+from baselines.smc import SlidingModeController, SurfaceGains  # noqa: E402
+from baselines.soft_speed import SoftSpeed, SoftSpeedGains  # noqa: E402
+from baselines.speed_loop import DriveLimits, SpeedLoopController, SpeedLoopTuning  # noqa: E402
+from baselines.stiff_pi import StiffPI, StiffPIGains  # noqa: E402
+from baselines.z_torque import ZTorque, ZTorqueGains  # noqa: E402
+from drill_env.control import controller_names, make_controller, register_controller  # noqa: E402
 
 __all__ = [
     "ASMC",
-    "CONTROLLERS",
+    "BUILT_IN",
+    "COMPILED_LAWS",
     "CSMC",
     "CompiledLawController",
     "MSMC",

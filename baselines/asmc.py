@@ -5,11 +5,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from baselines.base import check_gain
-from baselines.smc import SlidingModeController, SurfaceGains
-from drill_env.control_laws import LAW_ASMC
+from numba import cfunc
 
-__all__ = ["ASMC", "ASMCGains"]
+from baselines.smc import VARIANT_ASMC, SlidingModeController, SurfaceGains, smc_law
+from drill_env.control import LAW_SIGNATURE
+
+__all__ = ["asmc_law", "ASMC", "ASMCGains"]
 
 
 @dataclass(frozen=True)
@@ -28,9 +29,9 @@ class ASMCGains(SurfaceGains):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        check_gain(self, "mu11", "> 0", self.mu11 > 0)
-        check_gain(self, "mu22", "> 0", self.mu22 > 0)
-        check_gain(self, "k0", "> 0", self.k0 > 0)
+        self._check("mu11", "> 0", self.mu11 > 0)
+        self._check("mu22", "> 0", self.mu22 > 0)
+        self._check("k0", "> 0", self.k0 > 0)
 
     def law_gains(self) -> tuple[float, ...]:
         return (self.mu11, self.mu22)
@@ -39,9 +40,16 @@ class ASMCGains(SurfaceGains):
         return self.k0
 
 
+@cfunc(LAW_SIGNATURE, cache=True)
+def asmc_law(lp, ls, m, ref, dt):
+    """The compiled law of ``asmc`` (see :func:`baselines.smc.smc_torque`)."""
+    return smc_law(VARIANT_ASMC, lp, ls, m, ref, dt)
+
+
 class ASMC(SlidingModeController):
     """Adaptive sliding-mode controller."""
 
     name = "asmc"
-    law_id = LAW_ASMC
+    variant = VARIANT_ASMC
+    law = asmc_law
     gains_type = ASMCGains

@@ -1,55 +1,44 @@
 """What every built-in controller shares: validated gains, its own model of the string, and a
-compiled law of :mod:`drill_env.control_laws` that it runs from Python or hands to the env."""
+compiled law (a numba ``cfunc`` of :data:`drill_env.control.LAW_SIGNATURE`) that it runs from
+Python or hands to the env's plant loop."""
 
 from __future__ import annotations
 
 import dataclasses
-import math
-import numbers
 from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
 
 from drill_env.control import CompiledLaw
-from drill_env.control_laws import N_LAW_STATE, control_torque
+from drill_env.layout import N_STATE
+from drill_env.limits import DEFAULT_TORQUE_LIMITS, TorqueLimits
 from drill_env.parameters import DrillStringParameters, resolve_parameters
+from drill_env.validation import check_finite_fields, check_unknown, require
 
-__all__ = ["CompiledLawController", "check_gain", "check_numbers"]
-
-
-def check_numbers(owner: object) -> None:
-    """Raise ``ValueError`` naming the first ``float`` field of the dataclass ``owner`` that is
-    not a finite real number (run it before the range checks, which compare the values)."""
-    for field in dataclasses.fields(owner):  # type: ignore[arg-type]
-        if field.type not in ("float", float):
-            continue
-        value = getattr(owner, field.name)
-        if (
-            isinstance(value, (bool, np.bool_))
-            or not isinstance(value, numbers.Real)
-            or not math.isfinite(value)
-        ):
-            raise ValueError(
-                f"{type(owner).__name__}.{field.name} must be a finite number, got {value!r}"
-            )
+__all__ = ["CompiledLawController", "Gains"]
 
 
-def check_gain(owner: object, name: str, allowed: str, ok: bool) -> None:
-    """Raise ``ValueError`` naming ``owner.name``, its value and the allowed range unless ``ok``."""
-    if not ok:
-        raise ValueError(
-            f"{type(owner).__name__}.{name} = {getattr(owner, name)!r} is out of range: "
-            f"allowed {allowed}"
-        )
+class Gains:
+    """Base of the controllers' frozen gain dataclasses: checks whose messages name
+    ``Class.field``, the value and the allowed range."""
+
+    def _check_finite(self) -> None:
+        """Every float field a finite number (stored as a Python float)."""
+        check_finite_fields(self, f"{type(self).__name__}.")
+
+    def _check(self, name: str, allowed: str, ok: bool) -> None:
+        """``ValueError`` naming ``Class.name``, its value and ``allowed`` unless ``ok``."""
+        require(f"{type(self).__name__}.{name}", getattr(self, name), allowed, ok)
 
 
 class CompiledLawController:
     """A top-drive controller whose law is compiled and runs inside the plant loop.
 
-    Subclasses set ``name``, ``law_id`` and ``gains_type`` and implement :meth:`_pack` (the law's
-    parameter vector for a model of the string) and, when the law starts from a non-zero state,
-    :meth:`_initial_state`.
+    Subclasses set ``name``, ``gains_type``, ``law`` (the compiled law) and the state slots the
+    env reports (``error_slot``, ``gain_slot``; -1 for none), and implement :meth:`_pack` (the
+    law's parameter vector for a model of the string and the top drive's torque limits),
+    :meth:`_initial_state` and :meth:`_python_torque` (the same law called from Python).
 
     Args:
         gains: The controller's gains (an instance of ``gains_type``); defaults when omitted.
@@ -59,8 +48,10 @@ class CompiledLawController:
     """
 
     name: ClassVar[str]
-    law_id: ClassVar[int]
     gains_type: ClassVar[type[Any]]
+    law: ClassVar[Any]
+    error_slot: ClassVar[int] = -1
+    gain_slot: ClassVar[int] = -1
 
     def __init__(
         self,
@@ -74,32 +65,49 @@ class CompiledLawController:
                 f"{self.name} needs {self.gains_type.__name__}, got {type(base).__name__}"
             )
         valid = [f.name for f in dataclasses.fields(base)]
-        unknown = sorted(set(overrides) - set(valid))
-        if unknown:
-            raise TypeError(
-                f"unrecognized gain(s) for {self.name}: {', '.join(unknown)}; "
-                f"valid gains: {', '.join(valid)}"
-            )
+        check_unknown(overrides, valid, "gain", self.name)
         self.gains = dataclasses.replace(base, **overrides) if overrides else base
         self.model = resolve_parameters(model)
-        self._params = self._pack(self.model)
+        self._params = self._pack(self.model, self._own_torque_limits())
         self._state = self._initial_state()
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.gains!r})"
 
-    def _pack(self, model: DrillStringParameters) -> npt.NDArray[np.float64]:
-        """The law's parameter vector for ``model`` (length ``N_LAW_PARAMS``)."""
+    def _pack(
+        self, model: DrillStringParameters, torque_limits: TorqueLimits
+    ) -> npt.NDArray[np.float64]:
+        """The law's parameter vector for ``model`` and the top drive's ``torque_limits``."""
         raise NotImplementedError
 
-    def _initial_state(self) -> npt.NDArray[np.float64]:
-        """The law's state at the start of an episode (length ``N_LAW_STATE``)."""
-        return np.zeros(N_LAW_STATE)
+    def _own_torque_limits(self) -> TorqueLimits:
+        """The torque range the controller assumes when no env tells it its own, N m."""
+        return DEFAULT_TORQUE_LIMITS
 
-    def compiled_law(self, model: DrillStringParameters | None = None) -> CompiledLaw:
-        """The law for the compiled loop; ``model`` replaces the controller's own model."""
-        params = self._params if model is None else self._pack(model)
-        return CompiledLaw(self.law_id, params, self._initial_state())
+    def _initial_state(self) -> npt.NDArray[np.float64]:
+        """The law's state at the start of an episode."""
+        raise NotImplementedError
+
+    def _python_torque(self, m: npt.NDArray[np.float64], ref: float, dt: float) -> float:
+        """The law on this controller's own vectors, from Python."""
+        raise NotImplementedError
+
+    def compiled_law(
+        self,
+        model: DrillStringParameters | None = None,
+        torque_limits: TorqueLimits | None = None,
+    ) -> CompiledLaw:
+        """The law for the compiled loop; ``model`` replaces the controller's own model and
+        ``torque_limits`` (N m) its default torque range (the env passes its own)."""
+        if model is None and torque_limits is None:
+            params = self._params
+        else:
+            params = self._pack(
+                self.model if model is None else model, torque_limits or self._own_torque_limits()
+            )
+        return CompiledLaw(
+            self.law, params, self._initial_state(), self.error_slot, self.gain_slot
+        ).validated()
 
     def reset(self) -> None:
         """Restore the law's initial state (integrals, adaptive gains, filters)."""
@@ -111,16 +119,7 @@ class CompiledLawController:
         """Top-drive torque (N m) from the measured state (7,) and the reference bit speed
         (rad/s); advances the law's state by ``dt_s`` seconds. The same compiled function
         runs inside the env's plant loop."""
-        m = np.asarray(measurement, dtype=np.float64)
-        if m.shape != (7,):
-            raise ValueError(f"measurement must have shape (7,), got {m.shape}")
-        return float(
-            control_torque(
-                self.law_id,
-                self._params,
-                self._state,
-                (m[0], m[1], m[2], m[3], m[4], m[5], m[6]),
-                float(reference_speed_rad_s),
-                float(dt_s),
-            )
-        )
+        m = np.ascontiguousarray(measurement, dtype=np.float64)
+        if m.shape != (N_STATE,):
+            raise ValueError(f"measurement must have shape ({N_STATE},), got {m.shape}")
+        return self._python_torque(m, float(reference_speed_rad_s), float(dt_s))

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from baselines.base import check_gain
-from baselines.smc import SlidingModeController, SurfaceGains
-from drill_env.control_laws import LAW_CSMC
+from numba import cfunc
 
-__all__ = ["CSMC", "CSMCGains"]
+from baselines.smc import VARIANT_CSMC, SlidingModeController, SurfaceGains, smc_law
+from drill_env.control import LAW_SIGNATURE
+
+__all__ = ["csmc_law", "CSMC", "CSMCGains"]
 
 
 @dataclass(frozen=True)
@@ -23,15 +24,22 @@ class CSMCGains(SurfaceGains):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        check_gain(self, "k1", "> 0", self.k1 > 0)
+        self._check("k1", "> 0", self.k1 > 0)
 
     def law_gains(self) -> tuple[float, ...]:
         return (self.k1,)
+
+
+@cfunc(LAW_SIGNATURE, cache=True)
+def csmc_law(lp, ls, m, ref, dt):
+    """The compiled law of ``csmc`` (see :func:`baselines.smc.smc_torque`)."""
+    return smc_law(VARIANT_CSMC, lp, ls, m, ref, dt)
 
 
 class CSMC(SlidingModeController):
     """Classic sliding-mode controller."""
 
     name = "csmc"
-    law_id = LAW_CSMC
+    variant = VARIANT_CSMC
+    law = csmc_law
     gains_type = CSMCGains

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from baselines.base import check_gain
-from baselines.smc import SlidingModeController, SurfaceGains
-from drill_env.control_laws import LAW_MSMC
+from numba import cfunc
 
-__all__ = ["MSMC", "MSMCGains"]
+from baselines.smc import VARIANT_MSMC, SlidingModeController, SurfaceGains, smc_law
+from drill_env.control import LAW_SIGNATURE
+
+__all__ = ["msmc_law", "MSMC", "MSMCGains"]
 
 
 @dataclass(frozen=True)
@@ -26,16 +27,23 @@ class MSMCGains(SurfaceGains):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        check_gain(self, "k2", "> 0", self.k2 > 0)
-        check_gain(self, "k3", ">= 0", self.k3 >= 0)
+        self._check("k2", "> 0", self.k2 > 0)
+        self._check("k3", ">= 0", self.k3 >= 0)
 
     def law_gains(self) -> tuple[float, ...]:
         return (self.k2, self.k3)
+
+
+@cfunc(LAW_SIGNATURE, cache=True)
+def msmc_law(lp, ls, m, ref, dt):
+    """The compiled law of ``msmc`` (see :func:`baselines.smc.smc_torque`)."""
+    return smc_law(VARIANT_MSMC, lp, ls, m, ref, dt)
 
 
 class MSMC(SlidingModeController):
     """Modified sliding-mode controller."""
 
     name = "msmc"
-    law_id = LAW_MSMC
+    variant = VARIANT_MSMC
+    law = msmc_law
     gains_type = MSMCGains

@@ -9,7 +9,8 @@ import numpy as np
 import numpy.typing as npt
 
 from drill_env.control import Controller
-from drill_env.observation import unscale_measurement
+from drill_env.layout import unscale_measurement
+from drill_env.limits import DEFAULT_TORQUE_LIMITS
 
 __all__ = ["ControllerPolicy"]
 
@@ -33,8 +34,8 @@ class ControllerPolicy:
         self,
         controller: Controller,
         control_dt_s: float = 0.001,
-        min_torque_nm: float = 0.0,
-        max_torque_nm: float = 50_000.0,
+        min_torque_nm: float = DEFAULT_TORQUE_LIMITS.min_nm,
+        max_torque_nm: float = DEFAULT_TORQUE_LIMITS.max_nm,
     ) -> None:
         if not control_dt_s > 0:
             raise ValueError(f"control_dt_s = {control_dt_s!r} is out of range: allowed > 0")

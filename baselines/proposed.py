@@ -6,11 +6,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from baselines.base import check_gain
-from baselines.smc import SlidingModeController, SurfaceGains
-from drill_env.control_laws import LAW_PROPOSED
+from numba import cfunc
 
-__all__ = ["ProposedASMC", "ProposedGains"]
+from baselines.smc import VARIANT_PROPOSED, SlidingModeController, SurfaceGains, smc_law
+from drill_env.control import LAW_SIGNATURE
+
+__all__ = ["proposed_law", "ProposedASMC", "ProposedGains"]
 
 
 @dataclass(frozen=True)
@@ -35,12 +36,12 @@ class ProposedGains(SurfaceGains):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        check_gain(self, "mu1", "> 0", self.mu1 > 0)
-        check_gain(self, "mu2", "> 0", self.mu2 > 0)
-        check_gain(self, "alpha", "> 0", self.alpha > 0)
-        check_gain(self, "a", ">= 0", self.a >= 0)
-        check_gain(self, "b", "(0, 1]", 0 < self.b <= 1)
-        check_gain(self, "k0", f"> alpha = {self.alpha}", self.k0 > self.alpha)
+        self._check("mu1", "> 0", self.mu1 > 0)
+        self._check("mu2", "> 0", self.mu2 > 0)
+        self._check("alpha", "> 0", self.alpha > 0)
+        self._check("a", ">= 0", self.a >= 0)
+        self._check("b", "(0, 1]", 0 < self.b <= 1)
+        self._check("k0", f"> alpha = {self.alpha}", self.k0 > self.alpha)
 
     def law_gains(self) -> tuple[float, ...]:
         return (self.mu1, self.mu2, self.alpha, self.a, self.b)
@@ -49,9 +50,16 @@ class ProposedGains(SurfaceGains):
         return self.k0
 
 
+@cfunc(LAW_SIGNATURE, cache=True)
+def proposed_law(lp, ls, m, ref, dt):
+    """The compiled law of ``proposed`` (see :func:`baselines.smc.smc_torque`)."""
+    return smc_law(VARIANT_PROPOSED, lp, ls, m, ref, dt)
+
+
 class ProposedASMC(SlidingModeController):
     """The paper's proposed adaptive sliding-mode controller."""
 
     name = "proposed"
-    law_id = LAW_PROPOSED
+    variant = VARIANT_PROPOSED
+    law = proposed_law
     gains_type = ProposedGains

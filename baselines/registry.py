@@ -1,22 +1,25 @@
-"""Registry of the built-in controllers: ``make_controller(name, **gains)``."""
+"""The built-in controllers by name, registered with the core's registry
+(:func:`drill_env.control.register_controller`) when :mod:`baselines` is imported; installed,
+the same names are offered through the ``drill_string_gym.controllers`` entry points, so that
+``gym.make("DrillString-v0", base_controller="proposed")`` finds them without an import."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any
+from typing import Final
 
 from baselines.asmc import ASMC
+from baselines.base import CompiledLawController
 from baselines.csmc import CSMC
 from baselines.msmc import MSMC
 from baselines.proposed import ProposedASMC
 from baselines.soft_speed import SoftSpeed
 from baselines.stiff_pi import StiffPI
 from baselines.z_torque import ZTorque
-from drill_env.control import Controller
+from drill_env.control import register_controller
 
-__all__ = ["CONTROLLERS", "controller_names", "make_controller", "register_controller"]
+__all__ = ["BUILT_IN", "COMPILED_LAWS"]
 
-CONTROLLERS: dict[str, Callable[..., Controller]] = {
+BUILT_IN: Final[dict[str, type[CompiledLawController]]] = {
     "csmc": CSMC,
     "msmc": MSMC,
     "asmc": ASMC,
@@ -25,31 +28,10 @@ CONTROLLERS: dict[str, Callable[..., Controller]] = {
     "soft_speed": SoftSpeed,
     "z_torque": ZTorque,
 }
-"""Factories by name; each takes gain keywords (and ``model``)."""
+"""The built-in controller classes by name; each takes gain keywords (and ``model``)."""
 
+COMPILED_LAWS: Final = {name: cls.law for name, cls in BUILT_IN.items()}
+"""The compiled law (a numba ``cfunc``) each built-in controller runs in the plant loop."""
 
-def controller_names() -> list[str]:
-    """The registered controller names, in registration order."""
-    return list(CONTROLLERS)
-
-
-def register_controller(name: str, factory: Callable[..., Controller]) -> None:
-    """Add a controller factory under ``name`` (an error if the name is taken)."""
-    if name in CONTROLLERS:
-        raise ValueError(f"controller name {name!r} is already registered")
-    CONTROLLERS[name] = factory
-
-
-def make_controller(name: str, **gains: Any) -> Controller:
-    """A new controller ``name`` with default gains, overridden by ``gains``.
-
-    Raises:
-        ValueError: for an unknown name, listing the valid ones.
-    """
-    try:
-        factory = CONTROLLERS[name]
-    except (KeyError, TypeError):
-        raise ValueError(
-            f"unknown controller {name!r}: valid names are {', '.join(CONTROLLERS)}"
-        ) from None
-    return factory(**gains)
+for _name, _factory in BUILT_IN.items():
+    register_controller(_name, _factory)

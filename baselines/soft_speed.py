@@ -29,17 +29,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from baselines.base import check_gain, check_numbers
+from baselines.base import Gains
 from baselines.speed_loop import DriveLimits, SpeedLoopController, SpeedLoopTuning
 from baselines.string_modes import pipe_impedance, stick_slip_frequency
-from drill_env.control_laws import LAW_SOFT_SPEED
 from drill_env.parameters import DrillStringParameters
 
 __all__ = ["SoftSpeed", "SoftSpeedGains"]
 
 
 @dataclass(frozen=True)
-class SoftSpeedGains:
+class SoftSpeedGains(Gains):
     """Tuning knobs of the soft speed loop.
 
     Attributes:
@@ -57,9 +56,9 @@ class SoftSpeedGains:
     limits: DriveLimits = field(default_factory=DriveLimits)
 
     def __post_init__(self) -> None:
-        check_numbers(self)
-        check_gain(self, "impedance_factor", "(0, 100]", 0 < self.impedance_factor <= 100)
-        check_gain(self, "frequency_factor", "(0, 100]", 0 < self.frequency_factor <= 100)
+        self._check_finite()
+        self._check("impedance_factor", "(0, 100]", 0 < self.impedance_factor <= 100)
+        self._check("frequency_factor", "(0, 100]", 0 < self.frequency_factor <= 100)
         if not isinstance(self.inertia_compensation, bool):
             raise TypeError(
                 "SoftSpeedGains.inertia_compensation must be True or False, got "
@@ -73,7 +72,6 @@ class SoftSpeed(SpeedLoopController):
     """PI speed loop tuned as a matched damper at the stick-slip frequency (SoftSpeed)."""
 
     name = "soft_speed"
-    law_id = LAW_SOFT_SPEED
     gains_type = SoftSpeedGains
 
     def tuning(self, model: DrillStringParameters | None = None) -> SpeedLoopTuning:

@@ -1,7 +1,7 @@
 """The top-drive speed-loop family shared by the industry baselines.
 
 ``stiff_pi``, ``soft_speed`` and ``z_torque`` are all one compiled law,
-:func:`drill_env.control_laws.speed_loop_torque`: a PI loop on the measured top-drive speed
+:func:`speed_loop_torque`: a PI loop on the measured top-drive speed
 ``x1`` with an optional set-point feed-forward and an optional torque feedback that moves the
 set-point. They differ in how the gains are derived from the controller's model of the string
 (see each controller's module). All of them track the reference *bit* speed with the top drive:
@@ -17,49 +17,105 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import Final
 
 import numpy as np
 import numpy.typing as npt
+from numba import carray, cfunc, njit
 
-from baselines.base import CompiledLawController, check_gain, check_numbers
-from drill_env.control_laws import (
-    N_LAW_PARAMS,
-    PI_C_PI,
-    PI_J_FF,
-    PI_K_PI,
-    PI_KI,
-    PI_KP,
-    PI_TAU,
-    PI_U_MAX,
-    PI_U_MIN,
-    PI_Z,
-    PS_ERROR,
-    PS_INT,
-)
+from baselines.base import CompiledLawController, Gains
+from drill_env.control import LAW_SIGNATURE
+from drill_env.layout import M_STATE, N_MEASUREMENT
+from drill_env.limits import DEFAULT_TORQUE_LIMITS, TorqueLimits
 from drill_env.parameters import DrillStringParameters
 
-__all__ = ["DriveLimits", "SpeedLoopController", "SpeedLoopTuning"]
+__all__ = [
+    "DriveLimits",
+    "SpeedLoopController",
+    "SpeedLoopTuning",
+    "speed_loop_law",
+    "speed_loop_torque",
+]
+
+# Parameter vector.
+PI_KP, PI_KI, PI_J_FF, PI_Z, PI_K_PI, PI_C_PI, PI_TAU, PI_U_MIN, PI_U_MAX = range(9)
+N_PI_PARAMS: Final = 9
+# State vector.
+PS_INT, PS_SET_PREV, PS_ERROR, PS_T_MEAN, PS_STARTED = range(5)
+N_PI_STATE: Final = 5
+
+
+@njit(cache=True)
+def speed_loop_torque(lp, ls, m, ref: float, dt: float) -> float:
+    """Top-drive speed PI loop with optional set-point feed-forward and torque feedback, N m.
+
+    With the measured string torque at the top drive ``T = k_pi x2 + c_pi (x1 - x3)`` and its
+    running mean ``T_mean`` (first-order low-pass, time constant ``tau_mean``)::
+
+        w_set = ref - (T - T_mean) / z              (z = 0: no torque feedback, w_set = ref)
+        e     = w_set - x1
+        u     = kp e + ki I + j_ff d(w_set)/dt       I = integral of e (forward Euler)
+
+    ``stiff_pi`` and ``soft_speed`` use ``z = 0``; ``z_torque`` feeds the torque back through
+    the pipe impedance ``z``. ``d(w_set)/dt`` is the backward difference of the set-point over
+    ``dt`` (0 at the first call). The integral is clamped (conditional integration) while the
+    unclipped output is beyond ``[u_min, u_max]`` and the error would push it further out. The
+    torque is returned unclipped (the env clips it); then ``I``, ``T_mean`` and the previous
+    set-point advance by ``dt``. ``ls[PS_ERROR]`` keeps the speed error ``x1 - w_set`` (rad/s).
+    """
+    x1, x2, x3 = m[M_STATE], m[M_STATE + 1], m[M_STATE + 2]
+    kp, ki, j_ff, z = lp[PI_KP], lp[PI_KI], lp[PI_J_FF], lp[PI_Z]
+    w_set = ref
+    t_string = lp[PI_K_PI] * x2 + lp[PI_C_PI] * (x1 - x3)
+    first = ls[PS_STARTED] == 0.0
+    if first:
+        ls[PS_T_MEAN] = t_string
+    if z > 0.0:
+        w_set = ref - (t_string - ls[PS_T_MEAN]) / z
+    feed = 0.0 if first else j_ff * (w_set - ls[PS_SET_PREV]) / dt
+    e = w_set - x1
+    u = kp * e + ki * ls[PS_INT] + feed
+    saturated = (u > lp[PI_U_MAX] and e > 0.0) or (u < lp[PI_U_MIN] and e < 0.0)
+    if not saturated:
+        ls[PS_INT] += e * dt
+    tau = lp[PI_TAU]
+    if tau > 0.0:
+        ls[PS_T_MEAN] += (t_string - ls[PS_T_MEAN]) * min(dt / tau, 1.0)
+    ls[PS_SET_PREV] = w_set
+    ls[PS_ERROR] = -e
+    ls[PS_STARTED] = 1.0
+    return u
+
+
+@cfunc(LAW_SIGNATURE, cache=True)
+def speed_loop_law(lp_ptr, ls_ptr, m_ptr, ref, dt):
+    """The compiled law of every speed-loop controller (:func:`speed_loop_torque`)."""
+    lp = carray(lp_ptr, (N_PI_PARAMS,))
+    ls = carray(ls_ptr, (N_PI_STATE,))
+    m = carray(m_ptr, (N_MEASUREMENT,))
+    return speed_loop_torque(lp, ls, m, ref, dt)
 
 
 @dataclass(frozen=True)
-class DriveLimits:
-    """Torque limits of the top drive as the controller knows them (anti-windup only).
+class DriveLimits(Gains):
+    """Torque limits of the top drive as the controller knows them when it runs on its own (as
+    a policy), for anti-windup only. Inside ``DrillString-v0`` the env hands the controller its
+    own ``min_torque_nm``/``max_torque_nm`` instead.
 
     The law stops integrating while its output is beyond these limits and the error would push
-    it further out; it still returns the unclipped torque, which the env clips to its own
-    ``min_torque_nm``/``max_torque_nm``. Keep the two pairs equal (the defaults are the env's).
+    it further out; it still returns the unclipped torque, which the env clips.
 
     Attributes:
         u_min_nm: Lowest top-drive torque, N m.
         u_max_nm: Highest top-drive torque, N m (> ``u_min_nm``).
     """
 
-    u_min_nm: float = 0.0
-    u_max_nm: float = 50_000.0
+    u_min_nm: float = DEFAULT_TORQUE_LIMITS.min_nm
+    u_max_nm: float = DEFAULT_TORQUE_LIMITS.max_nm
 
     def __post_init__(self) -> None:
-        check_numbers(self)
-        check_gain(self, "u_max_nm", f"> u_min_nm = {self.u_min_nm}", self.u_max_nm > self.u_min_nm)
+        self._check_finite()
+        self._check("u_max_nm", f"> u_min_nm = {self.u_min_nm}", self.u_max_nm > self.u_min_nm)
 
 
 @dataclass(frozen=True)
@@ -110,14 +166,28 @@ class SpeedLoopController(CompiledLawController):
         """The gains derived from ``model`` (the controller's own model when omitted)."""
         raise NotImplementedError
 
-    def _pack(self, model: DrillStringParameters) -> npt.NDArray[np.float64]:
+    law = speed_loop_law
+    error_slot = PS_ERROR
+
+    def _pack(
+        self, model: DrillStringParameters, torque_limits: TorqueLimits
+    ) -> npt.NDArray[np.float64]:
         t = self.tuning(model)
-        limits: DriveLimits = self.gains.limits
-        p = np.zeros(N_LAW_PARAMS)
+        p = np.zeros(N_PI_PARAMS)
         p[PI_KP], p[PI_KI], p[PI_J_FF], p[PI_Z] = t.kp, t.ki, t.j_ff, t.z
         p[PI_K_PI], p[PI_C_PI], p[PI_TAU] = t.k_pi, t.c_pi, t.tau_mean_s
-        p[PI_U_MIN], p[PI_U_MAX] = limits.u_min_nm, limits.u_max_nm
+        p[PI_U_MIN], p[PI_U_MAX] = torque_limits
         return p
+
+    def _own_torque_limits(self) -> TorqueLimits:
+        limits: DriveLimits = self.gains.limits
+        return TorqueLimits(limits.u_min_nm, limits.u_max_nm)
+
+    def _initial_state(self) -> npt.NDArray[np.float64]:
+        return np.zeros(N_PI_STATE)
+
+    def _python_torque(self, m: npt.NDArray[np.float64], ref: float, dt: float) -> float:
+        return float(speed_loop_torque(self._params, self._state, m, ref, dt))
 
     @property
     def speed_error(self) -> float:

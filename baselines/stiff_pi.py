@@ -23,17 +23,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from baselines.base import check_gain, check_numbers
+from baselines.base import Gains
 from baselines.speed_loop import DriveLimits, SpeedLoopController, SpeedLoopTuning
 from baselines.string_modes import pipe_impedance, stick_slip_frequency
-from drill_env.control_laws import LAW_STIFF_PI
 from drill_env.parameters import DrillStringParameters
 
 __all__ = ["StiffPI", "StiffPIGains"]
 
 
 @dataclass(frozen=True)
-class StiffPIGains:
+class StiffPIGains(Gains):
     """Tuning knobs of the stiff speed loop.
 
     Attributes:
@@ -49,9 +48,9 @@ class StiffPIGains:
     limits: DriveLimits = field(default_factory=DriveLimits)
 
     def __post_init__(self) -> None:
-        check_numbers(self)
-        check_gain(self, "bandwidth_factor", "(0, 10000]", 0 < self.bandwidth_factor <= 10_000)
-        check_gain(self, "damping_ratio", "(0, 100]", 0 < self.damping_ratio <= 100)
+        self._check_finite()
+        self._check("bandwidth_factor", "(0, 10000]", 0 < self.bandwidth_factor <= 10_000)
+        self._check("damping_ratio", "(0, 100]", 0 < self.damping_ratio <= 100)
         if not isinstance(self.limits, DriveLimits):
             raise TypeError(f"StiffPIGains.limits must be a DriveLimits, got {self.limits!r}")
 
@@ -60,7 +59,6 @@ class StiffPI(SpeedLoopController):
     """Stiff top-drive speed PI loop."""
 
     name = "stiff_pi"
-    law_id = LAW_STIFF_PI
     gains_type = StiffPIGains
 
     def tuning(self, model: DrillStringParameters | None = None) -> SpeedLoopTuning:

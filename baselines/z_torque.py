@@ -33,17 +33,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from baselines.base import check_gain, check_numbers
+from baselines.base import Gains
 from baselines.speed_loop import DriveLimits, SpeedLoopController, SpeedLoopTuning
 from baselines.string_modes import pipe_impedance, stick_slip_frequency
-from drill_env.control_laws import LAW_Z_TORQUE
 from drill_env.parameters import DrillStringParameters
 
 __all__ = ["ZTorque", "ZTorqueGains"]
 
 
 @dataclass(frozen=True)
-class ZTorqueGains:
+class ZTorqueGains(Gains):
     """Tuning knobs of the impedance-matching controller.
 
     Attributes:
@@ -65,11 +64,11 @@ class ZTorqueGains:
     limits: DriveLimits = field(default_factory=DriveLimits)
 
     def __post_init__(self) -> None:
-        check_numbers(self)
-        check_gain(self, "impedance_factor", "(0, 100]", 0 < self.impedance_factor <= 100)
-        check_gain(self, "mean_periods", "(0, 1000]", 0 < self.mean_periods <= 1000)
-        check_gain(self, "bandwidth_factor", "(0, 10000]", 0 < self.bandwidth_factor <= 10_000)
-        check_gain(self, "damping_ratio", "(0, 100]", 0 < self.damping_ratio <= 100)
+        self._check_finite()
+        self._check("impedance_factor", "(0, 100]", 0 < self.impedance_factor <= 100)
+        self._check("mean_periods", "(0, 1000]", 0 < self.mean_periods <= 1000)
+        self._check("bandwidth_factor", "(0, 10000]", 0 < self.bandwidth_factor <= 10_000)
+        self._check("damping_ratio", "(0, 100]", 0 < self.damping_ratio <= 100)
         if not isinstance(self.limits, DriveLimits):
             raise TypeError(f"ZTorqueGains.limits must be a DriveLimits, got {self.limits!r}")
 
@@ -78,7 +77,6 @@ class ZTorque(SpeedLoopController):
     """Stiff speed loop with an impedance-matched torque feedback on its set-point (Z-Torque)."""
 
     name = "z_torque"
-    law_id = LAW_Z_TORQUE
     gains_type = ZTorqueGains
 
     def tuning(self, model: DrillStringParameters | None = None) -> SpeedLoopTuning:

@@ -24,7 +24,7 @@ import numpy as np
 import drill_env  # noqa: F401  (registers DrillString-v0)
 from drill_env import kernel
 from drill_env.batch import StringBatch
-from drill_env.config import EnvConfig
+from drill_env.options import EnvConfig
 from drill_env.parameters import PRESETS
 
 WOB_N = 97_347.0
@@ -57,7 +57,8 @@ def kernel_throughput(num: int, seconds: float, parallel: bool) -> float:
     batch = StringBatch(config, num)
     for i in range(num):
         batch.reset_string(i, i, None)
-    batch._advance = kernel.advance_batch_parallel if parallel else kernel.advance_batch
+    dispatcher = kernel.advance_batch_parallel if parallel else kernel.advance_batch
+    batch._advance = kernel.fast_entry(dispatcher, batch.arrays, batch.settings)
     actions = np.zeros(num)
     batch.step(actions)  # warm up
     steps = 0

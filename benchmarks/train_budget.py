@@ -27,9 +27,9 @@ import time
 from pathlib import Path
 
 from agents.config import TrainConfig
-from agents.figures import plot_learning_curves
 from agents.policy import DEFAULT_MODEL_DIR
 from agents.train import train
+from experiments.plots import plot_learning_curves
 
 FIGURE = Path("docs/figures/residual_ppo_learning_curve.png")
 

@@ -15,12 +15,14 @@ from pathlib import Path
 __all__ = ["invalidate_stale_cache"]
 
 
-def invalidate_stale_cache(package_dir: Path) -> None:
-    """Delete ``package_dir/__pycache__/*.nbi|*.nbc`` when any ``*.py`` of the package changed."""
+def invalidate_stale_cache(package_dir: Path, *depends_on: Path) -> None:
+    """Delete ``package_dir/__pycache__/*.nbi|*.nbc`` when any ``*.py`` of the package, or of
+    the packages in ``depends_on`` whose compiled functions it calls, changed."""
     digest = hashlib.sha256()
-    for source in sorted(package_dir.glob("*.py")):
-        digest.update(source.name.encode())
-        digest.update(source.read_bytes())
+    for folder in (package_dir, *depends_on):
+        for source in sorted(folder.glob("*.py")):
+            digest.update(f"{folder.name}/{source.name}".encode())
+            digest.update(source.read_bytes())
     cache = package_dir / "__pycache__"
     stamp = cache / "numba-sources.sha256"
     current = digest.hexdigest()

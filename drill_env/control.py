@@ -1,35 +1,159 @@
-"""The controller hook of the environment: what a base controller must provide.
+"""The controller hook of the environment: what a base controller provides, how a compiled
+one runs inside the plant loop, and the registry of controllers by name.
 
 Any object with ``reset()`` and ``torque(measurement, reference_speed_rad_s, dt_s)`` can be a
 base controller; the env then calls it from Python at every plant step (the slow path). A
-controller that also has ``compiled_law(model)`` runs inside the compiled plant loop instead,
-state and all, at full speed: the built-in controllers of :mod:`baselines` all do.
+controller that also has ``compiled_law(model, torque_limits)`` runs inside the compiled plant
+loop instead, state and all, at full speed. Its law is a numba ``cfunc`` with the signature
+:data:`LAW_SIGNATURE`::
+
+    torque_nm = law(params*, state*, measurement*, reference_rad_s, dt_s)
+
+reading its parameter vector and the measurement vector (``drill_env.layout.M_*``: the
+measured state), updating its own state vector in place, and returning the top-drive torque in
+N m. The kernel calls it through its address, so the core runs controllers it does not know:
+the controllers live in the packages that define them and are found by name through the
+registry below (the built-in ones of :mod:`baselines` through the
+``drill_string_gym.controllers`` entry point group).
 """
 
 from __future__ import annotations
 
-from typing import NamedTuple, Protocol, runtime_checkable
+import ctypes
+from collections.abc import Callable
+from importlib import metadata
+from typing import Any, Final, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
+from llvmlite import ir
+from numba import types
+from numba.extending import intrinsic
 
+from drill_env.limits import TorqueLimits
 from drill_env.parameters import DrillStringParameters
 
-__all__ = ["CompiledLaw", "CompiledController", "Controller"]
+__all__ = [
+    "ENTRY_POINT_GROUP",
+    "LAW_SIGNATURE",
+    "CompiledController",
+    "CompiledLaw",
+    "Controller",
+    "call_law",
+    "controller_names",
+    "make_controller",
+    "register_controller",
+    "resolve_controller",
+]
+
+_DOUBLE_P = types.CPointer(types.float64)
+LAW_SIGNATURE: Final = types.float64(_DOUBLE_P, _DOUBLE_P, _DOUBLE_P, types.float64, types.float64)
+"""``float64(float64* params, float64* state, float64* measurement, float64 reference_rad_s,
+float64 dt_s)``: the signature of every compiled law (a numba ``cfunc``)."""
+
+_CTYPES_ARGS: Final = (
+    ctypes.POINTER(ctypes.c_double),
+    ctypes.POINTER(ctypes.c_double),
+    ctypes.POINTER(ctypes.c_double),
+    ctypes.c_double,
+    ctypes.c_double,
+)
 
 
 class CompiledLaw(NamedTuple):
-    """A law of :mod:`drill_env.control_laws` with its packed vectors.
+    """A controller's law as the compiled loop runs it.
 
     Attributes:
-        law_id: The law's id (``LAW_*`` of :mod:`drill_env.control_laws`).
-        params: Parameter vector, length ``N_LAW_PARAMS``.
-        initial_state: State vector at the start of an episode, length ``N_LAW_STATE``.
+        function: The law, a numba ``cfunc`` compiled with :data:`LAW_SIGNATURE`.
+        params: Its parameter vector (gains and the controller's model of the string).
+        initial_state: Its state vector at the start of an episode (integrals, adaptive gains,
+            filters); the kernel updates a copy in place.
+        error_slot: Index in the state of the law's error signal (rad/s) that the env reports
+            (``sliding_variable_rad_s``) and shows in the residual observation; -1 for none.
+        gain_slot: Index in the state of its adaptive gain (``adaptive_gain``); -1 for none.
     """
 
-    law_id: int
+    function: Any
     params: npt.NDArray[np.float64]
     initial_state: npt.NDArray[np.float64]
+    error_slot: int = -1
+    gain_slot: int = -1
+
+    @property
+    def address(self) -> int:
+        """Address of the compiled law, for the kernel."""
+        return int(self.function.address)
+
+    def torque(
+        self,
+        state: npt.NDArray[np.float64],
+        measurement: npt.NDArray[np.float64],
+        reference_rad_s: float,
+        dt_s: float,
+    ) -> float:
+        """Call the compiled law once from Python through its address, as the kernel does
+        (for tests and debugging): ``state`` (a float64 copy of ``initial_state``) is updated in
+        place; ``measurement`` is the law's measurement vector (``drill_env.layout.M_*``)."""
+        arrays = (self.params, state, measurement)
+        for name, array in zip(("params", "state", "measurement"), arrays, strict=True):
+            if (
+                not isinstance(array, np.ndarray)
+                or array.dtype != np.float64
+                or not array.flags.c_contiguous
+            ):
+                raise TypeError(f"{name} must be a C-contiguous float64 array")
+        pointer = ctypes.POINTER(ctypes.c_double)
+        return float(
+            self.function.ctypes(
+                *(a.ctypes.data_as(pointer) for a in arrays), float(reference_rad_s), float(dt_s)
+            )
+        )
+
+    def validated(self) -> CompiledLaw:
+        """This law with float64 vectors, checked against :data:`LAW_SIGNATURE`.
+
+        Raises:
+            TypeError: when ``function`` is not a cfunc of the law signature.
+            ValueError: when a vector is empty or not 1-D, or a slot is out of the state.
+        """
+        fn = getattr(self.function, "ctypes", None)
+        if fn is None or tuple(fn.argtypes) != _CTYPES_ARGS or fn.restype is not ctypes.c_double:
+            raise TypeError(
+                "CompiledLaw.function must be a numba cfunc with signature "
+                f"{LAW_SIGNATURE}, got {self.function!r}"
+            )
+        params = np.ascontiguousarray(self.params, dtype=np.float64)
+        state = np.ascontiguousarray(self.initial_state, dtype=np.float64)
+        for name, vector in (("params", params), ("initial_state", state)):
+            if vector.ndim != 1 or vector.size == 0:
+                raise ValueError(f"CompiledLaw.{name} must be a non-empty 1-D vector")
+        for name, slot in (("error_slot", self.error_slot), ("gain_slot", self.gain_slot)):
+            if not -1 <= slot < state.size:
+                raise ValueError(
+                    f"CompiledLaw.{name} = {slot!r} is out of range: allowed -1 (none) to "
+                    f"{state.size - 1}"
+                )
+        return self._replace(params=params, initial_state=state)
+
+
+@intrinsic
+def call_law(typingctx, address, params, state, measurement, reference, dt):
+    """Call the compiled law at ``address`` (an int) on the data pointers of three float64
+    arrays; compiled code only. An indirect call: a few nanoseconds."""
+    sig = types.float64(types.intp, params, state, measurement, types.float64, types.float64)
+
+    def codegen(context, builder, signature, args):
+        fn_address, lp, ls, m, ref, step = args
+        double = ir.DoubleType()
+        fnty = ir.FunctionType(double, [double.as_pointer()] * 3 + [double, double])
+        fn = builder.inttoptr(fn_address, fnty.as_pointer())
+        pointers = []
+        for array_type, value in zip(signature.args[1:4], (lp, ls, m), strict=True):
+            array = context.make_array(array_type)(context, builder, value)
+            pointers.append(array.data)
+        return builder.call(fn, [*pointers, ref, step])
+
+    return sig, codegen
 
 
 @runtime_checkable
@@ -51,7 +175,80 @@ class Controller(Protocol):
 class CompiledController(Controller, Protocol):
     """A controller that can run inside the compiled plant loop."""
 
-    def compiled_law(self, model: DrillStringParameters | None = None) -> CompiledLaw:
-        """The packed law, using ``model`` as the controller's model of the string when given
-        (the ``controller`` uncertainty reading) and its own otherwise."""
+    def compiled_law(
+        self,
+        model: DrillStringParameters | None = None,
+        torque_limits: TorqueLimits | None = None,
+    ) -> CompiledLaw:
+        """The law, using ``model`` as the controller's model of the string when given (the
+        ``controller`` uncertainty reading) and its own otherwise, and the env's top-drive
+        ``torque_limits`` (N m) when given."""
         ...
+
+
+# ----------------------------------------------------------------------------- registry
+ENTRY_POINT_GROUP: Final = "drill_string_gym.controllers"
+"""Entry point group through which installed packages offer controllers by name: each entry
+``name = "package.module:Factory"``, the factory taking gain keywords."""
+
+_FACTORIES: dict[str, Callable[..., Controller]] = {}
+_ENTRY_POINTS: dict[str, metadata.EntryPoint] = {}
+_discovered = False
+
+
+def _discover() -> None:
+    """Read the entry points once (they are loaded only when their name is used)."""
+    global _discovered
+    if _discovered:
+        return
+    _discovered = True
+    for entry in metadata.entry_points(group=ENTRY_POINT_GROUP):
+        _ENTRY_POINTS.setdefault(entry.name, entry)
+
+
+def register_controller(name: str, factory: Callable[..., Controller]) -> None:
+    """Offer ``factory`` under ``name``: ``make_controller(name, **gains)`` then calls it.
+
+    Registering the same factory twice is harmless; another factory under a taken name is an
+    error.
+    """
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"controller name must be a non-empty string, got {name!r}")
+    if not callable(factory):
+        raise TypeError(f"controller factory for {name!r} must be callable, got {factory!r}")
+    known = _FACTORIES.get(name)
+    if known is not None and known is not factory:
+        raise ValueError(f"controller name {name!r} is already registered")
+    _FACTORIES[name] = factory
+
+
+def controller_names() -> list[str]:
+    """The registered controller names: those registered in this process, then those offered
+    by installed packages' entry points, in order."""
+    _discover()
+    return list(dict.fromkeys([*_FACTORIES, *_ENTRY_POINTS]))
+
+
+def make_controller(name: str, **gains: Any) -> Controller:
+    """A new controller ``name`` with default gains, overridden by ``gains``.
+
+    Raises:
+        ValueError: for an unknown name, listing the valid ones.
+    """
+    _discover()
+    factory = _FACTORIES.get(name) if isinstance(name, str) else None
+    if factory is None and isinstance(name, str) and name in _ENTRY_POINTS:
+        factory = _ENTRY_POINTS[name].load()
+        register_controller(name, factory)
+    if factory is None:
+        raise ValueError(
+            f"unknown controller {name!r}: valid names are {', '.join(controller_names())}"
+        )
+    return factory(**gains)
+
+
+def resolve_controller(value: str | Controller | None) -> Controller | None:
+    """A controller object from a registered name, or ``value`` itself."""
+    if value is None or not isinstance(value, str):
+        return value
+    return make_controller(value)

@@ -13,6 +13,21 @@ import numpy.typing as npt
 from numba import njit
 
 from drill_env.friction import STUCK, slip_torque, string_torque_on_bit
+from drill_env.layout import (
+    P_C_BI,
+    P_C_BIT,
+    P_C_CO,
+    P_C_DT,
+    P_C_PI,
+    P_INV_J_BI,
+    P_INV_J_CO,
+    P_INV_J_DT,
+    P_INV_J_PI,
+    P_K_BI,
+    P_K_CO,
+    P_K_PI,
+    P_XI,
+)
 from drill_env.parameters import DrillStringParameters, plant_parameter_vector
 
 __all__ = ["derivative", "state_derivative"]
@@ -34,9 +49,9 @@ def derivative(x, u: float, p, t_a: float, t_0: float, mode: int):
         The 7-tuple ``dx/dt``.
     """
     x1, x2, x3, x4, x5, x6, x7 = x
-    inv_dt, inv_pi, inv_co, inv_bi = p[17], p[18], p[19], p[20]
-    c_dt, c_pi, c_co, c_bi, c_bit = p[4], p[5], p[6], p[7], p[8]
-    k_pi, k_co, k_bi = p[9], p[10], p[11]
+    inv_dt, inv_pi, inv_co, inv_bi = p[P_INV_J_DT], p[P_INV_J_PI], p[P_INV_J_CO], p[P_INV_J_BI]
+    c_dt, c_pi, c_co, c_bi, c_bit = p[P_C_DT], p[P_C_PI], p[P_C_CO], p[P_C_BI], p[P_C_BIT]
+    k_pi, k_co, k_bi = p[P_K_PI], p[P_K_CO], p[P_K_BI]
     d1 = (-(c_dt + c_pi) * x1 - k_pi * x2 + c_pi * x3 + u) * inv_dt
     d3 = (c_pi * x1 + k_pi * x2 - (c_pi + c_co) * x3 - k_co * x4 + c_co * x5) * inv_pi
     d5 = (c_co * x3 + k_co * x4 - (c_co + c_bi) * x5 - k_bi * x6 + c_bi * x7) * inv_co
@@ -44,7 +59,7 @@ def derivative(x, u: float, p, t_a: float, t_0: float, mode: int):
         d7 = 0.0
     else:
         t_e = string_torque_on_bit(x5, x6, x7, c_bi, k_bi, c_bit)
-        d7 = (t_e - slip_torque(x7, mode, t_a, t_0, p[15])) * inv_bi
+        d7 = (t_e - slip_torque(x7, mode, t_a, t_0, p[P_XI])) * inv_bi
     return (d1, x1 - x3, d3, x3 - x5, d5, x5 - x7, d7)
 
 

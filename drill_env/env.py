@@ -2,17 +2,33 @@
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
+from gymnasium.envs.registration import EnvSpec
 
-from drill_env import kernel
 from drill_env.batch import StringBatch
-from drill_env.config import EnvConfig
-from drill_env.observation import OBS_BOUND, observation_size
-from drill_env.rewards import reward_terms, total_reward
+from drill_env.evaluation import PlantSamples
+from drill_env.layout import (
+    OBS_BOUND,
+    REP_BASE_TORQUE,
+    REP_BIT_SPEED,
+    REP_BIT_STUCK,
+    REP_LAW_ERROR,
+    REP_LAW_GAIN,
+    REP_REFERENCE,
+    REP_STATUS,
+    REP_TIME,
+    REP_TOP_DRIVE_SPEED,
+    REP_TORQUE,
+    REP_WOB,
+    STATUS_OK,
+)
+from drill_env.options import EnvConfig
+from drill_env.rewards import TERMS, reward_terms, total_reward
 
 __all__ = ["DrillStringEnv", "validate_actions"]
 
@@ -144,20 +160,38 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
     >>> obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
     """
 
-    metadata: dict[str, Any] = {"render_modes": []}  # noqa: RUF012
+    metadata: dict[str, Any] = {"render_modes": []}
 
     def __init__(self, **kwargs: Any) -> None:
+        self._spec: EnvSpec | None = None
         self.config = EnvConfig.from_kwargs(kwargs)
         self._batch = StringBatch(self.config, 1)
-        size = observation_size(self.config.residual)
+        size = self._batch.obs_size
         self.observation_space = gym.spaces.Box(-OBS_BOUND, OBS_BOUND, (size,), np.float32)
+        self._residual_scale = self.config.residual_scale_nm if self.config.residual else None
         self.action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
         self._started = False
 
     @property
+    def spec(self) -> EnvSpec | None:
+        """The registration spec, with ``max_episode_steps`` the decisions that ``episode_s``
+        and ``control_dt_s`` make (the env truncates itself there)."""
+        return self._spec
+
+    @spec.setter
+    def spec(self, value: EnvSpec | None) -> None:
+        if value is not None and value.max_episode_steps is None:
+            value = dataclasses.replace(value, max_episode_steps=self.config.max_steps)
+        self._spec = value
+
+    @property
     def batch(self) -> StringBatch:
-        """The engine (a batch of one); its ``records`` hold the last step's plant samples."""
+        """The engine (a batch of one)."""
         return self._batch
+
+    def plant_samples(self) -> PlantSamples:
+        """The last step's samples at every plant step (views, valid until the next step)."""
+        return PlantSamples.from_records(self._batch.records[0])
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -170,11 +204,8 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         self._batch.reset_string(0, seed, options, previous_root=root)
         self._started = True
         obs = self._batch.obs[0].copy()
-        episode = self._batch.episodes[0]
-        assert episode is not None
         report = self._batch.report[0].tolist()
-        terms = reward_terms(0.0, 0.0, report[kernel.REP_BIT_STUCK], episode.config.reward_weights)
-        return obs, self._info(terms, report)
+        return obs, self._info(dict.fromkeys(TERMS, 0.0), report)
 
     def step(
         self, action: Any
@@ -185,17 +216,17 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         b = self._batch
         episode = b.episodes[0]
         assert episode is not None
-        if b.status[0] != kernel.STATUS_OK:
+        if b.status[0] != STATUS_OK:
             raise RuntimeError("the episode has ended (diverged): call reset()")
         was_clipped = bool(clipped[0])
         episode.actions_clipped += was_clipped
         b.step(a)
         report = b.report[0].tolist()
         weights = episode.config.reward_weights
-        terms = reward_terms(report[0], report[1], report[2], weights)
-        terminated = report[kernel.REP_STATUS] != kernel.STATUS_OK
+        terms = reward_terms(report, weights, self.config.max_torque_nm, self._residual_scale)
+        terminated = report[REP_STATUS] != STATUS_OK
         reward = -1.0 if terminated else total_reward(terms, weights)
-        truncated = not terminated and report[kernel.REP_TIME] >= episode.duration_s
+        truncated = not terminated and report[REP_TIME] >= episode.config.duration_s
         info = self._info(terms, report)
         info["action_clipped"] = was_clipped
         if terminated:
@@ -207,20 +238,20 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         episode = b.episodes[0]
         assert episode is not None
         info: dict[str, Any] = {
-            "time_s": report[kernel.REP_TIME],
-            "bit_speed_rad_s": report[kernel.REP_BIT_SPEED],
-            "top_drive_speed_rad_s": report[kernel.REP_TOP_DRIVE_SPEED],
-            "reference_speed_rad_s": report[kernel.REP_REFERENCE],
-            "top_drive_torque_nm": report[kernel.REP_TORQUE],
-            "wob_n": report[kernel.REP_WOB],
-            "bit_stuck": report[kernel.REP_BIT_STUCK] > 0.5,
+            "time_s": report[REP_TIME],
+            "bit_speed_rad_s": report[REP_BIT_SPEED],
+            "top_drive_speed_rad_s": report[REP_TOP_DRIVE_SPEED],
+            "reference_speed_rad_s": report[REP_REFERENCE],
+            "top_drive_torque_nm": report[REP_TORQUE],
+            "wob_n": report[REP_WOB],
+            "bit_stuck": report[REP_BIT_STUCK] > 0.5,
             "reward_terms": terms,
             "action_clipped": False,
             "actions_clipped_total": episode.actions_clipped,
         }
         if b.residual:
-            info["base_torque_nm"] = report[kernel.REP_BASE_TORQUE]
+            info["base_torque_nm"] = report[REP_BASE_TORQUE]
             info["residual_torque_nm"] = float(b.command[0])
-            info["sliding_variable_rad_s"] = report[kernel.REP_SLIDING]
-            info["adaptive_gain"] = report[kernel.REP_GAIN]
+            info["sliding_variable_rad_s"] = report[REP_LAW_ERROR]
+            info["adaptive_gain"] = report[REP_LAW_GAIN]
         return info

@@ -7,6 +7,8 @@ a loaded residual agent, or :class:`ZeroAction` (the base controller alone in re
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -14,11 +16,33 @@ import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
 
-from drill_env import kernel
+from drill_env.layout import (
+    N_RECORD,
+    N_STATE,
+    REC_BASE_TORQUE,
+    REC_LAW_ERROR,
+    REC_LAW_GAIN,
+    REC_REFERENCE,
+    REC_STUCK,
+    REC_TORQUE,
+    REC_WOB,
+    REC_X0,
+    X_BIT_SPEED,
+    X_TOP_DRIVE_SPEED,
+)
 from drill_env.metrics import episode_metrics_from_samples
 from drill_env.parameters import PLANT_DT_S
 
-__all__ = ["Policy", "Trace", "ZeroAction", "episode_metrics", "rollout"]
+__all__ = [
+    "PlantSamples",
+    "Policy",
+    "Trace",
+    "ZeroAction",
+    "episode_metrics",
+    "reset_each",
+    "rollout",
+    "run_episode",
+]
 
 
 class Policy(Protocol):
@@ -46,6 +70,54 @@ class ZeroAction:
         obs = np.asarray(observation)
         shape = (1,) if obs.ndim == 1 else (obs.shape[0], 1)
         return np.zeros(shape, dtype=np.float32), state
+
+
+@dataclass(frozen=True)
+class PlantSamples:
+    """Plant-rate samples of one or many strings: the state at the start of every plant step
+    and what held over it. Arrays are ``(n,)`` (``(n, 7)`` for ``states``) for one string and
+    ``(num_envs, n, ...)`` for a vector env; read from the env's records, they are views, valid
+    until the next ``step`` (copy what you keep).
+
+    Attributes:
+        states: True state, rad/s and rad.
+        torque_nm: Applied top-drive torque, N m.
+        base_torque_nm: Base controller torque (0 without one), N m.
+        reference_rad_s: Reference bit speed, rad/s.
+        wob_n: Weight on bit, N.
+        bit_stuck: Whether the bit is stuck.
+        sliding_variable: The base controller's error signal (its sliding variable), rad/s;
+            0 when it has none.
+        adaptive_gain: The base controller's adaptive gain used at the step (0 when none).
+    """
+
+    states: npt.NDArray[np.float64]
+    torque_nm: npt.NDArray[np.float64]
+    base_torque_nm: npt.NDArray[np.float64]
+    reference_rad_s: npt.NDArray[np.float64]
+    wob_n: npt.NDArray[np.float64]
+    bit_stuck: npt.NDArray[np.bool_]
+    sliding_variable: npt.NDArray[np.float64]
+    adaptive_gain: npt.NDArray[np.float64]
+
+    @classmethod
+    def from_records(cls, records: npt.NDArray[np.float64]) -> PlantSamples:
+        """Decode kernel records ``(..., n, N_RECORD)`` (``drill_env.layout.REC_*``)."""
+        return cls(
+            states=records[..., REC_X0 : REC_X0 + N_STATE],
+            torque_nm=records[..., REC_TORQUE],
+            base_torque_nm=records[..., REC_BASE_TORQUE],
+            reference_rad_s=records[..., REC_REFERENCE],
+            wob_n=records[..., REC_WOB],
+            bit_stuck=records[..., REC_STUCK] > 0.5,
+            sliding_variable=records[..., REC_LAW_ERROR],
+            adaptive_gain=records[..., REC_LAW_GAIN],
+        )
+
+    @property
+    def bit_speed_rad_s(self) -> npt.NDArray[np.float64]:
+        """True bit speed, rad/s."""
+        return self.states[..., X_BIT_SPEED]
 
 
 @dataclass(frozen=True)
@@ -82,12 +154,12 @@ class Trace:
     @property
     def bit_speed_rad_s(self) -> npt.NDArray[np.float64]:
         """True bit speed, rad/s."""
-        return self.states[:, 6]
+        return self.states[:, X_BIT_SPEED]
 
     @property
     def top_drive_speed_rad_s(self) -> npt.NDArray[np.float64]:
         """True top-drive speed, rad/s."""
-        return self.states[:, 0]
+        return self.states[:, X_TOP_DRIVE_SPEED]
 
     @property
     def duration_s(self) -> float:
@@ -114,7 +186,7 @@ def rollout(
     Returns:
         The episode's :class:`Trace`.
     """
-    batch = env.unwrapped.batch  # type: ignore[attr-defined]
+    records_of = env.unwrapped.batch.records  # type: ignore[attr-defined]
     obs, _ = env.reset(seed=seed, options=options)
     chunks: list[npt.NDArray[np.float64]] = []
     observations = [obs]
@@ -131,7 +203,7 @@ def rollout(
         start = False
         action = np.asarray(action, dtype=np.float32).reshape(1)
         obs, reward, terminated, truncated, info = env.step(action)
-        records = batch.records[0]
+        records = records_of[0]
         if terminated:
             valid = ~np.isnan(records[:, 0])
             records = records[valid]
@@ -143,18 +215,12 @@ def rollout(
             break
         observations.append(obs)
         times.append(float(info["time_s"]))
-    rec = np.concatenate(chunks) if chunks else np.zeros((0, kernel.N_RECORD))
+    rec = np.concatenate(chunks) if chunks else np.zeros((0, N_RECORD))
     n = rec.shape[0]
+    samples = PlantSamples.from_records(rec)
     return Trace(
         time_s=np.arange(n, dtype=np.float64) * PLANT_DT_S,
-        states=rec[:, kernel.REC_X0 : kernel.REC_X0 + 7],
-        torque_nm=rec[:, kernel.REC_TORQUE],
-        base_torque_nm=rec[:, kernel.REC_BASE_TORQUE],
-        reference_rad_s=rec[:, kernel.REC_REFERENCE],
-        wob_n=rec[:, kernel.REC_WOB],
-        bit_stuck=rec[:, kernel.REC_STUCK] > 0.5,
-        sliding_variable=rec[:, kernel.REC_SLIDING],
-        adaptive_gain=rec[:, kernel.REC_GAIN],
+        **{f.name: getattr(samples, f.name) for f in dataclasses.fields(samples)},
         decision_time_s=np.array(times[: len(actions)]),
         observations=np.array(observations[: len(actions)], dtype=np.float32),
         actions=np.array(actions, dtype=np.float32),
@@ -175,3 +241,39 @@ def episode_metrics(trace: Trace) -> dict[str, Any]:
     )
     metrics["diverged"] = trace.termination_reason == "diverged"
     return metrics
+
+
+def run_episode(
+    env_kwargs: dict[str, Any],
+    policy: Policy,
+    seed: int | None,
+    options: dict[str, Any] | None = None,
+) -> Trace:
+    """One episode of ``gym.make("DrillString-v0", **env_kwargs)`` under ``policy`` (the env
+    is made, rolled out and closed)."""
+    env = gym.make("DrillString-v0", **env_kwargs)
+    try:
+        return rollout(env, policy, seed, options)
+    finally:
+        env.close()
+
+
+def reset_each(
+    venv: Any,
+    seeds: Sequence[int],
+    options: Sequence[dict[str, Any]],
+) -> npt.NDArray[np.float32]:
+    """Reset every string ``i`` of the vector env ``venv`` with its own seed and reset options
+    (Gymnasium's partial reset, one string at a time); returns the observations."""
+    n = venv.num_envs
+    if len(seeds) != n or len(options) != n:
+        raise ValueError(
+            f"reset_each needs {n} seeds and {n} option dicts, got {len(seeds)} and {len(options)}"
+        )
+    obs, _ = venv.reset(seed=list(seeds))
+    for i, opts in enumerate(options):
+        if opts:
+            mask = np.zeros(n, dtype=bool)
+            mask[i] = True
+            obs, _ = venv.reset(seed=list(seeds), options={**opts, "reset_mask": mask})
+    return np.asarray(obs)

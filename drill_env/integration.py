@@ -24,6 +24,7 @@ from numba import njit
 
 from drill_env.dynamics import derivative
 from drill_env.friction import STUCK, string_torque_on_bit
+from drill_env.layout import P_C_BI, P_C_BIT, P_DW, P_K_BI
 from drill_env.parameters import PLANT_DT_S, DrillStringParameters, plant_parameter_vector
 
 __all__ = ["integrate_constant_torque", "plant_step", "rk4"]
@@ -66,7 +67,7 @@ def rk4(x, u: float, p, t_a: float, t_0: float, mode: int, h: float):
 
 @njit(cache=True)
 def _torque_on_bit(x, p):
-    return string_torque_on_bit(x[4], x[5], x[6], p[7], p[11], p[8])
+    return string_torque_on_bit(x[4], x[5], x[6], p[P_C_BI], p[P_K_BI], p[P_C_BIT])
 
 
 @njit(cache=True)
@@ -88,7 +89,7 @@ def _slip_step(x, mode: int, u: float, p, t_a: float, t_0: float, h: float):
     """Advance a slipping bit by ``h``, stopping it where its speed crosses zero."""
     xn = rk4(x, u, p, t_a, t_0, mode, h)
     if mode * xn[6] > 0.0:
-        if abs(xn[6]) < p[16] and abs(_torque_on_bit(xn, p)) <= t_a:
+        if abs(xn[6]) < p[P_DW] and abs(_torque_on_bit(xn, p)) <= t_a:
             return _with_bit_at_rest(xn), STUCK  # Karnopp capture inside the stick band
         return xn, mode
     # The speed crossed zero inside the step: find the instant by regula falsi on theta.

@@ -5,83 +5,184 @@ Per plant step ``j`` of string ``i`` (time ``t_j = step_index * dt``):
 
 1. WOB and reference speed are read from piecewise-linear knot tables (a repeated knot time
    makes a step change);
-2. the measured state is the true state plus ``noise_std * noise[i, j]`` on the four speeds;
-3. the base torque ``u_base`` comes from the compiled law ``law`` (0 N m for ``LAW_NONE``);
+2. the measurement vector (``drill_env.layout.M_*``) is the true state plus
+   ``noise_std * noise[i, j]`` on the four speeds;
+3. the base torque ``u_base`` comes from the compiled law at ``law_address``
+   (:mod:`drill_env.control`), or from ``base_torque[i]`` when there is none (0 N m without a
+   base controller; a Python controller's torque on the slow path);
 4. the applied torque is ``clip(u_base + command[i], u_min, u_max)`` held over the step;
-5. the pre-step state, torques, reference, WOB, stuck flag and the law's sliding variable and
-   adaptive gain are written to ``records``, the reward terms and end state to ``report``;
+5. the pre-step state, torques, reference, WOB, stuck flag and the law's error signal and
+   adaptive gain are written to ``records``, the reward sums and end state to ``report``;
 6. :func:`drill_env.integration.plant_step` advances the state.
 
-A state that is not finite or leaves the physical bounds (speeds beyond ``MAX_SPEED_RAD_S``,
-twists beyond ``MAX_TWIST_RAD``) is not accepted: the string keeps its last good state, its
-``status`` becomes ``STATUS_DIVERGED`` and it is not advanced again.
+A state that is not finite or leaves the physical bounds (``drill_env.limits``) is not
+accepted: the string keeps its last good state, its status becomes ``STATUS_DIVERGED`` and it
+is not advanced again. At the end of the call the observation of every string is written from
+its source vector (``drill_env.layout.SRC_*``) through the observation's source indices and
+scales.
+
+The kernel's inputs travel as two named tuples, :class:`BatchArrays` (the per-string arrays,
+updated in place) and :class:`LoopSettings` (what the batch shares).
 """
 
 from __future__ import annotations
 
 import math
-from typing import Final
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
+import numba
+import numpy as np
+import numpy.typing as npt
 from numba import njit, prange
 
-from drill_env.control_laws import control_torque
+from drill_env.control import call_law
 from drill_env.friction import STUCK
 from drill_env.integration import plant_step
-from drill_env.observation import OBS_BOUND
+from drill_env.layout import (
+    M_STATE,
+    N_RECORD,
+    N_STATE,
+    OBS_BOUND,
+    P_MU_0,
+    P_MU_A,
+    P_R,
+    REC_BASE_TORQUE,
+    REC_LAW_ERROR,
+    REC_LAW_GAIN,
+    REC_REFERENCE,
+    REC_STUCK,
+    REC_TORQUE,
+    REC_WOB,
+    REC_X0,
+    REP_BASE_TORQUE,
+    REP_BIT_SPEED,
+    REP_BIT_STUCK,
+    REP_LAW_ERROR,
+    REP_LAW_GAIN,
+    REP_REFERENCE,
+    REP_RESIDUAL_SQUARED,
+    REP_STATUS,
+    REP_STEPS,
+    REP_STUCK_STEPS,
+    REP_TIME,
+    REP_TOP_DRIVE_SPEED,
+    REP_TORQUE,
+    REP_TORQUE_SQUARED,
+    REP_TRACKING_SUM,
+    REP_VARIATION,
+    REP_WOB,
+    SRC_BASE_TORQUE,
+    SRC_LAST_TORQUE,
+    SRC_LAW_ERROR,
+    SRC_MEASUREMENT,
+    SRC_REFERENCE,
+    STATUS_DIVERGED,
+    STATUS_OK,
+    X_BIT_SPEED,
+    X_TOP_DRIVE_SPEED,
+)
+from drill_env.limits import MAX_SPEED_RAD_S, MAX_TWIST_RAD
+from drill_env.rewards import tracking_error
 from drill_env.scenarios import profile_value
 
 __all__ = [
-    "MAX_SPEED_RAD_S",
-    "MAX_TWIST_RAD",
-    "N_RECORD",
-    "STATUS_DIVERGED",
-    "STATUS_OK",
+    "BatchArrays",
+    "LoopSettings",
     "advance_batch",
     "advance_batch_parallel",
+    "fast_entry",
+    "fill_sources",
+    "write_observation",
+    "write_report",
 ]
 
-MAX_SPEED_RAD_S: Final = 1000.0
-"""Physical bound on every speed, rad/s; beyond it the run counts as diverged."""
-MAX_TWIST_RAD: Final = 1000.0
-"""Physical bound on every twist, rad; beyond it the run counts as diverged."""
 
-STATUS_OK: Final = 0
-STATUS_DIVERGED: Final = 1
-STATUS_PAUSED: Final = 2  # skipped by the kernel (a string that is being reset)
+class BatchArrays(NamedTuple):
+    """The per-string arrays of a batch of N strings (K profile knots, B noise rows); the
+    kernel updates them in place.
 
-# Columns of the per-plant-step records.
-REC_X0: Final = 0  # columns 0..6: state at the start of the step
-REC_TORQUE: Final = 7  # applied top-drive torque, N m
-REC_REFERENCE: Final = 8  # reference bit speed, rad/s
-REC_BASE_TORQUE: Final = 9  # base controller torque before the command, N m
-REC_STUCK: Final = 10  # 1.0 when the bit is stuck at the start of the step
-REC_WOB: Final = 11  # weight on bit, N
-REC_SLIDING: Final = 12  # the law's sliding variable at this step (or 0), rad/s
-REC_GAIN: Final = 13  # the law's adaptive gain used at this step (or 0)
-N_RECORD: Final = 14
+    Attributes:
+        x: States, (N, 7) float64, rad/s and rad.
+        mode: Slip modes, (N,) int64 (0 stuck, +1/-1 slipping).
+        step_index: Plant steps taken so far, (N,) int64; time is ``step_index * dt``.
+        status: (N,) int64 ``STATUS_*``; strings not OK at the start are not advanced
+            (records NaN, reward sums 0).
+        plant: Plant parameter vectors, (N, N_PLANT_PARAMS).
+        wob_t, wob_v, wob_n: WOB knot times (s), values (N) and counts, (N, K), (N, K), (N,).
+        ref_t, ref_v, ref_n: Reference-speed knots (s, rad/s), same shapes.
+        noise: Standard normal draws, (N, B, 4), B > noise_pos + n_sub: row noise_pos + j is
+            the speed noise at step j, row noise_pos + n_sub that of the final measurement
+            (which is also the next call's first step: the same instant).
+        noise_pos: (N,) int64, the row of the current measurement; advanced by n_sub.
+        noise_std: Measurement noise on the speeds, (N,), rad/s.
+        law_params, law_state: (N, P) and (N, S) vectors of the compiled law.
+        measurement: Scratch, (N, N_MEASUREMENT): the measurement vector the law reads.
+        command: Torque added to the base torque (the whole torque without one), (N,), N m.
+        base_torque: The base torque when there is no compiled law, (N,), N m.
+        last_u: Torque applied in the step before this call, (N,), N m; updated.
+        records: Output, (N, n_sub, N_RECORD): the pre-step record of every plant step (NaN
+            for steps not taken).
+        report: Output, (N, N_REPORT): the reward sums of this call and the end state.
+        sources: Scratch, (N, N_SOURCES): what the observation entries show.
+        obs: Output, (N, obs_size) float32: the observation at the end.
+    """
 
-# Columns of the per-string report written at the end of every call (one .tolist() gives the
-# env everything it needs for reward and info).
-REP_TRACKING: Final = 0  # mean of min(|V_ref - x7| / max(V_ref, 1 rad/s), 1) over the steps
-REP_VARIATION: Final = 1  # total variation of the applied torque over the steps, N m
-REP_STUCK_FRACTION: Final = 2  # share of the steps with the bit stuck
-REP_TIME: Final = 3  # time at the end, s
-REP_BIT_SPEED: Final = 4  # true bit speed, rad/s
-REP_TOP_DRIVE_SPEED: Final = 5  # true top-drive speed, rad/s
-REP_REFERENCE: Final = 6  # reference bit speed at the end, rad/s
-REP_TORQUE: Final = 7  # last applied torque, N m
-REP_WOB: Final = 8  # weight on bit of the last step, N
-REP_BIT_STUCK: Final = 9  # 1.0 when the bit is stuck at the end
-REP_BASE_TORQUE: Final = 10  # last base-controller torque, N m
-REP_SLIDING: Final = 11  # the law's sliding variable, rad/s
-REP_GAIN: Final = 12  # the law's adaptive gain
-REP_STATUS: Final = 13  # STATUS_* as a float
-N_REPORT: Final = 14
+    x: npt.NDArray[np.float64]
+    mode: npt.NDArray[np.int64]
+    step_index: npt.NDArray[np.int64]
+    status: npt.NDArray[np.int64]
+    plant: npt.NDArray[np.float64]
+    wob_t: npt.NDArray[np.float64]
+    wob_v: npt.NDArray[np.float64]
+    wob_n: npt.NDArray[np.int64]
+    ref_t: npt.NDArray[np.float64]
+    ref_v: npt.NDArray[np.float64]
+    ref_n: npt.NDArray[np.int64]
+    noise: npt.NDArray[np.float64]
+    noise_pos: npt.NDArray[np.int64]
+    noise_std: npt.NDArray[np.float64]
+    law_params: npt.NDArray[np.float64]
+    law_state: npt.NDArray[np.float64]
+    measurement: npt.NDArray[np.float64]
+    command: npt.NDArray[np.float64]
+    base_torque: npt.NDArray[np.float64]
+    last_u: npt.NDArray[np.float64]
+    records: npt.NDArray[np.float64]
+    report: npt.NDArray[np.float64]
+    sources: npt.NDArray[np.float64]
+    obs: npt.NDArray[np.float32]
+
+
+class LoopSettings(NamedTuple):
+    """What every string of the batch shares.
+
+    Attributes:
+        law_address: Address of the compiled law (:class:`drill_env.control.CompiledLaw`); 0
+            for none.
+        error_slot: State index of the law's error signal, -1 for none.
+        gain_slot: State index of the law's adaptive gain, -1 for none.
+        u_min, u_max: Top-drive torque limits, N m.
+        n_sub: Plant steps per call.
+        dt: Plant step, s.
+        obs_source: Source-vector entry of each observation entry, (obs_size,) int64.
+        obs_scale: Factor of each observation entry, (obs_size,).
+    """
+
+    law_address: int
+    error_slot: int
+    gain_slot: int
+    u_min: float
+    u_max: float
+    n_sub: int
+    dt: float
+    obs_source: npt.NDArray[np.int64]
+    obs_scale: npt.NDArray[np.float64]
 
 
 @njit(cache=True)
 def _in_bounds(x) -> bool:
-    for k in range(7):
+    for k in range(N_STATE):
         v = x[k]
         if not math.isfinite(v):
             return False
@@ -92,129 +193,147 @@ def _in_bounds(x) -> bool:
 
 
 @njit(cache=True)
-def _measure(x, noise_std: float, noise_row):
-    return (
-        x[0] + noise_std * noise_row[0],
-        x[1],
-        x[2] + noise_std * noise_row[1],
-        x[3],
-        x[4] + noise_std * noise_row[2],
-        x[5],
-        x[6] + noise_std * noise_row[3],
-    )
+def _measure(out, x, noise_std: float, noise_row) -> None:
+    """The measurement vector: speeds with their noise, twists exact."""
+    out[M_STATE] = x[0] + noise_std * noise_row[0]
+    out[M_STATE + 1] = x[1]
+    out[M_STATE + 2] = x[2] + noise_std * noise_row[1]
+    out[M_STATE + 3] = x[3]
+    out[M_STATE + 4] = x[4] + noise_std * noise_row[2]
+    out[M_STATE + 5] = x[5]
+    out[M_STATE + 6] = x[6] + noise_std * noise_row[3]
 
 
 @njit(cache=True)
-def _advance_one(
-    i, x, mode, step_index, status, plant, wob_t, wob_v, wob_n, ref_t, ref_v, ref_n,
-    noise, noise_pos, noise_std, law, law_params, law_state, command, u_min, u_max, n_sub, dt,
-    records, last_u, report, obs_scale, obs_out,
-):  # fmt: skip
-    p = plant[i]
-    xi = (x[i, 0], x[i, 1], x[i, 2], x[i, 3], x[i, 4], x[i, 5], x[i, 6])
-    mi = mode[i]
-    lp = law_params[i]
-    ls = law_state[i]
-    mu_a_r = p[13] * p[12]
-    mu_0_r = p[14] * p[12]
-    k = step_index[i]
-    row = noise_pos[i]
-    active = status[i] == STATUS_OK
-    u_prev = last_u[i]
-    u_base_last = report[i, REP_BASE_TORQUE]
-    wob = report[i, REP_WOB]
+def _slot(ls, slot: int) -> float:
+    return ls[slot] if slot >= 0 else 0.0
+
+
+@njit(cache=True)
+def _advance_one(i, b, s):
+    p = b.plant[i]
+    xs = b.x[i]
+    xi = (xs[0], xs[1], xs[2], xs[3], xs[4], xs[5], xs[6])
+    mi = b.mode[i]
+    lp = b.law_params[i]
+    ls = b.law_state[i]
+    meas = b.measurement[i]
+    rep = b.report[i]
+    mu_a_r = p[P_MU_A] * p[P_R]
+    mu_0_r = p[P_MU_0] * p[P_R]
+    k = b.step_index[i]
+    row = b.noise_pos[i]
+    active = b.status[i] == STATUS_OK
+    command = b.command[i]
+    u_prev = b.last_u[i]
+    u_base_last = rep[REP_BASE_TORQUE]
+    wob = rep[REP_WOB]
     tracking = 0.0
     variation = 0.0
+    torque_squared = 0.0
+    residual_squared = 0.0
     stuck = 0.0
     n_done = 0
-    for j in range(n_sub):
-        if status[i] != STATUS_OK:
+    for j in range(s.n_sub):
+        if b.status[i] != STATUS_OK:
             for c in range(N_RECORD):
-                records[i, j, c] = math.nan
+                b.records[i, j, c] = math.nan
             continue
-        t = k * dt
-        wob = profile_value(wob_t[i], wob_v[i], wob_n[i], t)
-        ref = profile_value(ref_t[i], ref_v[i], ref_n[i], t)
-        m = _measure(xi, noise_std[i], noise[i, row + j])
-        gain = ls[2]  # the adaptive gain this step's torque uses (the law advances it)
-        u_base = control_torque(law, lp, ls, m, ref, dt)
-        u = min(max(u_base + command[i], u_min), u_max)
-        for c in range(7):
-            records[i, j, REC_X0 + c] = xi[c]
-        records[i, j, REC_TORQUE] = u
-        records[i, j, REC_REFERENCE] = ref
-        records[i, j, REC_BASE_TORQUE] = u_base
-        records[i, j, REC_STUCK] = 1.0 if mi == STUCK else 0.0
-        records[i, j, REC_WOB] = wob
-        records[i, j, REC_SLIDING] = ls[3]
-        records[i, j, REC_GAIN] = gain
-        tracking += min(abs(ref - xi[6]) / max(ref, 1.0), 1.0)
+        t = k * s.dt
+        wob = profile_value(b.wob_t[i], b.wob_v[i], b.wob_n[i], t)
+        ref = profile_value(b.ref_t[i], b.ref_v[i], b.ref_n[i], t)
+        _measure(meas, xi, b.noise_std[i], b.noise[i, row + j])
+        gain = _slot(ls, s.gain_slot)  # the gain this step's torque uses (the law advances it)
+        u_base: float
+        if s.law_address != 0:
+            u_base = call_law(s.law_address, lp, ls, meas, ref, s.dt)  # type: ignore[call-arg]
+        else:
+            u_base = b.base_torque[i]
+        u = min(max(u_base + command, s.u_min), s.u_max)
+        rec = b.records[i, j]
+        for c in range(N_STATE):
+            rec[REC_X0 + c] = xi[c]
+        rec[REC_TORQUE] = u
+        rec[REC_REFERENCE] = ref
+        rec[REC_BASE_TORQUE] = u_base
+        rec[REC_STUCK] = 1.0 if mi == STUCK else 0.0
+        rec[REC_WOB] = wob
+        rec[REC_LAW_ERROR] = _slot(ls, s.error_slot)
+        rec[REC_LAW_GAIN] = gain
+        tracking += tracking_error(ref, xi[X_BIT_SPEED])
         variation += abs(u - u_prev)
+        torque_squared += u * u
+        residual_squared += (u - u_base) * (u - u_base)
         u_prev = u
         u_base_last = u_base
         if mi == STUCK:
             stuck += 1.0
         n_done += 1
-        xn, mn = plant_step(xi, mi, u, p, mu_a_r * wob, mu_0_r * wob, dt)
+        xn, mn = plant_step(xi, mi, u, p, mu_a_r * wob, mu_0_r * wob, s.dt)
         if _in_bounds(xn) and math.isfinite(u):
             xi, mi = xn, mn
             k += 1
         else:
-            status[i] = STATUS_DIVERGED
+            b.status[i] = STATUS_DIVERGED
+    rep[REP_TRACKING_SUM] = tracking
+    rep[REP_VARIATION] = variation
+    rep[REP_STUCK_STEPS] = stuck
+    rep[REP_STEPS] = n_done
+    rep[REP_TORQUE_SQUARED] = torque_squared
+    rep[REP_RESIDUAL_SQUARED] = residual_squared
     if not active:
-        report[i, REP_TRACKING] = 0.0
-        report[i, REP_VARIATION] = 0.0
-        report[i, REP_STUCK_FRACTION] = 0.0
         return
-    for c in range(7):
-        x[i, c] = xi[c]
-    mode[i] = mi
-    step_index[i] = k
-    last_u[i] = u_prev
-    row += n_sub
-    noise_pos[i] = row
-    ref_end = profile_value(ref_t[i], ref_v[i], ref_n[i], k * dt)
-    m = _measure(xi, noise_std[i], noise[i, row])
-    write_observation(obs_out[i], m, ref_end, u_prev, u_base_last, ls[3], obs_scale)
-    report[i, REP_TRACKING] = tracking / max(n_done, 1)
-    report[i, REP_VARIATION] = variation
-    report[i, REP_STUCK_FRACTION] = stuck / max(n_done, 1)
-    write_report(report[i], xi, mi, k * dt, ref_end, u_prev, wob, u_base_last, ls, status[i])
+    for c in range(N_STATE):
+        xs[c] = xi[c]
+    b.mode[i] = mi
+    b.step_index[i] = k
+    b.last_u[i] = u_prev
+    row += s.n_sub
+    b.noise_pos[i] = row
+    ref_end = profile_value(b.ref_t[i], b.ref_v[i], b.ref_n[i], k * s.dt)
+    _measure(meas, xi, b.noise_std[i], b.noise[i, row])
+    error = _slot(ls, s.error_slot)
+    fill_sources(b.sources[i], meas, ref_end, u_prev, u_base_last, error)
+    write_observation(b.obs[i], b.sources[i], s.obs_source, s.obs_scale)
+    write_report(
+        rep, xi, mi, k * s.dt, ref_end, u_prev, wob, u_base_last, error,
+        _slot(ls, s.gain_slot), b.status[i],
+    )  # fmt: skip
 
 
 @njit(cache=True)
-def write_report(out, xi, mi, t, ref, u_last, wob, u_base, ls, state_status):
-    """Fill the state part of one report row (everything but the reward terms)."""
+def write_report(out, xi, mi, t, ref, u_last, wob, u_base, error, gain, state_status):
+    """Fill the state part of one report row (everything but the reward sums)."""
     out[REP_TIME] = t
-    out[REP_BIT_SPEED] = xi[6]
-    out[REP_TOP_DRIVE_SPEED] = xi[0]
+    out[REP_BIT_SPEED] = xi[X_BIT_SPEED]
+    out[REP_TOP_DRIVE_SPEED] = xi[X_TOP_DRIVE_SPEED]
     out[REP_REFERENCE] = ref
     out[REP_TORQUE] = u_last
     out[REP_WOB] = wob
     out[REP_BIT_STUCK] = 1.0 if mi == STUCK else 0.0
     out[REP_BASE_TORQUE] = u_base
-    out[REP_SLIDING] = ls[3]
-    out[REP_GAIN] = ls[2]
+    out[REP_LAW_ERROR] = error
+    out[REP_LAW_GAIN] = gain
     out[REP_STATUS] = state_status
 
 
 @njit(cache=True)
-def write_observation(out, m, ref: float, u_last: float, u_base: float, sliding: float, scale):
-    """Fill one observation row: scaled measured state, reference, last torque and (when the
-    row is 11 long) base torque and sliding variable; NaN becomes 0, all clipped to the bound."""
-    n = out.shape[0]
-    for c in range(n):
-        if c < 7:
-            v = m[c]
-        elif c == 7:
-            v = ref
-        elif c == 8:
-            v = u_last
-        elif c == 9:
-            v = u_base
-        else:
-            v = sliding
-        v *= scale[c]
+def fill_sources(out, meas, ref: float, u_last: float, u_base: float, error: float) -> None:
+    """Fill one source vector (``drill_env.layout.SRC_*``)."""
+    for c in range(N_STATE):
+        out[SRC_MEASUREMENT + c] = meas[M_STATE + c]
+    out[SRC_REFERENCE] = ref
+    out[SRC_LAST_TORQUE] = u_last
+    out[SRC_BASE_TORQUE] = u_base
+    out[SRC_LAW_ERROR] = error
+
+
+@njit(cache=True)
+def write_observation(out, sources, source_index, scale) -> None:
+    """Fill one observation row: entry ``c`` is ``sources[source_index[c]] * scale[c]``; NaN
+    becomes 0 and everything is clipped to ``+-OBS_BOUND``."""
+    for c in range(out.shape[0]):
+        v = sources[source_index[c]] * scale[c]
         if not math.isfinite(v):
             v = 0.0 if math.isnan(v) else (OBS_BOUND if v > 0 else -OBS_BOUND)
         out[c] = min(max(v, -OBS_BOUND), OBS_BOUND)
@@ -228,60 +347,26 @@ def _check_noise_room(noise, noise_pos, n_sub):
 
 
 @njit(cache=True)
-def advance_batch(
-    x, mode, step_index, status, plant, wob_t, wob_v, wob_n, ref_t, ref_v, ref_n,
-    noise, noise_pos, noise_std, law, law_params, law_state, command, u_min, u_max, n_sub, dt,
-    records, last_u, report, obs_scale, obs_out,
-):  # fmt: skip
-    """Advance every string of the batch by ``n_sub`` plant steps of ``dt`` seconds.
-
-    Args (N strings, K knots, P/S law vector lengths; arrays are updated in place):
-        x: States, (N, 7) float64, rad/s and rad.
-        mode: Slip modes, (N,) int64 (0 stuck, +1/-1 slipping).
-        step_index: Plant steps taken so far, (N,) int64; time is ``step_index * dt``.
-        status: (N,) int64, ``STATUS_OK``, ``STATUS_DIVERGED`` or ``STATUS_PAUSED``; strings
-            not OK at the start are not advanced (records NaN, reward terms 0).
-        plant: Plant parameter vectors, (N, N_PLANT_PARAMS).
-        wob_t, wob_v, wob_n: WOB knot times (s), values (N) and counts, (N, K), (N, K), (N,).
-        ref_t, ref_v, ref_n: Reference-speed knots (s, rad/s), same shapes.
-        noise: Standard normal draws, (N, B, 4), B > noise_pos + n_sub: row noise_pos + j is
-            the speed noise at step j, row noise_pos + n_sub that of the final measurement
-            (which is also the next call's first step: the same instant).
-        noise_pos: (N,) int64, the row of the current measurement; advanced by n_sub.
-        noise_std: Measurement noise on speeds, (N,), rad/s.
-        law: Compiled law id (shared by the batch).
-        law_params, law_state: (N, P) and (N, S) law vectors.
-        command: Torque added to the base torque (the whole torque without a law), (N,), N m.
-        u_min, u_max: Top-drive torque limits, N m.
-        n_sub: Plant steps to take.
-        dt: Plant step, s.
-        records: Output, (N, n_sub, N_RECORD): the pre-step record of every plant step (NaN
-            for steps not taken).
-        last_u: Torque applied in the step before this call, (N,), N m; updated.
-        report: (N, N_REPORT): the reward terms of this call and the end state (``REP_*``).
-        obs_scale: Observation scales, (obs_size,) (see :mod:`drill_env.observation`).
-        obs_out: Output, (N, obs_size) float32: the observation at the end.
-    """
-    _check_noise_room(noise, noise_pos, n_sub)
-    for i in range(x.shape[0]):
-        _advance_one(
-            i, x, mode, step_index, status, plant, wob_t, wob_v, wob_n, ref_t, ref_v, ref_n,
-            noise, noise_pos, noise_std, law, law_params, law_state, command, u_min, u_max,
-            n_sub, dt, records, last_u, report, obs_scale, obs_out,
-        )  # fmt: skip
+def advance_batch(b, s):
+    """Advance every string of the batch ``b`` (:class:`BatchArrays`) by ``s.n_sub`` plant steps
+    of ``s.dt`` seconds under the settings ``s`` (:class:`LoopSettings`)."""
+    _check_noise_room(b.noise, b.noise_pos, s.n_sub)
+    for i in range(b.x.shape[0]):
+        _advance_one(i, b, s)
 
 
 @njit(cache=True, parallel=True)
-def advance_batch_parallel(
-    x, mode, step_index, status, plant, wob_t, wob_v, wob_n, ref_t, ref_v, ref_n,
-    noise, noise_pos, noise_std, law, law_params, law_state, command, u_min, u_max, n_sub, dt,
-    records, last_u, report, obs_scale, obs_out,
-):  # fmt: skip
+def advance_batch_parallel(b, s):
     """:func:`advance_batch` with the strings spread over numba's threads (large batches)."""
-    _check_noise_room(noise, noise_pos, n_sub)
-    for i in prange(x.shape[0]):
-        _advance_one(
-            i, x, mode, step_index, status, plant, wob_t, wob_v, wob_n, ref_t, ref_v, ref_n,
-            noise, noise_pos, noise_std, law, law_params, law_state, command, u_min, u_max,
-            n_sub, dt, records, last_u, report, obs_scale, obs_out,
-        )  # fmt: skip
+    _check_noise_room(b.noise, b.noise_pos, s.n_sub)
+    for i in prange(b.x.shape[0]):
+        _advance_one(i, b, s)
+
+
+def fast_entry(dispatcher: Any, *args: Any) -> Callable[..., None]:
+    """The compiled entry point of ``dispatcher`` for the types of ``args`` (compiled, or loaded
+    from numba's cache, now), which skips numba's per-call type dispatch (about 1 us for the
+    kernel's arguments). Every later call must pass arguments of the same types."""
+    signature = tuple(numba.typeof(a) for a in args)
+    entry = dispatcher.compile(signature)
+    return entry if callable(entry) else dispatcher

@@ -12,7 +12,13 @@ from typing import Any, Final
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["METRIC_KEYS", "SEVERITY_WINDOW_S", "episode_metrics_from_samples"]
+__all__ = [
+    "METRIC_KEYS",
+    "SEVERITY_WINDOW_S",
+    "WindowStatistics",
+    "episode_metrics_from_samples",
+    "stick_slip_severity",
+]
 
 SEVERITY_WINDOW_S: Final = 20.0
 """Stick-slip severity is measured over the last this many seconds, s."""
@@ -30,6 +36,52 @@ METRIC_KEYS: Final = (
     "stick_slip_severity",
     "stuck_fraction",
 )
+
+
+def stick_slip_severity(high: Any, low: Any, mean: Any) -> Any:
+    """``(max - min) / (2 mean)`` of the bit speed over a window, from its maximum, minimum and
+    mean (rad/s); 1.0 where the bit does not turn on average (``mean <= 0``). Floats or arrays
+    (elementwise)."""
+    if isinstance(mean, np.ndarray):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(mean > 0, (high - low) / (2.0 * mean), 1.0)
+    return float((high - low) / (2 * mean)) if mean > 0 else 1.0
+
+
+class WindowStatistics:
+    """Running maximum, minimum and sum of the bit speed and the count of stuck samples of
+    ``num`` strings over a window, fed chunk by chunk, so that a long run's stick-slip severity
+    and stuck fraction need no memory of its samples.
+
+    Args:
+        num: Number of strings.
+    """
+
+    def __init__(self, num: int) -> None:
+        self.high = np.full(num, -np.inf)
+        self.low = np.full(num, np.inf)
+        self.total = np.zeros(num)
+        self.stuck = np.zeros(num)
+        self.samples = 0
+
+    def add(self, bit_speed_rad_s: npt.NDArray[np.float64], bit_stuck: npt.ArrayLike) -> None:
+        """Take in a chunk: bit speed (num, n) in rad/s and stuck flags (num, n)."""
+        np.maximum(self.high, bit_speed_rad_s.max(axis=1), out=self.high)
+        np.minimum(self.low, bit_speed_rad_s.min(axis=1), out=self.low)
+        self.total += bit_speed_rad_s.sum(axis=1)
+        self.stuck += np.asarray(bit_stuck).sum(axis=1)
+        self.samples += bit_speed_rad_s.shape[1]
+
+    def severity(self) -> npt.NDArray[np.float64]:
+        """Stick-slip severity of each string over the samples taken in, (num,)."""
+        result: npt.NDArray[np.float64] = stick_slip_severity(
+            self.high, self.low, self.total / self.samples
+        )
+        return result
+
+    def stuck_fraction(self) -> npt.NDArray[np.float64]:
+        """Share of the samples with the bit stuck, (num,)."""
+        return self.stuck / self.samples
 
 
 def episode_metrics_from_samples(
@@ -79,8 +131,7 @@ def episode_metrics_from_samples(
     else:
         settling = float((np.flatnonzero(outside)[-1] + 1) * dt_s)
     window = w[max(0, n - round(SEVERITY_WINDOW_S / dt_s)) :]
-    mean_w = float(window.mean())
-    severity = float((window.max() - window.min()) / (2 * mean_w)) if mean_w > 0 else 1.0
+    severity = stick_slip_severity(float(window.max()), float(window.min()), float(window.mean()))
     overshoot = (
         (float(w.max()) - float(final_ref)) / float(final_ref) * 100 if final_ref > 0 else 0.0
     )

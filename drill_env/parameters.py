@@ -8,12 +8,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import numbers
 from dataclasses import dataclass
 from typing import Final
 
 import numpy as np
 import numpy.typing as npt
+
+from drill_env.layout import N_PLANT_PARAMS
+from drill_env.validation import check_finite_fields, require
 
 __all__ = [
     "PLANT_DT_S",
@@ -71,20 +73,12 @@ class DrillStringParameters:
     Dw: float = 1e-3
 
     def __post_init__(self) -> None:
-        for field in dataclasses.fields(self):
-            value = getattr(self, field.name)
-            if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-                raise TypeError(
-                    f"{field.name} must be a real number, got {value!r} ({type(value).__name__})"
-                )
-            if not math.isfinite(value):
-                raise ValueError(f"{field.name} must be finite, got {value!r}")
-            object.__setattr__(self, field.name, float(value))
+        check_finite_fields(self)
         for name in ("J_dt", "J_pi", "J_co", "J_bi", "k_pi", "k_co", "k_bi", "R", "Dw"):
-            _require(name, getattr(self, name), "> 0", getattr(self, name) > 0)
+            require(name, getattr(self, name), "> 0", getattr(self, name) > 0)
         for name in ("c_dt", "c_pi", "c_co", "c_bi", "c_bit", "xi"):
-            _require(name, getattr(self, name), ">= 0", getattr(self, name) >= 0)
-        _require("mu_0", self.mu_0, f"0 < mu_0 <= mu_a = {self.mu_a}", 0 < self.mu_0 <= self.mu_a)
+            require(name, getattr(self, name), ">= 0", getattr(self, name) >= 0)
+        require("mu_0", self.mu_0, f"0 < mu_0 <= mu_a = {self.mu_a}", 0 < self.mu_0 <= self.mu_a)
 
     def static_torque_nm(self, wob_n: float) -> float:
         """Maximum static bit torque ``T_a = mu_a * WOB * R``, N m."""
@@ -104,11 +98,6 @@ class DrillStringParameters:
         t_0 = self.sliding_torque_nm(wob_n)
         v = bit_speed_rad_s
         return (self.c_dt + self.c_bit) * v + t_0 + (t_a - t_0) * math.exp(-self.xi * abs(v))
-
-
-def _require(name: str, value: float, allowed: str, ok: bool) -> None:
-    if not ok:
-        raise ValueError(f"{name} = {value!r} is out of range: allowed {allowed}")
 
 
 PRESETS: Final[dict[str, DrillStringParameters]] = {
@@ -155,18 +144,12 @@ def scale_uncertain(
     )
 
 
-# Layout of the plant parameter vector the compiled kernels read (index constants).
-P_J_DT, P_J_PI, P_J_CO, P_J_BI = 0, 1, 2, 3
-P_C_DT, P_C_PI, P_C_CO, P_C_BI, P_C_BIT = 4, 5, 6, 7, 8
-P_K_PI, P_K_CO, P_K_BI = 9, 10, 11
-P_R, P_MU_A, P_MU_0, P_XI, P_DW = 12, 13, 14, 15, 16
-P_INV_J_DT, P_INV_J_PI, P_INV_J_CO, P_INV_J_BI = 17, 18, 19, 20  # reciprocal inertias
-N_PLANT_PARAMS: Final = 21
-
-
 def plant_parameter_vector(params: DrillStringParameters) -> npt.NDArray[np.float64]:
-    """Pack ``params`` into the float64 vector the kernels read: the 17 fields in order, then
-    the reciprocals of the four inertias (1/(kg m^2)), so that the hot loop multiplies."""
+    """Pack ``params`` into the float64 vector the kernels read (``drill_env.layout.P_*``): the
+    17 fields in order, then the reciprocals of the four inertias (1/(kg m^2)), so that the hot
+    loop multiplies."""
     fields = [float(getattr(params, f.name)) for f in dataclasses.fields(params)]
     inverse = [1.0 / params.J_dt, 1.0 / params.J_pi, 1.0 / params.J_co, 1.0 / params.J_bi]
-    return np.array(fields + inverse, dtype=np.float64)
+    vector = np.array(fields + inverse, dtype=np.float64)
+    assert vector.shape == (N_PLANT_PARAMS,)
+    return vector

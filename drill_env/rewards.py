@@ -1,74 +1,145 @@
-"""The per-step reward of ``DrillString-v0``: dimensionless, in [-1, 0], with named terms."""
+"""The reward of ``DrillString-v0``, in one place: the per-plant-step tracking integrand the
+compiled loop sums, the named terms formed from the loop's sums over a decision period, and
+their weighted total.
+
+Terms (each in [0, 1]) over one decision period of n plant steps::
+
+    tracking   = mean over the steps of min(|V_ref - w_bit| / max(V_ref, 1 rad/s), 1)
+    chattering = min(TV(u) / chattering_scale_nm, 1)        TV: total variation of the torque
+    stuck      = share of the steps with the bit stuck
+    torque     = mean(u^2) / torque_scale_nm^2               (the paper's RMSD measure)
+    residual   = mean((u - u_base)^2) / residual_scale_nm^2  (residual mode; 0 otherwise)
+
+Total::
+
+    r = -(w_t tracking + w_c chattering + w_s stuck) / (w_t + w_c + w_s)
+        - w_torque torque - w_residual residual
+
+in ``[-1 - w_torque - w_residual, 0]``; ``[-1, 0]`` with the default weights (the last two are
+0 by default; training can use them to trade tracking against torque).
+"""
 
 from __future__ import annotations
 
-import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 import numpy.typing as npt
+from numba import njit
 
-__all__ = ["RewardWeights", "reward_terms", "total_reward"]
+from drill_env.layout import (
+    REP_RESIDUAL_SQUARED,
+    REP_STEPS,
+    REP_STUCK_STEPS,
+    REP_TORQUE_SQUARED,
+    REP_TRACKING_SUM,
+    REP_VARIATION,
+)
+from drill_env.validation import check_range, require
+
+__all__ = ["TERMS", "RewardWeights", "reward_terms", "total_reward", "tracking_error"]
 
 Term = TypeVar("Term", float, npt.NDArray[np.float64])
+
+TERMS = ("tracking", "chattering", "stuck", "torque", "residual")
+"""The names of the reward terms, as in ``info["reward_terms"]``."""
+
+
+@njit(cache=True)
+def tracking_error(reference_rad_s: float, bit_speed_rad_s: float) -> float:
+    """The tracking integrand of one plant step: ``min(|V_ref - w_bit| / max(V_ref, 1), 1)``."""
+    return min(abs(reference_rad_s - bit_speed_rad_s) / max(reference_rad_s, 1.0), 1.0)
 
 
 @dataclass(frozen=True)
 class RewardWeights:
-    """Non-negative weights of the reward terms (normalised by their sum; not all zero).
+    """Non-negative weights of the reward terms (the first three normalised by their sum, not
+    all zero).
 
     Attributes:
         tracking: Weight of the relative bit-speed tracking error.
         chattering: Weight of the top-drive torque variation.
         stuck: Weight of the time the bit spends stuck.
         chattering_scale_nm: Torque variation within one decision period that saturates the
-            chattering term, N m.
+            chattering term, N m (> 0).
+        torque: Weight of the mean squared torque over the squared upper torque limit (an
+            energy penalty; 0 by default).
+        residual: Weight of the mean squared torque added to the base controller's, over the
+            squared residual scale (residual mode only; 0 by default).
     """
 
     tracking: float = 1.0
     chattering: float = 0.1
     stuck: float = 0.5
     chattering_scale_nm: float = 5000.0
+    torque: float = 0.0
+    residual: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("tracking", "chattering", "stuck"):
+        for name in ("tracking", "chattering", "stuck", "torque", "residual"):
             value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-                raise ValueError(f"reward weight {name} = {value!r} is out of range: allowed >= 0")
+            check_range(f"reward weight {name}", value, 0.0, float("inf"))
         if self.tracking + self.chattering + self.stuck <= 0:
-            raise ValueError("reward weights are all zero: at least one must be > 0")
+            raise ValueError(
+                "reward weights tracking, chattering and stuck are all zero: at least one must "
+                "be > 0"
+            )
         s = self.chattering_scale_nm
-        if not (isinstance(s, (int, float)) and math.isfinite(s) and s > 0):
-            raise ValueError(f"chattering_scale_nm = {s!r} is out of range: allowed > 0")
+        require("chattering_scale_nm", s, "> 0", isinstance(s, (int, float)) and 0 < s < np.inf)
+
+
+def _column(report: Any, index: int) -> Any:
+    return report[..., index] if isinstance(report, np.ndarray) else report[index]
 
 
 def reward_terms(
-    mean_tracking: float, torque_variation_nm: float, stuck_fraction: float, weights: RewardWeights
-) -> dict[str, float]:
-    """The three terms, each in [0, 1], over one decision period.
+    report: Sequence[float] | npt.NDArray[np.float64],
+    weights: RewardWeights,
+    torque_scale_nm: float,
+    residual_scale_nm: float | None,
+) -> dict[str, Any]:
+    """The terms over one decision period from the kernel's report (``drill_env.layout.REP_*``
+    sums): one report row (a list of floats, for one env) or an array of rows (a vector env,
+    elementwise).
 
     Args:
-        mean_tracking: Mean over the plant steps of ``min(|V_ref - w_bit| / max(V_ref, 1), 1)``.
-        torque_variation_nm: Total variation of the applied torque over the period, N m.
-        stuck_fraction: Share of the plant steps with the bit stuck.
-        weights: Reward weights (for the chattering scale).
+        report: A report row or rows.
+        weights: The reward weights (for the chattering scale).
+        torque_scale_nm: Scale of the torque term, N m (the upper torque limit).
+        residual_scale_nm: Scale of the residual term, N m; ``None`` outside residual mode
+            (the term is then 0).
     """
+    steps = _column(report, REP_STEPS)
+    steps = np.maximum(steps, 1) if isinstance(steps, np.ndarray) else max(steps, 1)
+    variation = _column(report, REP_VARIATION)
+    chattering = variation / weights.chattering_scale_nm
+    residual = 0.0 * steps
+    if residual_scale_nm is not None:
+        residual = _column(report, REP_RESIDUAL_SQUARED) / steps / max(residual_scale_nm, 1.0) ** 2
     return {
-        "tracking": mean_tracking,
-        "chattering": min(torque_variation_nm / weights.chattering_scale_nm, 1.0),
-        "stuck": stuck_fraction,
+        "tracking": _column(report, REP_TRACKING_SUM) / steps,
+        "chattering": np.minimum(chattering, 1.0)
+        if isinstance(chattering, np.ndarray)
+        else min(chattering, 1.0),
+        "stuck": _column(report, REP_STUCK_STEPS) / steps,
+        "torque": _column(report, REP_TORQUE_SQUARED) / steps / torque_scale_nm**2,
+        "residual": residual,
     }
 
 
 def total_reward(terms: Mapping[str, Term], weights: RewardWeights) -> Term:
-    """``-(w_t tracking + w_c chattering + w_s stuck) / (w_t + w_c + w_s)``, in [-1, 0].
-
-    The terms are floats (one env) or arrays (a vector env, elementwise)."""
+    """``-(w_t tracking + w_c chattering + w_s stuck) / (w_t + w_c + w_s) - w_torque torque
+    - w_residual residual``; the terms are floats (one env) or arrays (a vector env)."""
     num = (
         weights.tracking * terms["tracking"]
         + weights.chattering * terms["chattering"]
         + weights.stuck * terms["stuck"]
     )
-    return -num / (weights.tracking + weights.chattering + weights.stuck)
+    reward = -num / (weights.tracking + weights.chattering + weights.stuck)
+    if weights.torque > 0:
+        reward = reward - weights.torque * terms["torque"]
+    if weights.residual > 0:
+        reward = reward - weights.residual * terms["residual"]
+    return reward

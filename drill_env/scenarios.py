@@ -1,5 +1,10 @@
-"""Exogenous signals of an episode and every random draw: WOB profile, reference-speed
-profile, parametric uncertainty (SPEC section 2, Table 3) and measurement noise.
+"""The scenario of an episode and every random draw: WOB profile, reference-speed profile,
+parametric uncertainty (docs/specification.md section 2, the paper's Table 3) and measurement
+noise.
+
+:class:`Scenario` is the one description of what is exogenous about an episode: the env builds
+one from its keywords or draws one from :class:`Randomization`, and studies describe their
+runs as scenarios (``gym.make(..., **scenario.keywords())``).
 
 Each random component draws from its own ``np.random.Generator``; :func:`spawn_generators`
 makes them from one ``np.random.SeedSequence``, so an episode's draws do not depend on how
@@ -11,24 +16,27 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Final, Literal
+from typing import Any, Final, Literal
 
 import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from drill_env.parameters import DrillStringParameters, scale_uncertain
+from drill_env.limits import MAX_REFERENCE_RAD_S, MAX_WOB_N
+from drill_env.parameters import DrillStringParameters, resolve_parameters, scale_uncertain
+from drill_env.validation import check_choice, check_interval, check_range
 
 __all__ = [
     "COMPONENTS",
-    "check_range",
-    "profile_value",
+    "READINGS",
     "UNCERTAINTY_CONDITIONS",
-    "EpisodeScenario",
     "Randomization",
+    "Scenario",
     "SpeedProfile",
     "UncertaintyReading",
     "WobProfile",
+    "knot_arrays",
+    "profile_value",
     "resolve_uncertainty",
     "spawn_generators",
 ]
@@ -62,36 +70,10 @@ UNCERTAINTY_CONDITIONS: Final[dict[str, tuple[float, float, float]]] = {
 """Table 3: relative increases (Delta1 of c_pi, Delta2 of k_pi, Delta3 of c_dt)."""
 
 UncertaintyReading = Literal["plant", "controller"]
+READINGS: Final = ("plant", "controller")
+"""The two readings of the uncertainty: scale the true plant, or the controllers' model."""
 COMPONENTS: Final = ("wob", "reference", "uncertainty", "noise")
 """The random components, in the order their generators are spawned."""
-
-
-def check_range(name: str, value: float, low: float, high: float) -> float:
-    """Return ``value`` as float if ``low <= value <= high``, else raise naming ``name``."""
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-        raise TypeError(f"{name} must be a real number, got {value!r}")
-    v = float(value)
-    if not (math.isfinite(v) and low <= v <= high):
-        raise ValueError(f"{name} = {value!r} is out of range: allowed [{low:g}, {high:g}]")
-    return v
-
-
-def check_interval(
-    name: str, bounds: Sequence[float], low: float, high: float
-) -> tuple[float, float]:
-    if len(bounds) != 2:
-        raise ValueError(f"{name} must be a (low, high) pair, got {bounds!r}")
-    lo = check_range(f"{name}[0]", bounds[0], low, high)
-    hi = check_range(f"{name}[1]", bounds[1], low, high)
-    if lo > hi:
-        raise ValueError(f"{name} = {tuple(bounds)!r} is inverted: low must be <= high")
-    return lo, hi
-
-
-MAX_WOB_N: Final = 1e6
-"""Largest accepted weight on bit, N."""
-MAX_REFERENCE_RAD_S: Final = 100.0
-"""Largest accepted reference bit speed, rad/s."""
 
 
 @dataclass(frozen=True)
@@ -111,7 +93,7 @@ class WobProfile:
     def __post_init__(self) -> None:
         check_range("wob_n", self.initial_n, 1e-9, MAX_WOB_N)
         if (self.step_time_s is None) != (self.final_n is None):
-            raise ValueError("WobProfile needs both step_time_s and final_n, or neither")
+            raise ValueError("wob_step_time_s and wob_final_n must be given together")
         if self.step_time_s is not None and self.final_n is not None:
             check_range("wob_step_time_s", self.step_time_s, 0.0, math.inf)
             check_range("wob_final_n", self.final_n, 1e-9, MAX_WOB_N)
@@ -223,6 +205,34 @@ class Randomization:
         )
         check_interval("delta_range", self.delta_range, -0.9, 10.0)
 
+    def draw(
+        self,
+        generators: dict[str, np.random.Generator],
+        episode_s: float,
+        parameters: DrillStringParameters,
+        reading: UncertaintyReading,
+        noise_std_rad_s: float,
+    ) -> Scenario:
+        """A scenario drawn from these ranges, each component from its own generator."""
+        g = generators["wob"]
+        wob0 = float(g.uniform(*self.wob_range_n))
+        step_time: float | None = None
+        wob1: float | None = None
+        if g.random() < self.wob_step_probability:
+            step_time = float(g.uniform(*self.wob_step_time_fraction)) * episode_s
+            wob1 = float(g.uniform(*self.wob_range_n))
+        ref = float(generators["reference"].uniform(*self.reference_range_rad_s))
+        lo, hi = self.delta_range
+        d = generators["uncertainty"].uniform(lo, hi, size=3)
+        return Scenario(
+            wob=WobProfile(wob0, step_time, wob1),
+            reference=SpeedProfile.constant(ref),
+            uncertainty=(float(d[0]), float(d[1]), float(d[2])),
+            reading=reading,
+            noise_std_rad_s=noise_std_rad_s,
+            parameters=parameters,
+        )
+
 
 def spawn_generators(seed_sequence: np.random.SeedSequence) -> dict[str, np.random.Generator]:
     """One generator per random component (:data:`COMPONENTS`) from ``seed_sequence``."""
@@ -233,63 +243,62 @@ def spawn_generators(seed_sequence: np.random.SeedSequence) -> dict[str, np.rand
 
 
 @dataclass(frozen=True)
-class EpisodeScenario:
+class Scenario:
     """Everything exogenous about one episode, resolved to numbers.
 
     Attributes:
         wob: WOB profile.
         reference: Reference bit-speed profile.
-        deltas: Uncertainty ``(Delta1, Delta2, Delta3)``.
-        reading: ``"plant"``: the plant carries the deltas; ``"controller"``: the controller's
-            model does.
-        nominal: Nominal plant parameters.
+        uncertainty: ``(Delta1, Delta2, Delta3)``, relative increases of ``c_pi``, ``k_pi`` and
+            ``c_dt`` (the paper's Table 3).
+        reading: ``"plant"``: the plant carries the uncertainty; ``"controller"``: the
+            controllers' model does.
         noise_std_rad_s: Measurement noise on the speeds, rad/s.
+        parameters: Nominal plant parameters.
+        plant: The true plant's parameters (derived).
+        controller_model: The parameters the controllers' model uses (derived).
     """
 
     wob: WobProfile
     reference: SpeedProfile
-    deltas: tuple[float, float, float]
-    reading: UncertaintyReading
-    nominal: DrillStringParameters
-    noise_std_rad_s: float
-    plant: DrillStringParameters = field(init=False)
-    controller_model: DrillStringParameters = field(init=False)
+    uncertainty: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    reading: UncertaintyReading = "plant"
+    noise_std_rad_s: float = 0.0
+    parameters: DrillStringParameters = field(default_factory=DrillStringParameters)
+    plant: DrillStringParameters = field(init=False, repr=False, compare=False)
+    controller_model: DrillStringParameters = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        scaled = scale_uncertain(self.nominal, self.deltas)
-        plant, model = (scaled, self.nominal) if self.reading == "plant" else (self.nominal, scaled)
+        if not isinstance(self.wob, WobProfile):
+            raise TypeError(f"wob must be a WobProfile, got {self.wob!r}")
+        if not isinstance(self.reference, SpeedProfile):
+            raise TypeError(f"reference must be a SpeedProfile, got {self.reference!r}")
+        object.__setattr__(self, "uncertainty", resolve_uncertainty(self.uncertainty))
+        check_choice("uncertainty_reading", self.reading, READINGS, "reading")
+        check_range("noise_std_rad_s", self.noise_std_rad_s, 0.0, 10.0)
+        object.__setattr__(self, "parameters", resolve_parameters(self.parameters))
+        scaled = scale_uncertain(self.parameters, self.uncertainty)
+        plant, model = (
+            (scaled, self.parameters) if self.reading == "plant" else (self.parameters, scaled)
+        )
         object.__setattr__(self, "plant", plant)
         object.__setattr__(self, "controller_model", model)
 
-    @classmethod
-    def draw(
-        cls,
-        randomization: Randomization,
-        generators: dict[str, np.random.Generator],
-        episode_s: float,
-        nominal: DrillStringParameters,
-        reading: UncertaintyReading,
-        noise_std_rad_s: float,
-    ) -> EpisodeScenario:
-        """Draw a scenario from ``randomization``, each component from its own generator."""
-        g = generators["wob"]
-        wob0 = float(g.uniform(*randomization.wob_range_n))
-        step_time: float | None = None
-        wob1: float | None = None
-        if g.random() < randomization.wob_step_probability:
-            step_time = float(g.uniform(*randomization.wob_step_time_fraction)) * episode_s
-            wob1 = float(g.uniform(*randomization.wob_range_n))
-        ref = float(generators["reference"].uniform(*randomization.reference_range_rad_s))
-        lo, hi = randomization.delta_range
-        d = generators["uncertainty"].uniform(lo, hi, size=3)
-        return cls(
-            wob=WobProfile(wob0, step_time, wob1),
-            reference=SpeedProfile.constant(ref),
-            deltas=(float(d[0]), float(d[1]), float(d[2])),
-            reading=reading,
-            nominal=nominal,
-            noise_std_rad_s=noise_std_rad_s,
-        )
+    def keywords(self) -> dict[str, Any]:
+        """The ``DrillString-v0`` keywords (and ``reset`` options) that give this scenario."""
+        ref = self.reference
+        constant = len(ref.times_s) == 1
+        return {
+            "randomize": False,
+            "parameters": self.parameters,
+            "wob_n": self.wob.initial_n,
+            "wob_step_time_s": self.wob.step_time_s,
+            "wob_final_n": self.wob.final_n,
+            "reference_speed_rad_s": ref.values_rad_s[0] if constant else ref,
+            "uncertainty": self.uncertainty,
+            "uncertainty_reading": self.reading,
+            "noise_std_rad_s": self.noise_std_rad_s,
+        }
 
 
 def knot_arrays(

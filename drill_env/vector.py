@@ -16,12 +16,27 @@ import numpy.typing as npt
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from drill_env import kernel
 from drill_env.batch import StringBatch
-from drill_env.config import EnvConfig
 from drill_env.env import validate_actions
-from drill_env.observation import OBS_BOUND, observation_size
-from drill_env.rewards import total_reward
+from drill_env.evaluation import PlantSamples
+from drill_env.layout import (
+    OBS_BOUND,
+    REP_BASE_TORQUE,
+    REP_BIT_SPEED,
+    REP_BIT_STUCK,
+    REP_LAW_ERROR,
+    REP_LAW_GAIN,
+    REP_REFERENCE,
+    REP_TIME,
+    REP_TOP_DRIVE_SPEED,
+    REP_TORQUE,
+    REP_WOB,
+    STATUS_DIVERGED,
+    STATUS_OK,
+    STATUS_PAUSED,
+)
+from drill_env.options import EnvConfig
+from drill_env.rewards import TERMS, reward_terms, total_reward
 
 __all__ = ["DrillStringVectorEnv"]
 
@@ -30,7 +45,7 @@ class DrillStringVectorEnv(VectorEnv):
     """``num_envs`` drill strings stepped together; the keywords are those of
     :class:`drill_env.env.DrillStringEnv` (shared by all strings)."""
 
-    metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.NEXT_STEP}  # noqa: RUF012
+    metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(
         self, num_envs: int = 1, max_episode_steps: int | None = None, **kwargs: Any
@@ -50,18 +65,25 @@ class DrillStringVectorEnv(VectorEnv):
         self.max_episode_steps = max_episode_steps
         self.num_envs = num_envs
         self._batch = StringBatch(self.config, num_envs)
-        size = observation_size(self.config.residual)
+        size = self._batch.obs_size
         self.single_observation_space = gym.spaces.Box(-OBS_BOUND, OBS_BOUND, (size,), np.float32)
         self.single_action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
+        self._residual_scale = self.config.residual_scale_nm if self.config.residual else None
         self._needs_reset = np.zeros(num_envs, dtype=bool)
         self._started = False
 
     @property
     def batch(self) -> StringBatch:
-        """The engine; its ``records`` hold the last step's plant samples of every string."""
+        """The engine."""
         return self._batch
+
+    def plant_samples(self) -> PlantSamples:
+        """The last step's samples of every string at every plant step, arrays
+        ``(num_envs, n, ...)`` (views, valid until the next step; NaN where a string did not
+        move: diverged, or resetting)."""
+        return PlantSamples.from_records(self._batch.records)
 
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
@@ -101,7 +123,7 @@ class DrillStringVectorEnv(VectorEnv):
         self._needs_reset[mask] = False
         self._started = True
         zeros = np.zeros(self.num_envs)
-        return self._batch.observations(), self._infos(zeros, zeros, zeros)
+        return self._batch.observations(), self._infos(dict.fromkeys(TERMS, zeros))
 
     def step(
         self, actions: Any
@@ -126,71 +148,57 @@ class DrillStringVectorEnv(VectorEnv):
             assert episode is not None
             episode.actions_clipped += 1
         # Strings starting a new episode (next-step autoreset) sit this step out.
-        b.status[resetting] = kernel.STATUS_PAUSED
+        b.status[resetting] = STATUS_PAUSED
         b.step(a)
-        b.status[resetting] = kernel.STATUS_OK
+        b.status[resetting] = STATUS_OK
         report = b.report
         episodes = [e for e in b.episodes if e is not None]
         weights = self.config.reward_weights  # fixed at make: the same for every string
-        tracking = report[:, kernel.REP_TRACKING]
-        chattering = np.minimum(report[:, kernel.REP_VARIATION] / weights.chattering_scale_nm, 1.0)
-        stuck = report[:, kernel.REP_STUCK_FRACTION]
-        terms = {"tracking": tracking, "chattering": chattering, "stuck": stuck}
+        terms = reward_terms(report, weights, self.config.max_torque_nm, self._residual_scale)
         rewards = total_reward(terms, weights)
-        terminated = b.status == kernel.STATUS_DIVERGED
+        terminated = b.status == STATUS_DIVERGED
         rewards[terminated] = -1.0
-        end_s = np.array([e.duration_s for e in episodes])
+        end_s = np.array([e.config.duration_s for e in episodes])
         if self.max_episode_steps is not None:
             end_s = np.minimum(end_s, self.max_episode_steps * self.config.control_dt_s)
-        truncated = (report[:, kernel.REP_TIME] >= end_s - 1e-9) & ~terminated
+        truncated = (report[:, REP_TIME] >= end_s - 1e-9) & ~terminated
         rewards[resetting] = 0.0
         terminated &= ~resetting
         truncated &= ~resetting
         self._needs_reset = terminated | truncated
-        infos = self._infos(tracking, chattering, stuck)
+        infos = self._infos(terms)
         infos["action_clipped"] = clipped
         infos["_action_clipped"] = np.ones(self.num_envs, dtype=bool)
         infos["termination_reason"] = np.where(terminated, "diverged", "")
         infos["_termination_reason"] = terminated
         return b.observations(), rewards, terminated, truncated, infos
 
-    def _infos(
-        self,
-        tracking: npt.NDArray[np.float64],
-        chattering: npt.NDArray[np.float64],
-        stuck: npt.NDArray[np.float64],
-    ) -> dict[str, Any]:
+    def _infos(self, terms: dict[str, npt.NDArray[np.float64]]) -> dict[str, Any]:
         b = self._batch
         r = b.report
         mask = np.ones(self.num_envs, dtype=bool)
         values: dict[str, Any] = {
-            "time_s": r[:, kernel.REP_TIME].copy(),
-            "bit_speed_rad_s": r[:, kernel.REP_BIT_SPEED].copy(),
-            "top_drive_speed_rad_s": r[:, kernel.REP_TOP_DRIVE_SPEED].copy(),
-            "reference_speed_rad_s": r[:, kernel.REP_REFERENCE].copy(),
-            "top_drive_torque_nm": r[:, kernel.REP_TORQUE].copy(),
-            "wob_n": r[:, kernel.REP_WOB].copy(),
-            "bit_stuck": r[:, kernel.REP_BIT_STUCK] > 0.5,
+            "time_s": r[:, REP_TIME].copy(),
+            "bit_speed_rad_s": r[:, REP_BIT_SPEED].copy(),
+            "top_drive_speed_rad_s": r[:, REP_TOP_DRIVE_SPEED].copy(),
+            "reference_speed_rad_s": r[:, REP_REFERENCE].copy(),
+            "top_drive_torque_nm": r[:, REP_TORQUE].copy(),
+            "wob_n": r[:, REP_WOB].copy(),
+            "bit_stuck": r[:, REP_BIT_STUCK] > 0.5,
             "actions_clipped_total": np.array(
                 [e.actions_clipped for e in b.episodes if e is not None]
             ),
         }
         if b.residual:
-            values["base_torque_nm"] = r[:, kernel.REP_BASE_TORQUE].copy()
+            values["base_torque_nm"] = r[:, REP_BASE_TORQUE].copy()
             values["residual_torque_nm"] = b.command.copy()
-            values["sliding_variable_rad_s"] = r[:, kernel.REP_SLIDING].copy()
-            values["adaptive_gain"] = r[:, kernel.REP_GAIN].copy()
+            values["sliding_variable_rad_s"] = r[:, REP_LAW_ERROR].copy()
+            values["adaptive_gain"] = r[:, REP_LAW_GAIN].copy()
         infos: dict[str, Any] = {}
         for key, value in values.items():
             infos[key] = value
             infos["_" + key] = mask
-        infos["reward_terms"] = {
-            "tracking": tracking.copy(),
-            "chattering": chattering,
-            "stuck": stuck.copy(),
-            "_tracking": mask,
-            "_chattering": mask,
-            "_stuck": mask,
-        }
+        infos["reward_terms"] = {key: np.array(value, copy=True) for key, value in terms.items()}
+        infos["reward_terms"].update({"_" + key: mask for key in terms})
         infos["_reward_terms"] = mask
         return infos

@@ -19,7 +19,7 @@ from baselines import (
     controller_names,
     make_controller,
 )
-from drill_env.config import EnvConfig
+from drill_env.options import EnvConfig
 from drill_env.scenarios import Randomization
 
 ENV_ID = "DrillString-v0"
@@ -136,7 +136,7 @@ BAD_KEYWORDS = [
     pytest.param({"uncertainty": (0.1, 0.2)}, ValueError, r"uncertainty must have 3 entries \(Delta1..3\), got 2", id="uncertainty-length"),
     pytest.param({"uncertainty": (0.1, -0.95, 0.0)}, ValueError, r"uncertainty\[1\] = -0.95 is out of range: allowed \[-0.9, 10\]", id="uncertainty-delta"),
     pytest.param({"uncertainty": 3}, TypeError, r"uncertainty must be a condition name or 3 numbers, got 3", id="uncertainty-int"),
-    pytest.param({"uncertainty_reading": "both"}, ValueError, r"uncertainty_reading = 'both' is not valid: allowed \['plant', 'controller'\]", id="reading"),
+    pytest.param({"uncertainty_reading": "both"}, ValueError, r"uncertainty_reading = 'both' is not a known reading: allowed \['controller', 'plant'\]", id="reading"),
     pytest.param({"noise_std_rad_s": -0.1}, ValueError, r"noise_std_rad_s = -0.1 is out of range: allowed \[0, 10\]", id="noise<0"),
     pytest.param({"parameters": "zribi"}, ValueError, r"parameters = 'zribi' is not a known preset: allowed \['navarro_lopez2007', 'zribi2024'\]", id="preset"),
     pytest.param({"randomize": 1}, TypeError, r"randomize must be True or False, got 1", id="randomize-int"),
@@ -233,7 +233,7 @@ def test_make_only_option_is_refused(key: str) -> None:
         pytest.param({"reference_speed_rad_s": 101.0}, ValueError, r"reference_speed_rad_s = 101.0 is out of range", id="reference"),
         pytest.param({"noise_std_rad_s": math.inf}, ValueError, r"noise_std_rad_s = inf is out of range", id="noise"),
         pytest.param({"uncertainty": "worst"}, ValueError, r"uncertainty = 'worst' is not a known condition", id="uncertainty"),
-        pytest.param({"uncertainty_reading": "model"}, ValueError, r"uncertainty_reading = 'model' is not valid", id="reading"),
+        pytest.param({"uncertainty_reading": "model"}, ValueError, r"uncertainty_reading = 'model' is not a known reading", id="reading"),
         pytest.param({"episode_s": 0.07}, ValueError, r"episode_s = 0.07 is out of range: allowed a multiple of control_dt_s", id="episode"),
         pytest.param({"randomize": "no"}, TypeError, r"randomize must be True or False, got 'no'", id="randomize"),
         pytest.param({"parameters": 7}, TypeError, r"parameters must be a preset name or a DrillStringParameters, got int", id="parameters"),
@@ -303,7 +303,7 @@ def test_make_controller_unknown_gain() -> None:
         pytest.param(MSMCGains, {"k3": -1.0}, r"MSMCGains.k3 = -1.0 is out of range: allowed >= 0", id="msmc-k3"),
         pytest.param(ASMCGains, {"mu22": 0.0}, r"ASMCGains.mu22 = 0.0 is out of range: allowed > 0", id="asmc-mu22"),
         pytest.param(SurfaceGains, {"lam": 0.0}, r"SurfaceGains.lam = 0.0 is out of range: allowed > 0", id="surface-lam"),
-        pytest.param(SurfaceGains, {"delta": math.nan}, r"SurfaceGains.delta must be a finite number, got nan", id="surface-delta-nan"),
+        pytest.param(SurfaceGains, {"delta": math.nan}, r"SurfaceGains.delta must be finite, got nan", id="surface-delta-nan"),
     ],
 )  # fmt: skip
 def test_controller_gain_validation(factory: type, kwargs: dict[str, Any], match: str) -> None:

@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 import drill_env  # noqa: F401  (registers DrillString-v0)
-from baselines import compare
-from baselines.compare import ROW_KEYS, decision_period, default_controllers, main
-from drill_env.cli import main as cli_main
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout
 from drill_env.metrics import METRIC_KEYS
+from experiments import compare
+from experiments.cli import main as cli_main
+from experiments.compare import ROW_KEYS, decision_period, default_controllers, main
 
 SHORT = ["--duration", "2", "--conditions", "nominal", "--no-agent", "--no-progress"]
 
@@ -225,12 +225,12 @@ def short_trace():  # type: ignore[no-untyped-def]
 
 
 class TestFigureHelpers:
-    """The figure helpers of drill_env.plots that the comparison relies on."""
+    """The figure helpers of experiments.plots that the comparison relies on."""
 
     def test_downsample_keeps_chattering(self, short_trace) -> None:  # type: ignore[no-untyped-def]
         import dataclasses
 
-        from drill_env.plots import downsample
+        from experiments.plots import downsample
 
         # A torque switching by +-1 kN m at every step must not alias to a flat line.
         chatter = 13_000.0 + 1_000.0 * (-1.0) ** np.arange(1000)
@@ -243,13 +243,13 @@ class TestFigureHelpers:
         np.testing.assert_array_equal(small.bit_speed_rad_s, short_trace.bit_speed_rad_s[::10])
 
     def test_downsample_bad_factor(self, short_trace) -> None:  # type: ignore[no-untyped-def]
-        from drill_env.plots import downsample
+        from experiments.plots import downsample
 
         with pytest.raises(ValueError, match=r"every = 0 is out of range"):
             downsample(short_trace, 0)
 
     def test_time_window(self, short_trace) -> None:  # type: ignore[no-untyped-def]
-        from drill_env.plots import time_window
+        from experiments.plots import time_window
 
         tail = time_window(short_trace, 0.8)
         assert tail.time_s.shape == (200,)
@@ -257,7 +257,7 @@ class TestFigureHelpers:
         np.testing.assert_array_equal(tail.torque_nm, short_trace.torque_nm[800:])
 
     def test_panel_without_traces(self, short_trace, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
-        from drill_env.plots import plot_panels
+        from experiments.plots import plot_panels
 
         with pytest.raises(ValueError, match=r"panel\(s\) 'csmc' have no traces"):
             plot_panels({"csmc": {}, "msmc": {"a": short_trace}}, tmp_path / "x.png")

@@ -16,6 +16,7 @@ import drill_env
 from baselines import make_controller
 from drill_env.integration import plant_step
 from drill_env.parameters import PRESETS, plant_parameter_vector
+from drill_env.rewards import TERMS
 from drill_env.vector import DrillStringVectorEnv
 
 ENV_ID = "DrillString-v0"
@@ -63,10 +64,14 @@ def act(value: float) -> np.ndarray:
 
 # ------------------------------------------------------------------------ registration
 def test_import_registers_env() -> None:
-    """Importing ``drill_env`` registers ``DrillString-v0`` with the 2000-step time limit."""
+    """Importing ``drill_env`` registers ``DrillString-v0`` without a registered step limit
+    (the env truncates itself); a made env's spec states its own: 2000 decisions by default."""
     spec = gym.spec(ENV_ID)
     assert spec.entry_point == "drill_env.env:DrillStringEnv"
-    assert spec.max_episode_steps == 2000
+    assert spec.max_episode_steps is None
+    assert gym.make(ENV_ID).spec.max_episode_steps == 2000  # type: ignore[union-attr]
+    made = gym.make(ENV_ID, episode_s=150.0, control_dt_s=0.1)
+    assert made.spec.max_episode_steps == 1500  # type: ignore[union-attr]
     assert drill_env.ENV_ID == ENV_ID
 
 
@@ -166,7 +171,7 @@ def test_info_keys_carry_units(mode: str) -> None:
             if isinstance(value, (float, np.floating)):
                 assert key.endswith(UNIT_SUFFIXES), f"info[{key!r}] has no unit in its name"
     assert type(step_info["bit_stuck"]) is bool
-    assert set(step_info["reward_terms"]) == {"tracking", "chattering", "stuck"}
+    assert set(step_info["reward_terms"]) == set(TERMS)
 
 
 def test_info_values_follow_the_scenario() -> None:
@@ -443,7 +448,7 @@ def test_python_controller_matches_compiled_controller() -> None:
 
 def test_make_sets_the_time_limit_from_the_keywords() -> None:
     """``drill_env.make`` truncates at ``episode_s``, not at the registered 2000 decisions."""
-    env = drill_env.make(randomize=False, episode_s=3.0, control_dt_s=0.001)
+    env = gym.make("DrillString-v0", randomize=False, episode_s=3.0, control_dt_s=0.001)
     env.reset(seed=0)
     steps = 0
     truncated = False

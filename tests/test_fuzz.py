@@ -10,8 +10,7 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from drill_env.batch import PER_EPISODE_KEYWORDS
-from drill_env.config import EnvConfig
+from drill_env.options import PER_EPISODE_KEYWORDS, EnvConfig
 
 ENV_ID = "DrillString-v0"
 FUZZ = settings(

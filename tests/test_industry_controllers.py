@@ -24,21 +24,9 @@ from baselines import (
     controller_names,
     make_controller,
 )
-from baselines.stick_slip_map import StickSlipMap, compute_map
-from baselines.string_modes import (
-    pipe_impedance,
-    pipe_travel_time_s,
-    reflection_coefficient,
-    stick_slip_frequency,
-    string_modes,
-    top_drive_impedance,
-)
-from drill_env.control_laws import (
-    LAW_SOFT_SPEED,
-    LAW_STIFF_PI,
-    LAW_Z_TORQUE,
-    N_LAW_PARAMS,
-    N_LAW_STATE,
+from baselines.speed_loop import (
+    N_PI_PARAMS,
+    N_PI_STATE,
     PI_C_PI,
     PI_J_FF,
     PI_K_PI,
@@ -48,10 +36,23 @@ from drill_env.control_laws import (
     PI_U_MAX,
     PI_U_MIN,
     PI_Z,
-    control_torque,
+    PS_ERROR,
+    PS_INT,
+    PS_T_MEAN,
+    speed_loop_law,
+    speed_loop_torque,
+)
+from baselines.string_modes import (
+    pipe_impedance,
+    pipe_travel_time_s,
+    reflection_coefficient,
+    stick_slip_frequency,
+    string_modes,
+    top_drive_impedance,
 )
 from drill_env.evaluation import ZeroAction, rollout
 from drill_env.parameters import PRESETS, scale_uncertain
+from experiments.stick_slip_map import StickSlipMap, compute_map
 
 INDUSTRY = ("stiff_pi", "soft_speed", "z_torque")
 P = PRESETS["zribi2024"]
@@ -153,10 +154,8 @@ def test_compiled_law_is_derived_from_the_model_it_is_given(name: str) -> None:
     nominal = controller.compiled_law()  # type: ignore[attr-defined]
     uncertain = scale_uncertain(P, (0.0, 0.5, 0.0))  # k_pi x 1.5
     law = controller.compiled_law(uncertain)  # type: ignore[attr-defined]
-    assert law.law_id == {"stiff_pi": LAW_STIFF_PI, "soft_speed": LAW_SOFT_SPEED}.get(
-        name, LAW_Z_TORQUE
-    )
-    assert law.params.shape == (N_LAW_PARAMS,) and law.initial_state.shape == (N_LAW_STATE,)
+    assert law.function is speed_loop_law
+    assert law.params.shape == (N_PI_PARAMS,) and law.initial_state.shape == (N_PI_STATE,)
     assert not law.initial_state.any()
     z_new = math.sqrt(uncertain.k_pi * uncertain.J_pi)
     if name == "soft_speed":
@@ -184,7 +183,7 @@ def speed_law(
     u_min: float = 0.0,
     u_max: float = 50_000.0,
 ) -> np.ndarray:
-    lp = np.zeros(N_LAW_PARAMS)
+    lp = np.zeros(N_PI_PARAMS)
     lp[PI_KP], lp[PI_KI], lp[PI_J_FF], lp[PI_Z] = kp, ki, j_ff, z
     lp[PI_K_PI], lp[PI_C_PI], lp[PI_TAU] = 700.0, 200.0, tau
     lp[PI_U_MIN], lp[PI_U_MAX] = u_min, u_max
@@ -192,63 +191,62 @@ def speed_law(
 
 
 def test_pi_law_proportional_then_forward_euler_integral() -> None:
-    lp, ls = speed_law(kp=1000.0, ki=50.0, u_min=-1e6), np.zeros(N_LAW_STATE)
+    lp, ls = speed_law(kp=1000.0, ki=50.0, u_min=-1e6), np.zeros(N_PI_STATE)
     # First call: integral 0, so u = kp (ref - x1) = 1000 * 2.
-    assert control_torque(LAW_STIFF_PI, lp, ls, M0, 12.0, DT) == pytest.approx(2000.0)
-    assert ls[0] == pytest.approx(2.0 * DT)  # I += (ref - x1) dt
-    assert ls[3] == pytest.approx(-2.0)  # x1 - w_set
-    assert ls[2] == 0.0
+    assert speed_loop_torque(lp, ls, M0, 12.0, DT) == pytest.approx(2000.0)
+    assert ls[PS_INT] == pytest.approx(2.0 * DT)  # I += (ref - x1) dt
+    assert ls[PS_ERROR] == pytest.approx(-2.0)  # x1 - w_set
     # Second call, top drive now above the reference: u = kp (-1) + ki * 2 dt.
     m1 = (13.0, *M0[1:])
-    u = control_torque(LAW_STIFF_PI, lp, ls, m1, 12.0, DT)
+    u = speed_loop_torque(lp, ls, m1, 12.0, DT)
     assert u == pytest.approx(-1000.0 + 50.0 * 2.0 * DT)
-    assert ls[0] == pytest.approx(2.0 * DT - 1.0 * DT)
+    assert ls[PS_INT] == pytest.approx(2.0 * DT - 1.0 * DT)
 
 
 def test_pi_law_sign_follows_the_speed_error() -> None:
     lp = speed_law(kp=500.0, ki=0.0)
-    slow: float = control_torque(LAW_SOFT_SPEED, lp, np.zeros(N_LAW_STATE), M0, 12.0, DT)
-    fast: float = control_torque(LAW_SOFT_SPEED, lp, np.zeros(N_LAW_STATE), M0, 8.0, DT)
+    slow: float = speed_loop_torque(lp, np.zeros(N_PI_STATE), M0, 12.0, DT)
+    fast: float = speed_loop_torque(lp, np.zeros(N_PI_STATE), M0, 8.0, DT)
     assert slow > 0 > fast
 
 
 def test_set_point_feed_forward_uses_the_reference_change() -> None:
-    lp, ls = speed_law(kp=1000.0, ki=0.0, j_ff=930.0), np.zeros(N_LAW_STATE)
+    lp, ls = speed_law(kp=1000.0, ki=0.0, j_ff=930.0), np.zeros(N_PI_STATE)
     # No feed-forward at the first call (no previous set-point), whatever the reference.
-    assert control_torque(LAW_SOFT_SPEED, lp, ls, M0, 12.0, DT) == pytest.approx(2000.0)
+    assert speed_loop_torque(lp, ls, M0, 12.0, DT) == pytest.approx(2000.0)
     # The reference rises by 0.01 rad/s in one step: + J (0.01 / dt).
-    u = control_torque(LAW_SOFT_SPEED, lp, ls, M0, 12.01, DT)
+    u = speed_loop_torque(lp, ls, M0, 12.01, DT)
     assert u == pytest.approx(1000.0 * 2.01 + 930.0 * 0.01 / DT)
 
 
 def test_torque_feedback_lowers_the_set_point_when_the_string_torque_rises() -> None:
-    lp, ls = speed_law(kp=1000.0, ki=0.0, z=1400.0, tau=10.0), np.zeros(N_LAW_STATE)
+    lp, ls = speed_law(kp=1000.0, ki=0.0, z=1400.0, tau=10.0), np.zeros(N_PI_STATE)
     t0 = 700.0 * M0[1] + 200.0 * (M0[0] - M0[2])  # k_pi x2 + c_pi (x1 - x3)
     # First call: the mean starts at the torque itself, so w_set = ref.
-    assert control_torque(LAW_Z_TORQUE, lp, ls, M0, 12.0, DT) == pytest.approx(2000.0)
-    assert ls[4] == pytest.approx(t0)  # the mean stays put when the torque does
+    assert speed_loop_torque(lp, ls, M0, 12.0, DT) == pytest.approx(2000.0)
+    assert ls[PS_T_MEAN] == pytest.approx(t0)  # the mean stays put when the torque does
     # The twist grows by 1 rad: T rises by 700 N m above its mean, w_set falls by 700 / z.
     m1 = (M0[0], M0[1] + 1.0, *M0[2:])
-    u = control_torque(LAW_Z_TORQUE, lp, ls, m1, 12.0, DT)
+    u = speed_loop_torque(lp, ls, m1, 12.0, DT)
     w_set = 12.0 - 700.0 / 1400.0
     assert u == pytest.approx(1000.0 * (w_set - M0[0]))
-    assert ls[3] == pytest.approx(M0[0] - w_set)
-    assert ls[4] == pytest.approx(t0 + 700.0 * DT / 10.0)  # low-pass by forward Euler
+    assert ls[PS_ERROR] == pytest.approx(M0[0] - w_set)
+    assert ls[PS_T_MEAN] == pytest.approx(t0 + 700.0 * DT / 10.0)  # low-pass by forward Euler
 
 
 def test_integral_stops_while_the_output_is_saturated() -> None:
-    lp, ls = speed_law(kp=1e5, ki=10.0, u_max=50_000.0), np.zeros(N_LAW_STATE)
-    u = control_torque(LAW_STIFF_PI, lp, ls, M0, 12.0, DT)
+    lp, ls = speed_law(kp=1e5, ki=10.0, u_max=50_000.0), np.zeros(N_PI_STATE)
+    u = speed_loop_torque(lp, ls, M0, 12.0, DT)
     assert u == pytest.approx(2e5)  # returned unclipped: the env clips
-    assert ls[0] == 0.0
+    assert ls[PS_INT] == 0.0
     # Back inside the limits the integral advances again.
-    control_torque(LAW_STIFF_PI, lp, ls, (11.9, *M0[1:]), 12.0, DT)
-    assert ls[0] == pytest.approx(0.1 * DT)
+    speed_loop_torque(lp, ls, (11.9, *M0[1:]), 12.0, DT)
+    assert ls[PS_INT] == pytest.approx(0.1 * DT)
     # Below the lower limit with a negative error it holds too.
     lp[PI_KP] = 1e3
-    before = ls[0]
-    assert control_torque(LAW_STIFF_PI, lp, ls, (13.0, *M0[1:]), 12.0, DT) < 0.0
-    assert ls[0] == before
+    before = ls[PS_INT]
+    assert speed_loop_torque(lp, ls, (13.0, *M0[1:]), 12.0, DT) < 0.0
+    assert ls[PS_INT] == before
 
 
 @pytest.mark.parametrize("name", INDUSTRY)
@@ -261,9 +259,9 @@ def test_python_torque_matches_the_compiled_law(name: str) -> None:
     for _ in range(50):
         m = rng.normal(5.0, 3.0, 7)
         ref = float(rng.uniform(1.0, 15.0))
-        compiled = control_torque(law.law_id, law.params, ls, tuple(m), ref, DT)
+        compiled = law.torque(ls, m, ref, DT)
         assert controller.torque(m, ref, DT) == compiled
-    assert controller.speed_error == ls[3]  # type: ignore[attr-defined]
+    assert controller.speed_error == ls[PS_ERROR]  # type: ignore[attr-defined]
     controller.reset()
     assert controller.integral == 0.0  # type: ignore[attr-defined]
 
@@ -296,7 +294,7 @@ def test_gains_out_of_range_name_the_field(
 @pytest.mark.parametrize("gains_type", [StiffPIGains, SoftSpeedGains, ZTorqueGains])
 def test_gains_reject_non_numbers(gains_type: type) -> None:
     field = dataclasses.fields(gains_type)[0].name
-    with pytest.raises(ValueError, match=rf"{field} must be a finite number"):
+    with pytest.raises(ValueError, match=rf"{field} must be finite"):
         gains_type(**{field: math.nan})
     with pytest.raises(TypeError, match="limits must be a DriveLimits"):
         gains_type(limits=(0.0, 1.0))

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
-import drill_env
-from drill_env import kernel
+from drill_env.layout import REC_REFERENCE
 from drill_env.scenarios import Randomization, SpeedProfile, WobProfile, resolve_uncertainty
 
 
@@ -42,7 +42,7 @@ def test_wob_step_knots() -> None:
         (lambda: SpeedProfile((5.0, 1.0), (4.0, 6.0)), "knot times must not decrease"),
         (lambda: SpeedProfile.constant(-1.0), r"reference_speed_rad_s\[0\] = -1.0 is out of range"),
         (lambda: WobProfile(-5.0), r"wob_n = -5.0 is out of range"),
-        (lambda: WobProfile(1e5, 10.0), "needs both step_time_s and final_n"),
+        (lambda: WobProfile(1e5, 10.0), "wob_step_time_s and wob_final_n must be given together"),
         (lambda: Randomization(wob_range_n=(2e5, 6e4)), "wob_range_n .* is inverted"),
         (lambda: resolve_uncertainty("condition9"), "not a known condition"),
     ],
@@ -66,13 +66,17 @@ def test_env_follows_a_step_reference_at_plant_rate() -> None:
     """The plant loop reads the reference profile at every 1 ms step (the records), and the
     observation and info report it at the end of each decision."""
     profile = SpeedProfile.steps(5.0, [(0.12, 9.0)])
-    env = drill_env.make(
-        randomize=False, reference_speed_rad_s=profile, episode_s=1.0, control_dt_s=0.1
+    env = gym.make(
+        "DrillString-v0",
+        randomize=False,
+        reference_speed_rad_s=profile,
+        episode_s=1.0,
+        control_dt_s=0.1,
     )
     env.reset(seed=0)
     env.step(np.zeros(1, dtype=np.float32))
     _, _, _, _, info = env.step(np.zeros(1, dtype=np.float32))
     records = env.unwrapped.batch.records[0]  # plant steps at t = 0.100 .. 0.199 s
-    np.testing.assert_array_equal(records[:20, kernel.REC_REFERENCE], 5.0)
-    np.testing.assert_array_equal(records[20:, kernel.REC_REFERENCE], 9.0)
+    np.testing.assert_array_equal(records[:20, REC_REFERENCE], 5.0)
+    np.testing.assert_array_equal(records[20:, REC_REFERENCE], 9.0)
     assert info["reference_speed_rad_s"] == 9.0

@@ -13,16 +13,16 @@ import numpy as np
 import pytest
 
 import drill_env  # noqa: F401  (registers DrillString-v0)
-from baselines.stick_slip_map import (
+from drill_env.evaluation import ZeroAction, rollout
+from experiments.cli import main as cli_main
+from experiments.stick_slip_map import (
     CSV_COLUMNS,
     StickSlipMap,
     compute_map,
     grid_values,
     main,
-    write_csv,
+    write_map_csv,
 )
-from drill_env.cli import main as cli_main
-from drill_env.evaluation import ZeroAction, rollout
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -117,7 +117,7 @@ def test_map_shapes_rows_and_csv(tmp_path: Path) -> None:
     assert result.cells == 6 and not result.diverged.any()
     rows = result.rows()
     assert [r[:2] for r in rows[:3]] == [(60e3, 4.0), (60e3, 12.0), (120e3, 4.0)]  # WOB-major
-    path = write_csv(result, tmp_path / "sub" / "map.csv")
+    path = write_map_csv(result, tmp_path / "sub" / "map.csv")
     with path.open() as f:
         table = list(csv.reader(f))
     assert tuple(table[0]) == CSV_COLUMNS

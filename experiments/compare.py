@@ -30,8 +30,7 @@ Example::
 from __future__ import annotations
 
 import argparse
-import csv
-import json
+import dataclasses
 import math
 import sys
 import time
@@ -39,16 +38,17 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final, NamedTuple
 
-import gymnasium as gym
 import numpy as np
 from tqdm import tqdm
 
-import drill_env  # noqa: F401  (registers DrillString-v0)
-from baselines.registry import controller_names, make_controller
-from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics, rollout
+import baselines  # noqa: F401  (registers the built-in controllers, in their order)
+from drill_env.control import controller_names, make_controller
+from drill_env.evaluation import Trace, ZeroAction, episode_metrics, run_episode
 from drill_env.metrics import METRIC_KEYS
 from drill_env.parameters import PLANT_DT_S, resolve_parameters
-from drill_env.scenarios import UNCERTAINTY_CONDITIONS
+from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, WobProfile
+from experiments.tables import Column, write_csv, write_json
+from experiments.tables import markdown_table as _markdown
 
 __all__ = [
     "CONDITIONS",
@@ -75,12 +75,9 @@ DEFAULT_NOISE_RAD_S: Final = (0.0, 0.1)
 DEFAULT_DURATION_S: Final = 150.0
 """Run length of the paper's protocol, s."""
 
-SCENARIO: Final[dict[str, Any]] = {
-    "randomize": False,
-    "wob_n": 97_347.0,
-    "reference_speed_rad_s": 12.0,
-}
-"""The SPEC section 2 scenario (constant WOB and reference, start at rest)."""
+SCENARIO: Final = Scenario(wob=WobProfile(97_347.0), reference=SpeedProfile.constant(12.0))
+"""The paper's scenario (docs/specification.md section 2): constant WOB and reference, from
+rest; the comparison varies its uncertainty condition, reading and noise."""
 
 _J_DT: Final = resolve_parameters("zribi2024").J_dt
 
@@ -181,13 +178,13 @@ def scenario_kwargs(
     condition: str, noise_std_rad_s: float, duration_s: float, reading: str
 ) -> dict[str, Any]:
     """The ``DrillString-v0`` keywords of one comparison scenario (no controller keywords)."""
-    return {
-        **SCENARIO,
-        "uncertainty": condition,
-        "uncertainty_reading": reading,
-        "noise_std_rad_s": float(noise_std_rad_s),
-        "episode_s": float(duration_s),
-    }
+    scenario = dataclasses.replace(
+        SCENARIO,
+        uncertainty=UNCERTAINTY_CONDITIONS[condition],
+        reading="controller" if reading == "controller" else "plant",
+        noise_std_rad_s=float(noise_std_rad_s),
+    )
+    return {**scenario.keywords(), "episode_s": float(duration_s)}
 
 
 def static_error(trace: Trace, window_s: float = STATIC_WINDOW_S) -> float:
@@ -219,14 +216,6 @@ def _row(
     row["seed"] = seed
     row["duration_s"] = duration_s
     return row
-
-
-def _run(env_kwargs: dict[str, Any], policy: Policy, seed: int) -> Trace:
-    env = gym.make("DrillString-v0", max_episode_steps=-1, **env_kwargs)
-    try:
-        return rollout(env, policy, seed)
-    finally:
-        env.close()
 
 
 def run_comparison(
@@ -274,18 +263,18 @@ def run_comparison(
         if is_agent:
             own = {k: v for k, v in dict(agent.env_kwargs).items() if k != "max_episode_steps"}
             kwargs = {**own, **scenario}
-            trace = _run(kwargs, agent, seed)
+            trace = run_episode(kwargs, agent, seed)
             gain_label = "agent"
         else:
             overrides = preset.get(label)
             controller = make_controller(label, **(overrides or {}))
             kwargs = {**scenario, "base_controller": controller, "control_dt_s": dt}
-            trace = _run(kwargs, ZeroAction(), seed)
+            trace = run_episode(kwargs, ZeroAction(), seed)
             gain_label = gains if overrides is not None else "default"
         metrics = {**episode_metrics(trace), "static_error_rad_s": static_error(trace)}
         rows.append(_row(label, cond, noise, metrics, gain_label, reading, seed, duration_s))
         if keep_traces:
-            from drill_env.plots import downsample, time_window
+            from experiments.plots import downsample, time_window
 
             traces[(label, cond, noise)] = RunTraces(
                 downsample(trace, PLOT_EVERY),
@@ -295,62 +284,34 @@ def run_comparison(
 
 
 # ----------------------------------------------------------------------------- output
-_TABLE_COLUMNS: Final = (
-    ("controller", "controller", "{}"),
-    ("condition", "condition", "{}"),
-    ("noise_std_rad_s", "noise (rad/s)", "{:g}"),
-    ("ise", "ISE", "{:.1f}"),
-    ("iae", "IAE", "{:.1f}"),
-    ("rmse", "RMSE (rad/s)", "{:.3f}"),
-    ("static_error_rad_s", "static error (rad/s)", "{:.2f}"),
-    ("rmsd_nm", "RMSD (N m)", "{:,.0f}"),
-    ("overshoot_pct", "overshoot %", "{:.1f}"),
-    ("settling_time_s", "settling (s)", "{:.1f}"),
-    ("chattering_nm_per_s", "chattering (N m/s)", "{:,.0f}"),
-    ("stick_slip_severity", "severity", "{:.3f}"),
-    ("stuck_fraction", "stuck fraction", "{:.3f}"),
+TABLE_COLUMNS: Final = (
+    Column("controller", "controller", align="left"),
+    Column("condition", "condition", align="left"),
+    Column("noise_std_rad_s", "noise (rad/s)", "{:g}"),
+    Column("ise", "ISE", "{:.1f}"),
+    Column("iae", "IAE", "{:.1f}"),
+    Column("rmse", "RMSE (rad/s)", "{:.3f}"),
+    Column("static_error_rad_s", "static error (rad/s)", "{:.2f}"),
+    Column("rmsd_nm", "RMSD (N m)", "{:,.0f}"),
+    Column("overshoot_pct", "overshoot %", "{:.1f}"),
+    Column("settling_time_s", "settling (s)", "{:.1f}", missing="never"),
+    Column("chattering_nm_per_s", "chattering (N m/s)", "{:,.0f}"),
+    Column("stick_slip_severity", "severity", "{:.3f}"),
+    Column("stuck_fraction", "stuck fraction", "{:.3f}"),
 )
+"""The columns of the comparison's markdown table."""
 
 
-def _cell(row: Mapping[str, Any], key: str, fmt: str) -> str:
-    value = row.get(key)
-    if key == "settling_time_s" and row.get("diverged"):
+def _diverged_cell(row: Mapping[str, Any], column: Column) -> str | None:
+    if column.key == "settling_time_s" and row.get("diverged"):
         return "diverged"
-    if value is None:
-        return "never" if key == "settling_time_s" else "-"
-    return fmt.format(value)
+    return None
 
 
 def markdown_table(rows: Sequence[Mapping[str, Any]]) -> str:
     """The rows as a markdown table (settling ``never``: the run ends outside the 5 % band;
     static error: mean of ``V_ref - w_bit`` over the last 20 s)."""
-    head = "| " + " | ".join(title for _, title, _ in _TABLE_COLUMNS) + " |"
-    rule = "|" + "|".join("---" if k in ("controller", "condition") else "---:" for k, _, _ in _TABLE_COLUMNS) + "|"  # fmt: skip
-    body = [
-        "| " + " | ".join(_cell(r, key, fmt) for key, _, fmt in _TABLE_COLUMNS) + " |" for r in rows
-    ]
-    return "\n".join([head, rule, *body])
-
-
-def write_csv(rows: Sequence[Mapping[str, Any]], path: Path) -> Path:
-    """``rows`` as CSV with the :data:`ROW_KEYS` columns (an empty cell for ``None``)."""
-    with path.open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=ROW_KEYS)
-        writer.writeheader()
-        for r in rows:
-            writer.writerow({k: ("" if r[k] is None else r[k]) for k in ROW_KEYS})
-    return path
-
-
-def write_json(rows: Sequence[Mapping[str, Any]], path: Path) -> Path:
-    """``rows`` as a JSON list of objects (``null`` for ``None``; non-finite numbers as ``null``)."""
-
-    def clean(v: Any) -> Any:
-        return None if isinstance(v, float) and not math.isfinite(v) else v
-
-    data = [{k: clean(r[k]) for k in ROW_KEYS} for r in rows]
-    path.write_text(json.dumps(data, indent=1) + "\n")
-    return path
+    return _markdown(rows, TABLE_COLUMNS, _diverged_cell)
 
 
 def write_figures(
@@ -369,7 +330,7 @@ def write_figures(
       ``bars_chattering.png`` (first condition, with and without noise) (Figs 5, 10-12);
     * ``adaptive_gains.png``: the adaptive gains against time (noise off).
     """
-    from drill_env.plots import (
+    from experiments.plots import (
         plot_adaptive_gains,
         plot_metric_bars,
         plot_panels,
@@ -466,17 +427,17 @@ def write_figures(
 
 
 # ---------------------------------------------------------------------------- the agent
-def load_agent(loader: Callable[[], Any] | None) -> Any:
-    """The agent ``loader()`` returns (a policy with ``predict``, ``env_kwargs`` and ``name``),
-    or ``None``.
+def load_agent(loader: Callable[[], Any] | None = None) -> Any:
+    """The shipped agent (``agents.load_default_policy``, or ``loader()`` when given): a policy
+    with ``predict``, ``env_kwargs`` and ``name``, or ``None``.
 
-    ``None`` when there is no loader (the command line passes ``agents.load_default_policy``
-    when the ``[rl]`` extra is installed; ``baselines`` does not import ``agents``), when the
-    loader needs a missing package, or when no model is shipped; a model that fails to load is
-    reported on standard error and skipped.
+    ``None`` when the loader needs a missing package or no model is shipped; a model that fails
+    to load is reported on standard error and skipped.
     """
     if loader is None:
-        return None
+        from agents import load_default_policy
+
+        loader = load_default_policy
     try:
         policy = loader()
     except ImportError as exc:
@@ -553,7 +514,7 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | None = None) -> int:
     """Run the comparison; print the table; write CSV, JSON and figures. Returns 0.
 
-    ``agent_loader`` returns the learned agent to add as a row (or ``None``).
+    ``agent_loader`` returns the learned agent to add as a row (``None``: the shipped one).
     """
     parser = _parser()
     args = parser.parse_args(argv)
@@ -586,12 +547,15 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     print(
-        f"Scenario: WOB {SCENARIO['wob_n']:,.0f} N, V_ref {SCENARIO['reference_speed_rad_s']:g} "
+        f"Scenario: WOB {SCENARIO.wob.initial_n:,.0f} N, V_ref {SCENARIO.reference.value(0.0):g} "
         f"rad/s, {args.duration:g} s from rest; uncertainty reading '{args.reading}', gains "
         f"'{args.gains}', seed {args.seed}.\n"
     )
     print(markdown_table(rows))
-    written = [write_csv(rows, out / "compare.csv"), write_json(rows, out / "compare.json")]
+    written = [
+        write_csv(rows, out / "compare.csv", ROW_KEYS),
+        write_json([{k: r[k] for k in ROW_KEYS} for r in rows], out / "compare.json"),
+    ]
     if not args.no_plots:
         written += write_figures(rows, traces, out / "figures")
     total = time.perf_counter() - start

@@ -14,8 +14,10 @@ so the base controller alone and the base controller plus the residual see the s
 the same WOB and reference profiles and the same noise samples.
 
 Outputs (``--out``, default ``results/evaluate``): ``heldout.csv`` and ``heldout.json`` (one
-row per scenario and controller), ``summary.json`` (means per controller and the goal check of
-issue 4) and figures under ``figures/`` (bit speed and torque, base controller against
+row per scenario and controller), ``summary.json`` (means per controller, ratios to the base
+controller and whether each agent meets the goal: mean IAE at most 0.7 times the base
+controller's, mean RMSD no higher, lower mean stick-slip severity over the stick-slip-prone
+scenarios) and figures under ``figures/`` (bit speed and torque, base controller against
 residual agent, on the same seeds); a markdown table on standard output.
 
 Examples::
@@ -28,18 +30,16 @@ Examples::
 from __future__ import annotations
 
 import argparse
-import csv
-import json
 import math
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
 
-import gymnasium as gym
 import numpy as np
 
-import drill_env  # noqa: F401  (registers DrillString-v0)
+import baselines  # noqa: F401  (registers the built-in controllers, in their order)
 from agents.policy import (
     DEFAULT_MODEL_DIR,
     DEFAULT_MODEL_NAME,
@@ -47,16 +47,20 @@ from agents.policy import (
     ResidualPolicy,
     load_policy,
 )
-from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics, rollout
+from drill_env.control import controller_names
+from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics, run_episode
 from drill_env.metrics import METRIC_KEYS
+from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, WobProfile
+from experiments.tables import write_csv, write_json
 
 __all__ = [
     "BASE_CONTROLLER",
     "EPISODE_S",
     "HELD_OUT",
+    "HeldOutScenario",
     "evaluate",
     "main",
-    "stick_slip_prone",
+    "run_scenario",
     "summarize",
 ]
 
@@ -68,88 +72,112 @@ NOISE_STD_RAD_S: Final = 0.1
 """Measurement noise on the speeds, rad/s."""
 
 
-def _scenario(
+@dataclass(frozen=True)
+class HeldOutScenario:
+    """One held-out run: its id, its reset seed (which drives the noise), the name of its
+    uncertainty condition and the scenario.
+
+    Attributes:
+        id: ``h01``, ``h02``, ...
+        seed: Reset seed of the run.
+        condition: The paper's parametric-uncertainty condition (``nominal``,
+            ``condition1``..``condition3``).
+        scenario: The scenario (``NOISE_STD_RAD_S`` noise, from rest).
+    """
+
+    id: str
+    seed: int
+    condition: str
+    scenario: Scenario
+
+    @property
+    def reference_speed_rad_s(self) -> float:
+        """The (constant) reference bit speed, rad/s."""
+        return self.scenario.reference.value(0.0)
+
+    @property
+    def prone(self) -> bool:
+        """Stick-slip prone: V_ref <= 6 rad/s, or a WOB of at least 150 kN at some time."""
+        wob = self.scenario.wob
+        wob_max = max(wob.initial_n, wob.final_n or 0.0)
+        return self.reference_speed_rad_s <= 6.0 or wob_max >= 150e3
+
+    def env_kwargs(self) -> dict[str, Any]:
+        """The ``DrillString-v0`` keywords of the run."""
+        return {**self.scenario.keywords(), "episode_s": EPISODE_S}
+
+    def row(self) -> dict[str, Any]:
+        """The scenario's columns of a result row."""
+        wob = self.scenario.wob
+        return {
+            "scenario": self.id,
+            "reference_speed_rad_s": self.reference_speed_rad_s,
+            "wob_n": wob.initial_n,
+            "wob_step_time_s": wob.step_time_s,
+            "wob_final_n": wob.final_n,
+            "uncertainty": self.condition,
+            "seed": self.seed,
+            "prone": self.prone,
+        }
+
+
+def _held_out(
     k: int,
     ref: float,
     wob_kn: float,
     condition: str,
     step: tuple[float, float] | None = None,
-) -> dict[str, Any]:
-    scenario: dict[str, Any] = {
-        "id": f"h{k:02d}",
-        "seed": 9_000 + k,
-        "reference_speed_rad_s": ref,
-        "wob_n": wob_kn * 1e3,
-        "uncertainty": condition,
-    }
+) -> HeldOutScenario:
+    wob = WobProfile(wob_kn * 1e3)
     if step is not None:
-        scenario["wob_step_time_s"] = step[0]
-        scenario["wob_final_n"] = step[1] * 1e3
-    return scenario
+        wob = WobProfile(wob_kn * 1e3, step[0], step[1] * 1e3)
+    scenario = Scenario(
+        wob=wob,
+        reference=SpeedProfile.constant(ref),
+        uncertainty=UNCERTAINTY_CONDITIONS[condition],
+        noise_std_rad_s=NOISE_STD_RAD_S,
+    )
+    return HeldOutScenario(f"h{k:02d}", 9_000 + k, condition, scenario)
 
 
-HELD_OUT: Final[tuple[dict[str, Any], ...]] = (
-    _scenario(1, 4.0, 60.0, "nominal"),
-    _scenario(2, 4.0, 120.0, "condition1", (50.0, 180.0)),
-    _scenario(3, 5.0, 90.0, "condition2"),
-    _scenario(4, 5.0, 160.0, "condition3", (60.0, 100.0)),
-    _scenario(5, 6.0, 200.0, "nominal"),
-    _scenario(6, 6.0, 70.0, "condition2", (40.0, 150.0)),
-    _scenario(7, 7.0, 130.0, "condition1"),
-    _scenario(8, 8.0, 100.0, "nominal", (50.0, 190.0)),
-    _scenario(9, 8.0, 175.0, "condition3"),
-    _scenario(10, 9.0, 65.0, "condition1"),
-    _scenario(11, 10.0, 110.0, "condition2", (60.0, 70.0)),
-    _scenario(12, 10.0, 185.0, "nominal"),
-    _scenario(13, 11.0, 140.0, "condition3", (40.0, 200.0)),
-    _scenario(14, 12.0, 97.347, "nominal"),
-    _scenario(15, 12.0, 155.0, "condition2"),
-    _scenario(16, 13.0, 80.0, "condition1", (50.0, 130.0)),
-    _scenario(17, 14.0, 195.0, "condition1"),
-    _scenario(18, 14.0, 60.0, "condition3"),
-    _scenario(19, 15.0, 125.0, "nominal", (50.0, 165.0)),
-    _scenario(20, 16.0, 170.0, "condition2"),
+HELD_OUT: Final[tuple[HeldOutScenario, ...]] = (
+    _held_out(1, 4.0, 60.0, "nominal"),
+    _held_out(2, 4.0, 120.0, "condition1", (50.0, 180.0)),
+    _held_out(3, 5.0, 90.0, "condition2"),
+    _held_out(4, 5.0, 160.0, "condition3", (60.0, 100.0)),
+    _held_out(5, 6.0, 200.0, "nominal"),
+    _held_out(6, 6.0, 70.0, "condition2", (40.0, 150.0)),
+    _held_out(7, 7.0, 130.0, "condition1"),
+    _held_out(8, 8.0, 100.0, "nominal", (50.0, 190.0)),
+    _held_out(9, 8.0, 175.0, "condition3"),
+    _held_out(10, 9.0, 65.0, "condition1"),
+    _held_out(11, 10.0, 110.0, "condition2", (60.0, 70.0)),
+    _held_out(12, 10.0, 185.0, "nominal"),
+    _held_out(13, 11.0, 140.0, "condition3", (40.0, 200.0)),
+    _held_out(14, 12.0, 97.347, "nominal"),
+    _held_out(15, 12.0, 155.0, "condition2"),
+    _held_out(16, 13.0, 80.0, "condition1", (50.0, 130.0)),
+    _held_out(17, 14.0, 195.0, "condition1"),
+    _held_out(18, 14.0, 60.0, "condition3"),
+    _held_out(19, 15.0, 125.0, "nominal", (50.0, 165.0)),
+    _held_out(20, 16.0, 170.0, "condition2"),
 )
-"""The held-out scenarios: ``id``, reset ``seed`` and ``DrillString-v0`` keywords (WOB in N).
-Each runs ``EPISODE_S`` seconds from rest with ``NOISE_STD_RAD_S`` noise, ``randomize=False``."""
+"""The held-out scenarios: WOB 60-200 kN (eight with one step change), V_ref 4-16 rad/s, the
+four uncertainty conditions, ``NOISE_STD_RAD_S`` noise, ``EPISODE_S`` seconds from rest."""
 
 FIGURE_SCENARIOS: Final = ("h01", "h02", "h08", "h14")
 """Scenarios drawn one by one (bit speed and torque, base against residual)."""
 
 
-def stick_slip_prone(scenario: Mapping[str, Any]) -> bool:
-    """V_ref <= 6 rad/s, or a WOB of at least 150 kN at some time of the run."""
-    wob_max = max(float(scenario["wob_n"]), float(scenario.get("wob_final_n") or 0.0))
-    return float(scenario["reference_speed_rad_s"]) <= 6.0 or wob_max >= 150e3
-
-
-def _env_kwargs(scenario: Mapping[str, Any]) -> dict[str, Any]:
-    kwargs = {k: v for k, v in scenario.items() if k not in ("id", "seed")}
-    return {
-        **kwargs,
-        "randomize": False,
-        "episode_s": EPISODE_S,
-        "noise_std_rad_s": NOISE_STD_RAD_S,
-    }
-
-
-def run_scenario(
-    scenario: Mapping[str, Any], policy: Policy, env_kwargs: Mapping[str, Any]
-) -> Trace:
+def run_scenario(held_out: HeldOutScenario, policy: Policy, env_kwargs: Mapping[str, Any]) -> Trace:
     """One held-out run of ``policy`` in ``DrillString-v0(**scenario, **env_kwargs)``."""
-    kwargs = {**_env_kwargs(scenario), **env_kwargs}
-    # No TimeLimit wrapper: the env truncates itself after episode_s, whatever the period.
-    env = gym.make("DrillString-v0", max_episode_steps=-1, **kwargs)
-    try:
-        return rollout(env, policy, int(scenario["seed"]))
-    finally:
-        env.close()
+    return run_episode({**held_out.env_kwargs(), **env_kwargs}, policy, held_out.seed)
 
 
 def evaluate(
     agents: Sequence[ResidualPolicy],
     controllers: Sequence[str] | None = None,
-    scenarios: Sequence[Mapping[str, Any]] = HELD_OUT,
+    scenarios: Sequence[HeldOutScenario] = HELD_OUT,
     keep_traces: Sequence[str] = (),
     progress: bool = False,
 ) -> tuple[list[dict[str, Any]], dict[tuple[str, str], Trace]]:
@@ -167,8 +195,6 @@ def evaluate(
         One row per (scenario, controller or agent) with the scenario, ``prone`` and the metrics;
         and the kept traces by (scenario id, label).
     """
-    from baselines import controller_names
-
     names = list(controller_names() if controllers is None else controllers)
     # Controllers run with the first agent's decision period: the same noise stream, and a
     # zero residual is then exactly the agent's base controller.
@@ -191,22 +217,10 @@ def evaluate(
         for label, policy, kwargs in jobs:
             trace = run_scenario(scenario, policy, kwargs)
             metrics = episode_metrics(trace)
-            rows.append(
-                {
-                    "scenario": scenario["id"],
-                    "controller": label,
-                    "reference_speed_rad_s": scenario["reference_speed_rad_s"],
-                    "wob_n": scenario["wob_n"],
-                    "wob_step_time_s": scenario.get("wob_step_time_s"),
-                    "wob_final_n": scenario.get("wob_final_n"),
-                    "uncertainty": scenario["uncertainty"],
-                    "seed": scenario["seed"],
-                    "prone": stick_slip_prone(scenario),
-                    **metrics,
-                }
-            )
+            row = scenario.row()
+            rows.append({"scenario": row.pop("scenario"), "controller": label, **row, **metrics})
             if label in keep_traces:
-                traces[(str(scenario["id"]), label)] = trace
+                traces[(scenario.id, label)] = trace
             if bar is not None:
                 bar.update()
     if bar is not None:
@@ -220,7 +234,7 @@ def _mean(values: Sequence[float | None]) -> float:
 
 
 def summarize(rows: Sequence[Mapping[str, Any]], base: str = BASE_CONTROLLER) -> dict[str, Any]:
-    """Means per controller, ratios to ``base`` and the goal check of issue 4.
+    """Means per controller, ratios to ``base`` and whether each meets the goal.
 
     The goal, per agent: mean IAE at most 0.7 x the base controller's, mean RMSD no higher, and
     a lower mean stick-slip severity over the stick-slip-prone scenarios.
@@ -305,15 +319,12 @@ def write_outputs(
     rows: Sequence[Mapping[str, Any]], summary: Mapping[str, Any], out: Path
 ) -> list[Path]:
     """``heldout.csv``, ``heldout.json`` and ``summary.json`` in ``out``."""
-    out.mkdir(parents=True, exist_ok=True)
     keys = list(rows[0]) if rows else []
-    with (out / "heldout.csv").open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=keys)
-        writer.writeheader()
-        writer.writerows(rows)
-    (out / "heldout.json").write_text(json.dumps(list(rows), indent=1) + "\n")
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    return [out / "heldout.csv", out / "heldout.json", out / "summary.json"]
+    return [
+        write_csv(rows, out / "heldout.csv", keys),
+        write_json(list(rows), out / "heldout.json"),
+        write_json(summary, out / "summary.json", indent=2),
+    ]
 
 
 def write_figures(
@@ -324,7 +335,7 @@ def write_figures(
 ) -> list[Path]:
     """Bit speed and torque (base against agents) per chosen scenario, small multiples of all
     scenarios, and IAE per scenario."""
-    from drill_env.plots import downsample, plot_metric_bars, plot_panels, plot_speed_and_torque
+    from experiments.plots import downsample, plot_metric_bars, plot_panels, plot_speed_and_torque
 
     paths: list[Path] = []
     scenario_ids = list(dict.fromkeys(r["scenario"] for r in rows))
@@ -421,13 +432,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         for a, p in zip(agents, paths, strict=True):
             a.name = f"{a.name}:{p}"
         labels = [a.name for a in agents]
-    scenarios: Sequence[Mapping[str, Any]] = HELD_OUT
+    scenarios: Sequence[HeldOutScenario] = HELD_OUT
     if args.scenarios:
-        known = {s["id"] for s in HELD_OUT}
+        known = {s.id for s in HELD_OUT}
         unknown = sorted(set(args.scenarios) - known)
         if unknown:
             parser.error(f"unknown scenario id(s) {unknown}: valid {sorted(known)}")
-        scenarios = [s for s in HELD_OUT if s["id"] in args.scenarios]
+        scenarios = [s for s in HELD_OUT if s.id in args.scenarios]
     out = Path(args.out)
     t0 = time.perf_counter()
     base_names = sorted({a.env_kwargs.get("base_controller") or BASE_CONTROLLER for a in agents})

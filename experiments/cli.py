@@ -11,16 +11,15 @@ from __future__ import annotations
 
 import importlib
 import sys
-from collections.abc import Callable, Sequence
-from typing import Any
+from collections.abc import Sequence
 
 __all__ = ["main"]
 
 SUBCOMMANDS = {
-    "compare": ("baselines.compare", "Compare the controllers on the paper's scenarios."),
-    "map": ("baselines.stick_slip_map", "Stick-slip map over WOB x reference speed."),
+    "compare": ("experiments.compare", "Compare the controllers on the paper's scenarios."),
+    "map": ("experiments.stick_slip_map", "Stick-slip map over WOB x reference speed."),
     "train": ("agents.train", "Train the residual PPO agent."),
-    "evaluate": ("agents.evaluate", "Evaluate a trained agent against the baselines."),
+    "evaluate": ("experiments.evaluate", "Evaluate a trained agent against the baselines."),
 }
 
 
@@ -42,22 +41,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"drill-gym: unknown subcommand {name!r}\n\n{_usage()}", file=sys.stderr)
         return 2
     module = importlib.import_module(SUBCOMMANDS[name][0])
-    if name == "compare":
-        return int(module.main(rest, agent_loader=_agent_loader()) or 0)
     return int(module.main(rest) or 0)
-
-
-def _agent_loader() -> Callable[[], Any] | None:
-    """``agents.load_default_policy`` when the agents package imports, else ``None``.
-
-    The command line is where the packages meet: ``baselines`` never imports ``agents``."""
-    try:
-        agents = importlib.import_module("agents")
-    except ImportError as exc:
-        print(f"drill-gym: no learned agent ({exc})", file=sys.stderr)
-        return None
-    loader: Callable[[], Any] | None = getattr(agents, "load_default_policy", None)
-    return loader
 
 
 if __name__ == "__main__":  # pragma: no cover

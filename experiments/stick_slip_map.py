@@ -12,9 +12,10 @@ the start-up transient, over the last ``window_s`` seconds (40 s by default, lon
   stick-slip, near 0 steady rotation;
 * ``stuck_fraction``: the share of plant steps with the bit stuck.
 
-All cells run together on the batched engine (:class:`drill_env.batch.StringBatch`, numba
-threads), in chunks of up to 1 s; only running maxima, minima and sums over the window are
-kept, so memory does not grow with the run length.
+All cells run together as the strings of one native vector env (``gym.make_vec``: one
+compiled call per step, numba threads), in decision periods of up to 1 s; only running
+maxima, minima and sums over the window are kept
+(:class:`drill_env.metrics.WindowStatistics`), so memory does not grow with the run length.
 
 Command line (see ``drill-gym map --help``)::
 
@@ -29,7 +30,6 @@ controllers also ``stick_slip_maps.png`` with all of them side by side.
 from __future__ import annotations
 
 import argparse
-import csv
 import math
 import time
 from collections.abc import Sequence
@@ -37,20 +37,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
 
+import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
-from matplotlib.axes import Axes
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.colors import Normalize
-from matplotlib.figure import Figure
 from tqdm import tqdm
 
-from baselines.registry import controller_names
-from drill_env import kernel
-from drill_env.batch import StringBatch
-from drill_env.config import EnvConfig
+import baselines  # noqa: F401  (registers the built-in controllers, in their order)
+from drill_env.control import controller_names
+from drill_env.evaluation import reset_each
+from drill_env.limits import MAX_REFERENCE_RAD_S, MAX_WOB_N
+from drill_env.metrics import WindowStatistics
 from drill_env.parameters import PLANT_DT_S, PRESETS
-from drill_env.scenarios import MAX_REFERENCE_RAD_S, MAX_WOB_N
+from experiments.plots import plot_map, plot_maps
+from experiments.tables import write_csv
 
 __all__ = [
     "CSV_COLUMNS",
@@ -58,9 +57,7 @@ __all__ = [
     "compute_map",
     "grid_values",
     "main",
-    "plot_map",
-    "plot_maps",
-    "write_csv",
+    "write_map_csv",
 ]
 
 CSV_COLUMNS: Final = ("wob_n", "reference_speed_rad_s", "stick_slip_severity", "stuck_fraction")
@@ -70,11 +67,8 @@ DEFAULT_WINDOW_S: Final = 40.0
 """Analysis window at the end of each run, s (longer than one stick-slip period)."""
 MAX_CHUNK_STEPS: Final = 1000
 """Plant steps per compiled call (1 s): bounds the memory of the per-step records."""
-SEVERITY_LIMIT: Final = 2.0
-"""Upper end of the severity colour scale (larger values show in the top colour)."""
 UNSTABLE_SEVERITY: Final = 0.5
 """A cell counts as stick-slipping when its severity exceeds this or its bit ever sticks."""
-DPI: Final = 80
 
 
 @dataclass(frozen=True)
@@ -240,7 +234,12 @@ def compute_map(
         raise ValueError(f"noise_std_rad_s = {noise_std_rad_s!r} is out of range: allowed [0, 10]")
 
     chunk = _chunk_steps(total_steps)
-    config = EnvConfig(
+    cells = [(float(w), float(v)) for w in wobs for v in speeds]
+    n = len(cells)
+    started = time.perf_counter()
+    venv = gym.make_vec(
+        "DrillString-v0",
+        num_envs=n,
         parameters=parameters,
         randomize=False,
         base_controller=controller,
@@ -248,18 +247,15 @@ def compute_map(
         episode_s=total_steps * PLANT_DT_S,
         noise_std_rad_s=float(noise_std_rad_s),
     )
-    cells = [(float(w), float(v)) for w in wobs for v in speeds]
-    n = len(cells)
-    started = time.perf_counter()
-    batch = StringBatch(config, n)
-    for i, (w, v) in enumerate(cells):
-        batch.reset_string(i, seed + i, {"wob_n": w, "reference_speed_rad_s": v})
+    reset_each(
+        venv,
+        [seed + i for i in range(n)],
+        [{"wob_n": w, "reference_speed_rad_s": v} for w, v in cells],
+    )
     window_start = total_steps - round(window_s / PLANT_DT_S)
-    high = np.full(n, -np.inf)
-    low = np.full(n, np.inf)
-    total = np.zeros(n)
-    stuck = np.zeros(n)
-    actions = np.zeros(n)
+    stats = WindowStatistics(n)
+    diverged = np.zeros(n, dtype=bool)
+    actions = np.zeros((n, 1), dtype=np.float32)
     n_chunks = total_steps // chunk
     bar = tqdm(
         total=n_chunks,
@@ -270,25 +266,20 @@ def compute_map(
     )
     with bar:
         for k in range(n_chunks):
-            batch.step(actions)
+            _, _, terminated, _, _ = venv.step(actions)
+            diverged |= terminated
             bar.update()
             first = max(window_start - k * chunk, 0)
             if first >= chunk:
                 continue
-            rec = batch.records[:, first:]
-            bit = rec[:, :, kernel.REC_X0 + 6]
-            np.maximum(high, bit.max(axis=1), out=high)
-            np.minimum(low, bit.min(axis=1), out=low)
-            total += bit.sum(axis=1)
-            stuck += rec[:, :, kernel.REC_STUCK].sum(axis=1)
-    samples = total_steps - window_start
-    mean = total / samples
-    with np.errstate(divide="ignore", invalid="ignore"):
-        severity = np.where(mean > 0, (high - low) / (2.0 * mean), 1.0)
-    stuck_fraction = stuck / samples
-    bad = batch.status != kernel.STATUS_OK
-    severity[bad] = np.nan
-    stuck_fraction[bad] = np.nan
+            samples = venv.unwrapped.plant_samples()  # type: ignore[attr-defined]
+            stats.add(samples.bit_speed_rad_s[:, first:], samples.bit_stuck[:, first:])
+    venv.close()
+    severity = stats.severity()
+    stuck_fraction = stats.stuck_fraction()
+    severity[diverged] = np.nan
+    stuck_fraction[diverged] = np.nan
+    samples_in_window = stats.samples
     shape = (wobs.size, speeds.size)
     return StickSlipMap(
         controller=controller,
@@ -297,7 +288,7 @@ def compute_map(
         severity=severity.reshape(shape),
         stuck_fraction=stuck_fraction.reshape(shape),
         duration_s=total_steps * PLANT_DT_S,
-        window_s=samples * PLANT_DT_S,
+        window_s=samples_in_window * PLANT_DT_S,
         noise_std_rad_s=float(noise_std_rad_s),
         seed=int(seed),
         parameters=parameters,
@@ -305,102 +296,10 @@ def compute_map(
     )
 
 
-def write_csv(result: StickSlipMap, path: str | Path) -> Path:
-    """Write the map as CSV (``CSV_COLUMNS``, one row per cell) and return the path."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(CSV_COLUMNS)
-        for row in result.rows():
-            writer.writerow([f"{v:.6g}" for v in row])
-    return path
-
-
-def _edges(values: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    """Cell edges around grid centres (a unit-wide cell around a single value)."""
-    if values.size == 1:
-        half = 0.05 * values[0]
-        return np.array([values[0] - half, values[0] + half])
-    mid = 0.5 * (values[1:] + values[:-1])
-    return np.concatenate(([2 * values[0] - mid[0]], mid, [2 * values[-1] - mid[-1]]))
-
-
-def _heatmap(ax: Axes, result: StickSlipMap, quantity: str, title: str) -> object:
-    if quantity == "severity":
-        data, norm, cmap = result.severity, Normalize(0.0, SEVERITY_LIMIT), "magma"
-    else:
-        data, norm, cmap = result.stuck_fraction, Normalize(0.0, 1.0), "viridis"
-    mesh = ax.pcolormesh(
-        _edges(result.reference_speed_rad_s),
-        _edges(result.wob_n) / 1e3,
-        np.ma.masked_invalid(data),
-        cmap=cmap,
-        norm=norm,
-        shading="flat",
-    )
-    unstable = result.unstable()
-    if unstable.any() and not unstable.all() and min(data.shape) > 1:
-        ax.contour(
-            result.reference_speed_rad_s,
-            result.wob_n / 1e3,
-            unstable.astype(float),
-            levels=[0.5],
-            colors="white",
-            linewidths=1.0,
-        )
-    ax.set_title(title, fontsize=9)
-    ax.set_xlabel("reference bit speed (rad/s)")
-    ax.set_ylabel("WOB (kN)")
-    return mesh
-
-
-def plot_map(result: StickSlipMap, path: str | Path) -> Path:
-    """Severity and stuck-fraction heatmaps of one map in one PNG; returns the path."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig = Figure(figsize=(9.0, 3.6), dpi=DPI, layout="constrained")
-    FigureCanvasAgg(fig)
-    axes = fig.subplots(1, 2)
-    labels = {"severity": "stick-slip severity", "stuck": "stuck fraction"}
-    for ax, quantity in zip(axes, ("severity", "stuck"), strict=True):
-        mesh = _heatmap(ax, result, quantity, f"{result.controller}: {labels[quantity]}")
-        fig.colorbar(mesh, ax=ax, extend="max" if quantity == "severity" else "neither")  # type: ignore[arg-type]
-    fig.suptitle(_caption(result), fontsize=8)
-    fig.savefig(path)
-    return path
-
-
-def plot_maps(results: Sequence[StickSlipMap], path: str | Path) -> Path:
-    """All maps side by side: one column per controller, severity above stuck fraction."""
-    if not results:
-        raise ValueError("plot_maps needs at least one map")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    n = len(results)
-    fig = Figure(figsize=(2.9 * n + 1.2, 5.6), dpi=DPI, layout="constrained")
-    FigureCanvasAgg(fig)
-    axes = np.asarray(fig.subplots(2, n, squeeze=False, sharex=True, sharey=True))
-    meshes = []
-    for col, result in enumerate(results):
-        meshes.append(_heatmap(axes[0, col], result, "severity", f"{result.controller}"))
-        last = _heatmap(axes[1, col], result, "stuck", f"{result.controller}")
-        if col:
-            axes[0, col].set_ylabel("")
-            axes[1, col].set_ylabel("")
-        axes[0, col].set_xlabel("")
-    fig.colorbar(meshes[-1], ax=list(axes[0]), extend="max", label="stick-slip severity")  # type: ignore[arg-type]
-    fig.colorbar(last, ax=list(axes[1]), label="stuck fraction")  # type: ignore[arg-type]
-    fig.suptitle(_caption(results[0]) + "; white line: stick-slip boundary", fontsize=8)
-    fig.savefig(path)
-    return path
-
-
-def _caption(result: StickSlipMap) -> str:
-    return (
-        f"{result.parameters}, runs of {result.duration_s:g} s from rest, last "
-        f"{result.window_s:g} s analysed, noise {result.noise_std_rad_s:g} rad/s"
-    )
+def write_map_csv(result: StickSlipMap, path: str | Path) -> Path:
+    """Write the map as CSV (``CSV_COLUMNS``, one row per cell, 6 significant digits)."""
+    rows = [{k: f"{v:.6g}" for k, v in zip(CSV_COLUMNS, row, strict=True)} for row in result.rows()]
+    return write_csv(rows, Path(path), CSV_COLUMNS)
 
 
 # ---------------------------------------------------------------------------- command line
@@ -503,7 +402,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             parameters=args.parameters,
             progress=not args.no_progress,
         )
-        csv_path = write_csv(result, args.out / f"stick_slip_map_{name}.csv")
+        csv_path = write_map_csv(result, args.out / f"stick_slip_map_{name}.csv")
         png_path = plot_map(result, args.out / f"stick_slip_map_{name}.png")
         simulated = result.cells * result.duration_s
         print(

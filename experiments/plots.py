@@ -1,5 +1,5 @@
-"""Figures of episode traces and metric tables, shared by the comparison, the stick-slip map
-and the agent evaluation.
+"""The studies' figures: episode traces and metric tables (comparison, held-out evaluation),
+stick-slip maps, and training learning curves.
 
 Every function draws one PNG with matplotlib's object-oriented API on the Agg canvas (no
 ``pyplot``, no global state, safe in worker processes) and returns the path it wrote. Traces
@@ -11,27 +11,37 @@ alias a torque that switches at every 1 ms step into a flat line.
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 import numpy.typing as npt
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 
 from drill_env.evaluation import Trace
 
+if TYPE_CHECKING:  # pragma: no cover
+    from experiments.stick_slip_map import StickSlipMap
+
 __all__ = [
     "METRIC_LABELS",
+    "SEVERITY_LIMIT",
     "downsample",
     "plot_adaptive_gains",
+    "plot_learning_curves",
+    "plot_map",
+    "plot_maps",
     "plot_metric_bars",
     "plot_panels",
     "plot_speed_and_torque",
+    "read_csv_columns",
     "time_window",
 ]
 
@@ -50,6 +60,8 @@ METRIC_LABELS: Final[dict[str, str]] = {
 
 DPI: Final = 80
 """Resolution of every figure, dots per inch (small files, quick to write)."""
+SEVERITY_LIMIT: Final = 2.0
+"""Upper end of the stick-slip severity colour scale (larger values show in the top colour)."""
 
 _MARGINS: Final = {"left": 0.1, "right": 0.97, "bottom": 0.1, "top": 0.9, "hspace": 0.12}
 
@@ -381,3 +393,155 @@ def plot_metric_bars(
     if title:
         fig.suptitle(title)
     return _save(fig, path)
+
+
+# ------------------------------------------------------------------- stick-slip maps
+def _edges(values: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """Cell edges around grid centres (a unit-wide cell around a single value)."""
+    if values.size == 1:
+        half = 0.05 * values[0]
+        return np.array([values[0] - half, values[0] + half])
+    mid = 0.5 * (values[1:] + values[:-1])
+    return np.concatenate(([2 * values[0] - mid[0]], mid, [2 * values[-1] - mid[-1]]))
+
+
+def _heatmap(ax: Axes, result: StickSlipMap, quantity: str, title: str) -> object:
+    if quantity == "severity":
+        data, norm, cmap = result.severity, Normalize(0.0, SEVERITY_LIMIT), "magma"
+    else:
+        data, norm, cmap = result.stuck_fraction, Normalize(0.0, 1.0), "viridis"
+    mesh = ax.pcolormesh(
+        _edges(result.reference_speed_rad_s),
+        _edges(result.wob_n) / 1e3,
+        np.ma.masked_invalid(data),
+        cmap=cmap,
+        norm=norm,
+        shading="flat",
+    )
+    unstable = result.unstable()
+    if unstable.any() and not unstable.all() and min(data.shape) > 1:
+        ax.contour(
+            result.reference_speed_rad_s,
+            result.wob_n / 1e3,
+            unstable.astype(float),
+            levels=[0.5],
+            colors="white",
+            linewidths=1.0,
+        )
+    ax.set_title(title, fontsize=9)
+    ax.set_xlabel("reference bit speed (rad/s)")
+    ax.set_ylabel("WOB (kN)")
+    return mesh
+
+
+def plot_map(result: StickSlipMap, path: str | Path) -> Path:
+    """Severity and stuck-fraction heatmaps of one map in one PNG; returns the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig = Figure(figsize=(9.0, 3.6), dpi=DPI, layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, 2)
+    labels = {"severity": "stick-slip severity", "stuck": "stuck fraction"}
+    for ax, quantity in zip(axes, ("severity", "stuck"), strict=True):
+        mesh = _heatmap(ax, result, quantity, f"{result.controller}: {labels[quantity]}")
+        fig.colorbar(mesh, ax=ax, extend="max" if quantity == "severity" else "neither")  # type: ignore[arg-type]
+    fig.suptitle(_caption(result), fontsize=8)
+    fig.savefig(path)
+    return path
+
+
+def plot_maps(results: Sequence[StickSlipMap], path: str | Path) -> Path:
+    """All maps side by side: one column per controller, severity above stuck fraction."""
+    if not results:
+        raise ValueError("plot_maps needs at least one map")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    n = len(results)
+    fig = Figure(figsize=(2.9 * n + 1.2, 5.6), dpi=DPI, layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = np.asarray(fig.subplots(2, n, squeeze=False, sharex=True, sharey=True))
+    meshes = []
+    for col, result in enumerate(results):
+        meshes.append(_heatmap(axes[0, col], result, "severity", f"{result.controller}"))
+        last = _heatmap(axes[1, col], result, "stuck", f"{result.controller}")
+        if col:
+            axes[0, col].set_ylabel("")
+            axes[1, col].set_ylabel("")
+        axes[0, col].set_xlabel("")
+    fig.colorbar(meshes[-1], ax=list(axes[0]), extend="max", label="stick-slip severity")  # type: ignore[arg-type]
+    fig.colorbar(last, ax=list(axes[1]), label="stuck fraction")  # type: ignore[arg-type]
+    fig.suptitle(_caption(results[0]) + "; white line: stick-slip boundary", fontsize=8)
+    fig.savefig(path)
+    return path
+
+
+def _caption(result: StickSlipMap) -> str:
+    return (
+        f"{result.parameters}, runs of {result.duration_s:g} s from rest, last "
+        f"{result.window_s:g} s analysed, noise {result.noise_std_rad_s:g} rad/s"
+    )
+
+
+# -------------------------------------------------------------------- learning curves
+def read_csv_columns(path: str | Path) -> dict[str, list[float]]:
+    """Columns of a CSV file as floats (empty cells become NaN)."""
+    columns: dict[str, list[float]] = {}
+    with Path(path).open(newline="") as f:
+        for row in csv.DictReader(f):
+            for key, value in row.items():
+                columns.setdefault(key, []).append(
+                    float(value) if value not in ("", None) else math.nan
+                )
+    return columns
+
+
+def plot_learning_curves(runs: Mapping[str, str | Path], path: str | Path, title: str = "") -> Path:
+    """Validation mean IAE and RMSD relative to the proposed SMC, and the training return,
+    against decisions, for each run folder.
+
+    Args:
+        runs: Label -> run folder (with ``validation.csv`` and ``progress*.csv``).
+        path: PNG file to write.
+        title: Figure title.
+
+    Returns:
+        ``path``.
+    """
+    fig = Figure(figsize=(8.0, 6.0), dpi=80, layout="constrained")
+    FigureCanvasAgg(fig)
+    ax_iae, ax_rmsd, ax_ret = fig.subplots(3, 1, sharex=True)
+    for label, folder in runs.items():
+        run = Path(folder)
+        validation = run / "validation.csv"
+        if validation.is_file():
+            v = read_csv_columns(validation)
+            steps = [s / 1e6 for s in v["timesteps"]]
+            ax_iae.plot(steps, v["iae_ratio"], marker="o", ms=3, label=label)
+            ax_rmsd.plot(steps, v["rmsd_ratio"], marker="o", ms=3, label=label)
+        xs: list[float] = []
+        ys: list[float] = []
+        for progress in sorted(run.glob("progress*.csv")):
+            p = read_csv_columns(progress)
+            if "rollout/ep_rew_mean" in p:
+                xs += [s / 1e6 for s in p["time/total_timesteps"]]
+                ys += p["rollout/ep_rew_mean"]
+        if xs:
+            pairs = sorted(zip(xs, ys, strict=True))
+            ax_ret.plot([a for a, _ in pairs], [b for _, b in pairs], lw=1.0, label=label)
+    ax_iae.axhline(1.0, color="k", lw=0.8, ls="--")
+    ax_iae.axhline(0.7, color="tab:red", lw=0.8, ls=":", label="goal (0.7)")
+    ax_iae.set_ylabel("mean IAE / proposed")
+    ax_iae.set_yscale("log")
+    ax_rmsd.axhline(1.0, color="k", lw=0.8, ls="--")
+    ax_rmsd.set_ylabel("mean RMSD / proposed")
+    ax_ret.set_ylabel("training return\n(each run's reward)")
+    ax_ret.set_xlabel("decisions (millions)")
+    for ax in (ax_iae, ax_rmsd, ax_ret):
+        ax.grid(True, alpha=0.3)
+    ax_iae.legend(fontsize="small")
+    if title:
+        fig.suptitle(title)
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=80)
+    return out
