@@ -17,7 +17,6 @@ from baselines import make_controller
 from drill_env.integration import plant_step
 from drill_env.parameters import PRESETS, plant_parameter_vector
 from drill_env.rewards import TERMS
-from drill_env.vector import DrillStringVectorEnv
 
 ENV_ID = "DrillString-v0"
 MODES = {
@@ -334,31 +333,6 @@ def test_residual_observation_carries_base_controller() -> None:
 
 
 # --------------------------------------------------------------------------- vector env
-@pytest.mark.parametrize("mode", sorted(MODES))
-def test_make_vec_gives_native_vector_env(mode: str) -> None:
-    """``gym.make_vec`` builds the native vector env, which resets and steps."""
-    venv = gym.make_vec(ENV_ID, num_envs=3, **MODES[mode])
-    assert isinstance(venv, DrillStringVectorEnv)
-    assert venv.num_envs == 3
-    assert venv.single_observation_space == gym.spaces.Box(-50, 50, (OBS_SIZE[mode],), np.float32)
-    assert venv.single_action_space == gym.spaces.Box(-1, 1, (1,), np.float32)
-    obs, infos = venv.reset(seed=0)
-    assert obs.shape == (3, OBS_SIZE[mode])
-    assert obs.dtype == np.float32
-    for _ in range(5):
-        obs, rewards, terminated, truncated, infos = venv.step(np.zeros((3, 1), np.float32))
-    assert obs.shape == (3, OBS_SIZE[mode])
-    assert venv.observation_space.contains(obs)
-    assert rewards.shape == terminated.shape == truncated.shape == (3,)
-    assert np.all((rewards >= -1.0) & (rewards <= 0.0))
-    assert not terminated.any() and not truncated.any()
-    for key in REQUIRED_INFO_KEYS:
-        assert infos[key].shape == (3,)
-    np.testing.assert_allclose(infos["time_s"], 0.25)
-    venv.close()
-
-
-# ---------------------------------------------------------------------- reset options
 def test_reset_options_override_one_episode() -> None:
     """``reset(options=...)`` changes the scenario for that episode only."""
     env = make(randomize=False, noise_std_rad_s=0.0, episode_s=1.0)
@@ -458,38 +432,3 @@ def test_make_sets_the_time_limit_from_the_keywords() -> None:
         steps += 1
     assert steps == 3000
     assert info["time_s"] == pytest.approx(3.0)
-
-
-def test_vector_env_of_one_takes_its_batched_action_shape() -> None:
-    """``make_vec(num_envs=1)`` steps with actions of its own space's shape (1, 1)."""
-    venv = gym.make_vec("DrillString-v0", num_envs=1)
-    venv.reset(seed=0)
-    assert venv.action_space.shape == (1, 1)
-    obs, *_ = venv.step(np.zeros((1, 1), dtype=np.float32))
-    assert obs.shape == (1, 9)
-    with pytest.raises(ValueError, match=r"action must have shape \(1, 1\)"):
-        venv.step(np.zeros((2, 1), dtype=np.float32))
-
-
-def test_vector_env_partial_reset_matches_a_single_env() -> None:
-    """``reset(options={"reset_mask": m})`` starts new episodes only where ``m`` is True; a
-    string so reset continues exactly like a single env reset without a seed."""
-    venv = gym.make_vec("DrillString-v0", num_envs=2)
-    single = gym.make("DrillString-v0")
-    venv.reset(seed=10)
-    single.reset(seed=11)
-    action = np.full((2, 1), 0.1, dtype=np.float32)
-    for _ in range(5):
-        obs_before, *_ = venv.step(action)
-        single.step(action[1])
-    obs, info = venv.reset(options={"reset_mask": np.array([False, True])})
-    single_obs, single_info = single.reset()
-    np.testing.assert_array_equal(obs[0], obs_before[0])  # string 0 untouched
-    np.testing.assert_array_equal(obs[1], single_obs)
-    assert info["wob_n"][1] == single_info["wob_n"]
-    for _ in range(5):
-        obs, *_ = venv.step(action)
-        single_obs, *_ = single.step(action[1])
-    np.testing.assert_array_equal(obs[1], single_obs)
-    with pytest.raises(ValueError, match="reset_mask must be a bool array of shape"):
-        venv.reset(options={"reset_mask": np.array([1, 0])})
