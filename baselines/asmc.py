@@ -15,7 +15,7 @@ __all__ = ["asmc_law", "ASMC", "ASMCGains"]
 
 @dataclass(frozen=True)
 class ASMCGains(SurfaceGains):
-    """Gains of the ASMC (Table 1; ``k0`` from SPEC section 3).
+    """Gains of the ASMC (Table 1; ``k0`` from docs/specification.md section 3).
 
     Attributes:
         mu11: Adaptation rate, N m s^-1 (rad/s)^-1 (> 0).

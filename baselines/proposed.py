@@ -16,7 +16,7 @@ __all__ = ["proposed_law", "ProposedASMC", "ProposedGains"]
 
 @dataclass(frozen=True)
 class ProposedGains(SurfaceGains):
-    """Gains of the proposed controller (Table 1; ``k0`` from SPEC section 3).
+    """Gains of the proposed controller (Table 1; ``k0`` from docs/specification.md section 3).
 
     Attributes:
         mu1: Adaptation rate (> 0).

@@ -4,7 +4,7 @@ The industry stick-slip controllers (:mod:`baselines.soft_speed`, :mod:`baseline
 tuned from two numbers of the string: its lowest torsional natural frequency with the bit stuck
 (the *stick-slip frequency*) and the *characteristic impedance* of the drill pipe. For a real,
 continuous pipe they come from wave mechanics; here they are computed from the 4-DOF lumped
-model of SPEC section 1, in plain numpy (never inside the compiled loop).
+model of docs/specification.md section 1, in plain numpy (never inside the compiled loop).
 
 Characteristic impedance. A uniform pipe of length ``L``, polar moment ``I_p``, shear modulus
 ``G`` and density ``rho`` has the torsional wave impedance ``zeta = I_p sqrt(G rho)`` (torque

@@ -1,6 +1,6 @@
 """Wall time of ``drill-gym map``: the default 20 x 16 grid of 100 s runs, per controller.
 
-Prints, for each controller, the wall time of :func:`baselines.stick_slip_map.compute_map` on
+Prints, for each controller, the wall time of :func:`experiments.stick_slip_map.compute_map` on
 the default grid (WOB 40-200 kN x 16 reference speeds 1-16 rad/s, runs of 100 s from rest),
 the simulated seconds per wall second (cells x 100 s / wall time) and the ratio to the
 target of 60 s. Numba's compilation is warmed up first on a one-cell map, so the numbers are
@@ -19,7 +19,7 @@ import time
 import numba
 import numpy as np
 
-from baselines.stick_slip_map import compute_map
+from experiments.stick_slip_map import compute_map
 
 TARGET_S = 60.0
 """The issue's budget for the default 20 x 16 grid of 100 s runs on 2 cores, s."""

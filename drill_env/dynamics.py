@@ -1,4 +1,4 @@
-"""State derivative of the 4-DOF torsional drill string (SPEC section 1, paper eq. 28).
+"""State derivative of the 4-DOF torsional drill string (docs/specification.md section 1, paper eq. 28).
 
 State ``x = (w_dt, phi_dt - phi_pi, w_pi, phi_pi - phi_co, w_co, phi_co - phi_bi, w_bi)``:
 speeds in rad/s, twists in rad. The plant parameter vector ``p`` is the one packed by

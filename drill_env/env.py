@@ -71,9 +71,9 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
     A top drive turns a drill string of pipes, collars (BHA) and a bit; the bit rubs on rock
     with Karnopp friction, which drops from the static ``T_a = mu_a WOB R`` to the sliding
     ``T_0 = mu_0 WOB R``. The agent sets the top-drive torque so that the bit turns at the
-    reference speed without sticking. The plant is SPEC section 1 (Zribi, Sidhom & Gharib 2024,
-    eq. 27-29), integrated at 1 ms with event-located stick and break-away; the torque is held
-    over each ``control_dt_s`` decision period.
+    reference speed without sticking. The plant is docs/specification.md section 1 (Zribi,
+    Sidhom & Gharib 2024, eq. 27-29), integrated at 1 ms with event-located stick and
+    break-away; the torque is held over each ``control_dt_s`` decision period.
 
     ## Action Space
     ``Box(-1, 1, (1,), float32)``; out-of-range values are clipped and counted in ``info``, and
@@ -88,7 +88,7 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
 
     ## Observation Space
     ``Box(-50, 50, (9,), float32)``, or ``(11,)`` in residual mode; each entry is a physical
-    value divided by its scale (``drill_env.observation``) and clipped to +-50.
+    value divided by its scale (``drill_env.layout.observation_fields``) and clipped to +-50.
 
     | index | observation | scale |
     |---|---|---|
@@ -102,11 +102,13 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
     ## Rewards
     Per decision period, with ``e = V_ref - w_bit`` (true bit speed) at every plant step:
 
-    ``r = -(w_t T + w_c C + w_s S) / (w_t + w_c + w_s)``, in ``[-1, 0]``, where
-    ``T = mean(min(|e| / max(V_ref, 1 rad/s), 1))`` (tracking), ``C = min(TV(u) / 5000 N m, 1)``
-    (chattering: total variation of the applied torque) and ``S`` the share of plant steps with
-    the bit stuck. Weights ``RewardWeights(tracking=1, chattering=0.1, stuck=0.5)`` by default;
-    the terms are in ``info["reward_terms"]``. A diverged step gets -1.
+    ``r = -(w_t T + w_c C + w_s S) / (w_t + w_c + w_s) - w_q Q - w_r R``, in ``[-1, 0]`` with
+    the default weights, where ``T = mean(min(|e| / max(V_ref, 1 rad/s), 1))`` (tracking),
+    ``C = min(TV(u) / 5000 N m, 1)`` (chattering: total variation of the applied torque), ``S``
+    the share of plant steps with the bit stuck, ``Q = mean(u^2) / max_torque^2`` (torque) and
+    ``R = mean((u - u_base)^2) / residual_scale^2`` (residual mode). Weights
+    ``RewardWeights(tracking=1, chattering=0.1, stuck=0.5, torque=0, residual=0)`` by default
+    (``drill_env.rewards``); the terms are in ``info["reward_terms"]``. A diverged step gets -1.
 
     ## Starting State
     At rest, ``x = 0``, bit stuck. The scenario (WOB profile, reference, uncertainty) is drawn
@@ -116,11 +118,12 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
     reset seed, one per component (``wob``, ``reference``, ``uncertainty``, ``noise``).
 
     ## Episode End
-    Truncation after ``episode_s``. The registered ``max_episode_steps`` is 2000 = 100 s / 0.05 s,
-    and ``gym.make`` applies it whatever the keywords say: when you change ``episode_s`` or
-    ``control_dt_s``, use ``drill_env.make(**kwargs)`` (which sets the limit from them) or pass
-    ``max_episode_steps=-1`` (no wrapper; the env still truncates itself at ``episode_s``). Termination when the state is not finite or leaves the physical bounds (1000 rad/s,
-    1000 rad): ``info["termination_reason"] = "diverged"``, the observation stays finite.
+    Truncation after ``episode_s`` (the env truncates itself; no step limit is registered, and
+    ``env.spec.max_episode_steps`` is ``episode_s / control_dt_s``, 2000 by default). An explicit
+    ``gym.make(..., max_episode_steps=n)`` adds Gymnasium's ``TimeLimit``, which may end an
+    episode earlier. Termination when the state is not finite or leaves the physical bounds
+    (1000 rad/s, 1000 rad, ``drill_env.limits``): ``info["termination_reason"] = "diverged"``,
+    the observation stays finite.
 
     ## Arguments
     | keyword | meaning | default |
@@ -141,7 +144,7 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
     | ``randomization`` | ``Randomization`` ranges | see Starting State |
     | ``reward_weights`` | ``RewardWeights`` | see Rewards |
 
-    ``reset(options=...)`` takes the scenario keywords (``drill_env.batch.PER_EPISODE_KEYWORDS``)
+    ``reset(options=...)`` takes the scenario keywords (``drill_env.options.PER_EPISODE_KEYWORDS``)
     for one episode; unknown keys are errors that list the valid ones.
 
     ## Info

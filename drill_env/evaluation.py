@@ -230,7 +230,7 @@ def rollout(
 
 
 def episode_metrics(trace: Trace) -> dict[str, Any]:
-    """The SPEC section 4 metrics of ``trace`` (see
+    """The docs/specification.md section 4 metrics of ``trace`` (see
     :func:`drill_env.metrics.episode_metrics_from_samples`), plus ``diverged``."""
     metrics = episode_metrics_from_samples(
         trace.bit_speed_rad_s,

@@ -1,4 +1,4 @@
-"""Karnopp bit-rock friction (SPEC section 1), as pure compiled functions.
+"""Karnopp bit-rock friction (docs/specification.md section 1), as pure compiled functions.
 
 The slip mode of the bit is an integer: 0 when the bit is stuck (held at rest by static
 friction), +1 or -1 when it slips forwards or backwards. Torques are in N m, speeds in rad/s.
@@ -30,7 +30,7 @@ def slip_torque(x7: float, direction: int, t_a: float, t_0: float, xi: float):
 
 @njit(cache=True)
 def karnopp_torque(x7: float, t_e: float, t_a: float, t_0: float, xi: float, dw: float):
-    """The Karnopp bit torque ``T_bit`` of SPEC section 1 as a function of the bit speed, N m.
+    """The Karnopp bit torque ``T_bit`` of docs/specification.md section 1 as a function of the bit speed, N m.
 
     Args:
         x7: Bit speed, rad/s.

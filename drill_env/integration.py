@@ -1,4 +1,4 @@
-"""Event-aware fixed-step integration of the drill string (SPEC section 1, accuracy).
+"""Event-aware fixed-step integration of the drill string (docs/specification.md section 1, accuracy).
 
 Each plant step of ``h`` seconds (1 ms in the environment) is one classical Runge-Kutta step
 with the bit's slip mode frozen, followed by event handling:

@@ -1,4 +1,4 @@
-"""Episode metrics of SPEC section 4, pure functions of plant-rate samples.
+"""Episode metrics of docs/specification.md section 4, pure functions of plant-rate samples.
 
 Every sample is one plant step (1 ms): the error ``e = V_ref - w_bit`` (true bit speed) and the
 applied torque are taken at every step, whatever the agent's decision period.
@@ -91,7 +91,7 @@ def episode_metrics_from_samples(
     bit_stuck: npt.ArrayLike,
     dt_s: float,
 ) -> dict[str, Any]:
-    """The SPEC section 4 metrics of one run sampled every ``dt_s`` seconds.
+    """The docs/specification.md section 4 metrics of one run sampled every ``dt_s`` seconds.
 
     Args:
         bit_speed_rad_s: True bit speed at each sample, (n,), rad/s.

@@ -1,4 +1,4 @@
-"""Physical parameters of the 4-DOF torsional drill string (SPEC section 1).
+"""Physical parameters of the 4-DOF torsional drill string (docs/specification.md section 1).
 
 Every field is in SI units. Parameter sets are frozen dataclasses validated on creation;
 variants are made with :func:`dataclasses.replace`, which validates again.
@@ -92,7 +92,7 @@ class DrillStringParameters:
         """Top-drive torque that holds the whole string at one constant speed, N m.
 
         At steady rotation every twist is constant and all inertias share the speed ``V``, so
-        ``u = (c_dt + c_bit) V + T_0 + (T_a - T_0) exp(-xi V)`` (SPEC section 2), for ``V > 0``.
+        ``u = (c_dt + c_bit) V + T_0 + (T_a - T_0) exp(-xi V)`` (docs/specification.md section 2), for ``V > 0``.
         """
         t_a = self.static_torque_nm(wob_n)
         t_0 = self.sliding_torque_nm(wob_n)
@@ -101,7 +101,7 @@ class DrillStringParameters:
 
 
 PRESETS: Final[dict[str, DrillStringParameters]] = {
-    # Table 2 of Zribi, Sidhom & Gharib (2024) as corrected by SPEC section 1.
+    # Table 2 of Zribi, Sidhom & Gharib (2024) as corrected by docs/specification.md section 1.
     "zribi2024": DrillStringParameters(),
     # The original 4-DOF set of Navarro-Lopez & Cortes (2007).
     "navarro_lopez2007": DrillStringParameters(

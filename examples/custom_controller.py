@@ -2,17 +2,19 @@
 
 Any object with ``reset()`` and ``torque(measurement, reference_speed_rad_s, dt_s)`` works; the
 env calls it at every 1 ms plant step from Python (the slow path; the built-in controllers run
-compiled inside the plant loop). Here: a proportional-integral top-drive speed loop, which
-stick-slips at this low speed and high WOB (SPEC section 6): watch stuck_fraction.
+compiled inside the plant loop, and so can yours: see examples/compiled_controller.py). Here: a proportional-integral top-drive speed loop, which
+stick-slips at this low speed and high WOB (docs/specification.md section 6): watch
+stuck_fraction.
 
 Run: .venv/bin/python examples/custom_controller.py
 """
 
 from __future__ import annotations
 
+import gymnasium as gym
 import numpy as np
 
-import drill_env
+import drill_env  # noqa: F401  (registers DrillString-v0)
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout
 
 
@@ -32,7 +34,8 @@ class SpeedPI:
         return self.feedforward_nm + self.kp * error + self.ki * self.integral
 
 
-env = drill_env.make(
+env = gym.make(
+    "DrillString-v0",
     randomize=False,
     base_controller=SpeedPI(),
     reference_speed_rad_s=5.0,

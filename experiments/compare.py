@@ -1,7 +1,7 @@
 """``drill-gym compare``: the controllers on the paper's scenarios, scored on the paper's metrics.
 
 By default every registered controller (the paper's four first: ``csmc``, ``msmc``, ``asmc``,
-``proposed``) runs on the SPEC section 2 scenario (WOB 97,347 N, V_ref 12 rad/s, 150 s from
+``proposed``) runs on the docs/specification.md section 2 scenario (WOB 97,347 N, V_ref 12 rad/s, 150 s from
 rest) under each Table 3 uncertainty condition, without and with 0.1 rad/s measurement noise:
 32 runs for the four SMCs. When a trained residual agent is shipped (``agents``, the ``[rl]``
 extra) it is added as one more row per scenario.
@@ -10,7 +10,7 @@ Every run goes through the one scoring path of the project::
 
     env = gym.make("DrillString-v0", randomize=False, base_controller=name, ...)
     trace = rollout(env, ZeroAction(), seed)      # the base controller acts at every 1 ms step
-    row = episode_metrics(trace)                  # SPEC section 4, from plant-rate samples
+    row = episode_metrics(trace)                  # docs/specification.md section 4, from plant-rate samples
 
 The decision period of the (idle) agent is long (``control_dt_s`` up to 1 s) only to keep the
 Python overhead low; the controller still runs inside the compiled plant loop at 1 kHz, and the
@@ -70,7 +70,7 @@ CONDITIONS: Final = tuple(UNCERTAINTY_CONDITIONS)
 """The Table 3 uncertainty conditions: nominal, condition1..3."""
 
 DEFAULT_NOISE_RAD_S: Final = (0.0, 0.1)
-"""Measurement noise levels of the default comparison, rad/s (SPEC section 2)."""
+"""Measurement noise levels of the default comparison, rad/s (docs/specification.md section 2)."""
 
 DEFAULT_DURATION_S: Final = 150.0
 """Run length of the paper's protocol, s."""
@@ -125,7 +125,7 @@ ROW_KEYS: Final = (
     "seed",
     "duration_s",
 )
-"""Columns of ``compare.csv`` and keys of each row of ``compare.json``: the SPEC section 4
+"""Columns of ``compare.csv`` and keys of each row of ``compare.json``: the docs/specification.md section 4
 metrics, plus ``static_error_rad_s`` (mean of ``V_ref - w_bit`` over the last
 :data:`STATIC_WINDOW_S`, the paper's "static error") and the run's settings."""
 
@@ -461,7 +461,7 @@ def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="drill-gym compare",
         description=(
-            "Compare the controllers on the paper's scenarios (SPEC section 2): each controller "
+            "Compare the controllers on the paper's scenarios (docs/specification.md section 2): each controller "
             "x uncertainty condition x noise level, scored by rollout + episode_metrics."
         ),
     )

@@ -5,9 +5,9 @@ does the bit turn steadily or stick and slip? Each cell of the grid is one run o
 loop from rest (bit stuck) for ``duration_s`` seconds with a constant WOB and a constant
 reference bit speed, the controller running inside the plant loop at every 1 ms step. After
 the start-up transient, over the last ``window_s`` seconds (40 s by default, longer than the
-13-36 s stick-slip periods of SPEC section 6), two numbers are kept per cell:
+13-36 s stick-slip periods of docs/specification.md section 6), two numbers are kept per cell:
 
-* ``stick_slip_severity = (max x7 - min x7) / (2 mean x7)`` of the true bit speed (the SPEC
+* ``stick_slip_severity = (max x7 - min x7) / (2 mean x7)`` of the true bit speed (the
   section 4 definition, 1.0 when the bit does not turn on average); about 1 or more is
   stick-slip, near 0 steady rotation;
 * ``stuck_fraction``: the share of plant steps with the bit stuck.

@@ -1,7 +1,7 @@
-"""Independent event-located reference for the SPEC section 1 plant (test helper).
+"""Independent event-located reference for the docs/specification.md section 1 plant (test helper).
 
 This module re-implements the 4-DOF torsional drill string with ideal Karnopp friction from the
-equations in ``SPEC.md`` alone, with numpy and scipy only. It deliberately imports nothing from
+equations of ``docs/specification.md`` section 1 alone, with numpy and scipy only. It deliberately imports nothing from
 ``drill_env``, so the package's integrator can be checked against it.
 
 The friction discontinuity is handled as a hybrid system rather than by smoothing it:
@@ -63,7 +63,7 @@ PARAMETER_NAMES: tuple[str, ...] = (
     "Dw",  # rad/s, stick band (unused here: the reference is the limit Dw -> 0)
 )
 
-# SPEC section 1, column `zribi2024` (paper Table 2 plus c_bi from Navarro-Lopez & Cortes 2007).
+# docs/specification.md section 1, column `zribi2024` (paper Table 2 plus c_bi from Navarro-Lopez & Cortes 2007).
 ZRIBI2024: dict[str, float] = {
     "J_dt": 930.0,
     "J_pi": 2782.25,
@@ -84,7 +84,7 @@ ZRIBI2024: dict[str, float] = {
     "Dw": 1e-3,
 }
 
-# SPEC section 1, column `navarro_lopez2007`.
+# docs/specification.md section 1, column `navarro_lopez2007`.
 NAVARRO_LOPEZ2007: dict[str, float] = {
     "J_dt": 930.0,
     "J_pi": 2782.25,
@@ -129,10 +129,10 @@ def _check_parameters(p: dict[str, float]) -> None:
 
 
 def string_torque(p: dict[str, float], x: FloatArray) -> FloatArray:
-    """Torque T_e the string applies to the bit (SPEC section 1), net of the bit's viscous term.
+    """Torque T_e the string applies to the bit (docs/specification.md section 1), net of the bit's viscous term.
 
     Args:
-        p: parameter dict with the SPEC section 1 names.
+        p: parameter dict with the docs/specification.md section 1 names.
         x: state(s), shape (..., 7).
 
     Returns:
@@ -239,7 +239,7 @@ def reference_segments(
     of the bit speed to 0 (slip -> stuck or slip in the other direction).
 
     Args:
-        p: parameter dict with the SPEC section 1 names (see `PARAMETER_NAMES`); ``Dw`` is
+        p: parameter dict with the docs/specification.md section 1 names (see `PARAMETER_NAMES`); ``Dw`` is
             required but unused.
         torque_nm: constant top-drive torque u, N m.
         wob_n: weight on bit, N (> 0).
@@ -327,7 +327,7 @@ def reference_trajectory(
     """States of the plant under a constant top-drive torque, from rest with the bit stuck.
 
     Args:
-        p: parameter dict with the SPEC section 1 names (see `PARAMETER_NAMES`); ``Dw`` is
+        p: parameter dict with the docs/specification.md section 1 names (see `PARAMETER_NAMES`); ``Dw`` is
             required but unused.
         torque_nm: constant top-drive torque u, N m.
         wob_n: weight on bit, N (> 0).

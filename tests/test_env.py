@@ -1,4 +1,4 @@
-"""Tests of the ``DrillString-v0`` Gymnasium contract (SPEC section 5)."""
+"""Tests of the ``DrillString-v0`` Gymnasium contract (docs/specification.md section 5)."""
 
 from __future__ import annotations
 
@@ -157,7 +157,7 @@ def test_observation_scales_physical_values() -> None:
 # --------------------------------------------------------------------------------- info
 @pytest.mark.parametrize("mode", sorted(MODES))
 def test_info_keys_carry_units(mode: str) -> None:
-    """``info`` has the SPEC section 5 keys at reset and step, and numeric keys name a unit."""
+    """``info`` has the docs/specification.md section 5 keys at reset and step, and numeric keys name a unit."""
     env = make(mode)
     _, reset_info = env.reset(seed=0)
     _, _, _, _, step_info = env.step(act(0.0))
@@ -266,7 +266,7 @@ def test_divergence_terminates_cleanly(mode: str) -> None:
     ],
 )
 def test_direct_torque_mapping(action: float, expected_nm: float) -> None:
-    """Direct mode: ``u = min + (a + 1) / 2 (max - min)`` (SPEC section 5)."""
+    """Direct mode: ``u = min + (a + 1) / 2 (max - min)`` (docs/specification.md section 5)."""
     env = make(min_torque_nm=1_000.0, max_torque_nm=30_000.0)
     env.reset(seed=0)
     _, _, _, _, info = env.step(act(action))

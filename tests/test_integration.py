@@ -1,7 +1,7 @@
-"""Tests of the event-aware integrator against independent references (SPEC section 1).
+"""Tests of the event-aware integrator against independent references (docs/specification.md section 1).
 
 The references are the scipy event-located solver of ``tests/reference_solver.py`` and closed
-forms derived here from the SPEC equations; nothing is compared with a stored copy of the
+forms derived here from the equations of docs/specification.md section 1; nothing is compared with a stored copy of the
 package's own output.
 
 Print the measured accuracy figures with::
@@ -24,12 +24,14 @@ from drill_env.integration import integrate_constant_torque
 from drill_env.parameters import PRESETS
 from reference_solver import NAVARRO_LOPEZ2007, ZRIBI2024, reference_segments, reference_trajectory
 
-WOB_N = 97_347.0  # SPEC section 2
-U_OPEN_LOOP = 10_000.0  # N m, SPEC section 1 accuracy case
+WOB_N = 97_347.0  # docs/specification.md section 2
+U_OPEN_LOOP = 10_000.0  # N m, docs/specification.md section 1 accuracy case
 T_OPEN_LOOP_S = 30.0
 PLANT_DT = 1e-3  # s
-REQUIREMENT_RAD_S = 1e-2  # SPEC section 1: bit speed within 1e-2 rad/s of the reference
-GOAL_RAD_S = 1e-3  # SPEC section 1: the goal
+REQUIREMENT_RAD_S = (
+    1e-2  # docs/specification.md section 1: bit speed within 1e-2 rad/s of the reference
+)
+GOAL_RAD_S = 1e-3  # docs/specification.md section 1: the goal
 
 REFERENCE_DICTS = {"zribi2024": ZRIBI2024, "navarro_lopez2007": NAVARRO_LOPEZ2007}
 PRESET_NAMES = sorted(REFERENCE_DICTS)
@@ -54,7 +56,7 @@ def _friction_levels(name: str, wob_n: float) -> tuple[float, float]:
 # --------------------------------------------------------------------------- (a) accuracy
 @pytest.mark.parametrize("name", PRESET_NAMES)
 def test_open_loop_case_sticks_and_slips(name: str) -> None:
-    """The SPEC accuracy case is a real stick-slip run (so the comparison tests the events)."""
+    """The specification's accuracy case is a real stick-slip run (so the comparison tests the events)."""
     segments = reference_segments(REFERENCE_DICTS[name], U_OPEN_LOOP, WOB_N, T_OPEN_LOOP_S)
     modes = [s.mode for s in segments]
     assert modes.count("stuck") >= 3
@@ -66,7 +68,7 @@ def test_open_loop_case_sticks_and_slips(name: str) -> None:
 
 @pytest.mark.parametrize("name", PRESET_NAMES)
 def test_accuracy_bit_speed_requirement(name: str) -> None:
-    """SPEC section 1 requirement: bit speed within 1e-2 rad/s at every 1 ms instant."""
+    """docs/specification.md section 1 requirement: bit speed within 1e-2 rad/s at every 1 ms instant."""
     _, _, err = _open_loop_errors(name, U_OPEN_LOOP, WOB_N, T_OPEN_LOOP_S)
     worst = float(err[:, 6].max())
     at = float(np.argmax(err[:, 6]) * PLANT_DT)
@@ -76,7 +78,7 @@ def test_accuracy_bit_speed_requirement(name: str) -> None:
 
 @pytest.mark.parametrize("name", PRESET_NAMES)
 def test_accuracy_bit_speed_goal(name: str) -> None:
-    """SPEC section 1 goal: bit speed within 1e-3 rad/s at every 1 ms instant."""
+    """docs/specification.md section 1 goal: bit speed within 1e-3 rad/s at every 1 ms instant."""
     _, _, err = _open_loop_errors(name, U_OPEN_LOOP, WOB_N, T_OPEN_LOOP_S)
     assert float(err[:, 6].max()) <= GOAL_RAD_S
 
@@ -119,7 +121,7 @@ def test_stuck_intervals_match_reference(name: str) -> None:
 def test_accuracy_other_open_loop_cases(
     name: str, torque_nm: float, wob_n: float, t_end_s: float, min_events: int
 ) -> None:
-    """Other torques and WOBs meet the same requirement (not tuned to the SPEC case)."""
+    """Other torques and WOBs meet the same requirement (not tuned to the specification's case)."""
     segments = reference_segments(REFERENCE_DICTS[name], torque_nm, wob_n, t_end_s)
     assert len(segments) - 1 >= min_events
     _, _, err = _open_loop_errors(name, torque_nm, wob_n, t_end_s)
@@ -129,7 +131,7 @@ def test_accuracy_other_open_loop_cases(
 
 # ------------------------------------------------------------------ (b) steady rotation
 def _steady_state(name: str, v: float, wob_n: float) -> tuple[npt.NDArray[np.float64], float]:
-    """State and torque of steady rotation at ``v`` rad/s, from the SPEC equations alone.
+    """State and torque of steady rotation at ``v`` rad/s, from the specification's equations alone.
 
     With every speed equal to ``v`` the x7' equation gives ``k_bi x6 = c_bit v + T_bit(v)``,
     x5' gives ``k_co x4 = k_bi x6``, x3' gives ``k_pi x2 = k_co x4`` and x1' gives
@@ -146,7 +148,7 @@ def _steady_state(name: str, v: float, wob_n: float) -> tuple[npt.NDArray[np.flo
 
 
 def test_steady_torque_is_the_spec_value() -> None:
-    """The torque balance above gives SPEC section 2's 13,011.9 N m at 12 rad/s."""
+    """The torque balance above gives docs/specification.md section 2's 13,011.9 N m at 12 rad/s."""
     _, u = _steady_state("zribi2024", 12.0, WOB_N)
     assert u == pytest.approx(13_011.9, abs=0.1)
     assert PRESETS["zribi2024"].steady_torque_nm(12.0, WOB_N) == pytest.approx(u, rel=1e-12)
@@ -190,7 +192,7 @@ def test_stuck_derivative_holds_the_bit() -> None:
 
 
 def test_state_derivative_matches_spec_equations() -> None:
-    """``state_derivative`` is SPEC section 1's eq. 28 with the slip friction branch."""
+    """``state_derivative`` is docs/specification.md section 1's eq. 28 with the slip friction branch."""
     name = "zribi2024"
     p = REFERENCE_DICTS[name]
     t_a, t_0 = _friction_levels(name, WOB_N)
@@ -288,7 +290,7 @@ def test_fourth_order_in_smooth_slip(torque_nm: float) -> None:
 @pytest.mark.parametrize("name", PRESET_NAMES)
 def test_accuracy_monte_carlo(name: str) -> None:
     """Monte-Carlo over the open-loop regime (slow): 40 seeded random cases per preset, WOB
-    U(40, 200) kN and torque U(0.8, 1.6) T_a for 30 s, meet the SPEC section 1 goal."""
+    U(40, 200) kN and torque U(0.8, 1.6) T_a for 30 s, meet the docs/specification.md section 1 goal."""
     rng = np.random.default_rng(2024)
     worst = 0.0
     for _ in range(40):

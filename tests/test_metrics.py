@@ -1,4 +1,4 @@
-"""SPEC section 4 metrics on synthetic traces with answers known in closed form."""
+"""docs/specification.md section 4 metrics on synthetic traces with answers known in closed form."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Tests of drill_env.parameters: the SPEC section 1 presets and their validation."""
+"""Tests of drill_env.parameters: the docs/specification.md section 1 presets and their validation."""
 
 from __future__ import annotations
 
@@ -17,8 +17,8 @@ from drill_env.parameters import (
     scale_uncertain,
 )
 
-# SPEC section 1, "Parameter presets", written out again here (not read from the package).
-SPEC_TABLE = {
+# docs/specification.md section 1, "Parameter presets", written out again here (not read from the package).
+SPECIFIED_TABLE = {
     "zribi2024": dict(
         J_dt=930.0, J_pi=2782.25, J_co=750.0, J_bi=471.96,
         c_dt=425.0, c_pi=193.61, c_co=190.0, c_bi=181.49, c_bit=50.0,
@@ -33,21 +33,21 @@ SPEC_TABLE = {
     ),
 }  # fmt: skip
 
-WOB_N = 97_347.0  # SPEC section 2
-V_REF = 12.0  # rad/s, SPEC section 2
+WOB_N = 97_347.0  # docs/specification.md section 2
+V_REF = 12.0  # rad/s, docs/specification.md section 2
 
 
-@pytest.mark.parametrize("name", sorted(SPEC_TABLE))
+@pytest.mark.parametrize("name", sorted(SPECIFIED_TABLE))
 def test_preset_has_spec_table_values(name: str) -> None:
-    """Every field of each preset equals the SPEC section 1 table, and nothing else exists."""
+    """Every field of each preset equals the docs/specification.md section 1 table, and nothing else exists."""
     params = PRESETS[name]
     fields = {f.name: getattr(params, f.name) for f in dataclasses.fields(params)}
-    assert fields == SPEC_TABLE[name]
+    assert fields == SPECIFIED_TABLE[name]
 
 
 def test_presets_are_exactly_the_spec_ones() -> None:
-    """The package offers the two SPEC presets, ``zribi2024`` being the dataclass default."""
-    assert sorted(PRESETS) == sorted(SPEC_TABLE)
+    """The package offers the two specified presets, ``zribi2024`` being the dataclass default."""
+    assert sorted(PRESETS) == sorted(SPECIFIED_TABLE)
     assert DrillStringParameters() == PRESETS["zribi2024"]
 
 
@@ -152,7 +152,7 @@ def test_replace_keeps_other_fields() -> None:
     assert dataclasses.replace(new, c_dt=base.c_dt) == base
 
 
-@pytest.mark.parametrize("name", sorted(SPEC_TABLE))
+@pytest.mark.parametrize("name", sorted(SPECIFIED_TABLE))
 def test_resolve_parameters_by_name_and_object(name: str) -> None:
     """A preset name resolves to its preset; a parameter object passes through unchanged."""
     assert resolve_parameters(name) is PRESETS[name]
@@ -178,15 +178,15 @@ def test_resolve_parameters_wrong_type() -> None:
 
 
 def test_steady_torque_matches_spec_check() -> None:
-    """SPEC section 2: holding the string at 12 rad/s under 97,347 N takes 13,011.9 N m."""
+    """docs/specification.md section 2: holding the string at 12 rad/s under 97,347 N takes 13,011.9 N m."""
     params = PRESETS["zribi2024"]
     assert params.steady_torque_nm(V_REF, WOB_N) == pytest.approx(13_011.9, abs=0.1)
 
 
-@pytest.mark.parametrize("name", sorted(SPEC_TABLE))
+@pytest.mark.parametrize("name", sorted(SPECIFIED_TABLE))
 def test_friction_levels(name: str) -> None:
-    """``T_a = mu_a WOB R`` and ``T_0 = mu_0 WOB R`` (SPEC section 1)."""
-    p = SPEC_TABLE[name]
+    """``T_a = mu_a WOB R`` and ``T_0 = mu_0 WOB R`` (docs/specification.md section 1)."""
+    p = SPECIFIED_TABLE[name]
     params = PRESETS[name]
     assert params.static_torque_nm(WOB_N) == pytest.approx(p["mu_a"] * WOB_N * p["R"], rel=1e-15)
     assert params.sliding_torque_nm(WOB_N) == pytest.approx(p["mu_0"] * WOB_N * p["R"], rel=1e-15)
@@ -194,7 +194,7 @@ def test_friction_levels(name: str) -> None:
 
 def test_steady_torque_formula_at_other_speeds() -> None:
     """``u = (c_dt + c_bit) V + T_0 + (T_a - T_0) exp(-xi V)`` at any positive speed."""
-    p = SPEC_TABLE["navarro_lopez2007"]
+    p = SPECIFIED_TABLE["navarro_lopez2007"]
     params = PRESETS["navarro_lopez2007"]
     t_a, t_0 = p["mu_a"] * 150e3 * p["R"], p["mu_0"] * 150e3 * p["R"]
     for v in (0.5, 4.0, 30.0):
@@ -203,7 +203,7 @@ def test_steady_torque_formula_at_other_speeds() -> None:
 
 
 def test_scale_uncertain_applies_table3_reading() -> None:
-    """SPEC section 2: ``c_pi (1 + D1)``, ``k_pi (1 + D2)``, ``c_dt (1 + D3)``, nothing else."""
+    """docs/specification.md section 2: ``c_pi (1 + D1)``, ``k_pi (1 + D2)``, ``c_dt (1 + D3)``, nothing else."""
     base = PRESETS["zribi2024"]
     scaled = scale_uncertain(base, (0.4, 0.3, 0.3))
     assert scaled.c_pi == pytest.approx(193.61 * 1.4, rel=1e-15)
@@ -218,9 +218,9 @@ def test_scale_uncertain_validates() -> None:
         scale_uncertain(PRESETS["zribi2024"], (0.0, -1.5, 0.0))
 
 
-@pytest.mark.parametrize("name", sorted(SPEC_TABLE))
+@pytest.mark.parametrize("name", sorted(SPECIFIED_TABLE))
 def test_parameter_vector_is_field_order(name: str) -> None:
     """The kernels' parameter vector starts with the 17 fields in declaration order."""
     vec = plant_parameter_vector(PRESETS[name])
     assert vec.dtype == np.float64
-    assert vec[:17].tolist() == list(SPEC_TABLE[name].values())
+    assert vec[:17].tolist() == list(SPECIFIED_TABLE[name].values())

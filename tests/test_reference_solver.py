@@ -1,7 +1,7 @@
 """Checks of the scipy reference itself (tests/reference_solver.py) against closed forms.
 
 Nothing here touches drill_env: these tests make sure the reference that drill_env is later
-compared with is right, from the SPEC section 1 equations, closed-form equilibria, a matrix
+compared with is right, from the docs/specification.md section 1 equations, closed-form equilibria, a matrix
 exponential and an energy balance.
 """
 
@@ -23,9 +23,9 @@ from reference_solver import (
     string_torque,
 )
 
-WOB_N = 97_347.0  # SPEC section 2
-V_REF = 12.0  # rad/s, SPEC section 2
-U_OPEN_LOOP = 10_000.0  # N m, SPEC section 1 open-loop stick-slip case
+WOB_N = 97_347.0  # docs/specification.md section 2
+V_REF = 12.0  # rad/s, docs/specification.md section 2
+U_OPEN_LOOP = 10_000.0  # N m, docs/specification.md section 1 open-loop stick-slip case
 
 
 def friction_levels(p: dict[str, float], wob_n: float) -> tuple[float, float]:
@@ -125,7 +125,7 @@ def test_stuck_phase_matches_matrix_exponential_until_break_away() -> None:
 
 
 def test_steady_rotation_matches_closed_form_torque() -> None:
-    """SPEC section 2: u = (c_dt + c_bit) V + T_0 + (T_a - T_0) exp(-xi V) holds V = 12 rad/s."""
+    """docs/specification.md section 2: u = (c_dt + c_bit) V + T_0 + (T_a - T_0) exp(-xi V) holds V = 12 rad/s."""
     p = ZRIBI2024
     t_a, t_0 = friction_levels(p, WOB_N)
     u_closed = (p["c_dt"] + p["c_bit"]) * V_REF + t_0 + (t_a - t_0) * np.exp(-p["xi"] * V_REF)
@@ -150,7 +150,7 @@ def stick_onsets(t: np.ndarray, x7: np.ndarray) -> np.ndarray:
 
 
 def test_open_loop_case_sticks_and_slips_with_period_of_about_7_s() -> None:
-    """SPEC section 1: u = 10,000 N m, WOB = 97,347 N, from rest, 30 s."""
+    """docs/specification.md section 1: u = 10,000 N m, WOB = 97,347 N, from rest, 30 s."""
     p = ZRIBI2024
     t = grid(30.0, 1e-3)
     x = reference_trajectory(p, U_OPEN_LOOP, WOB_N, 30.0, t)

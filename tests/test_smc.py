@@ -1,4 +1,4 @@
-"""The four sliding-mode laws of SPEC section 3 on hand-computed cases, their gains validation,
+"""The four sliding-mode laws of docs/specification.md section 3 on hand-computed cases, their gains validation,
 the registry, and the equivalence of in-loop and policy execution."""
 
 from __future__ import annotations
@@ -74,7 +74,7 @@ U_EQ = C_PI * 1.0 + K_PI * 3.0 + C_DT * 10.0 + J_DT * 2.0 - J_DT * 2.0  # 6537.7
 
 
 def u_disc(name: str, s: float, gain: float) -> float:
-    """The discontinuous part of each law (SPEC section 3, Table 1 gains)."""
+    """The discontinuous part of each law (docs/specification.md section 3, Table 1 gains)."""
     sgn = math.copysign(1.0, s) if s != 0 else 0.0
     if name == "csmc":
         return -3.0 * sgn

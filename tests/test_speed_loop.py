@@ -339,7 +339,7 @@ def test_stiff_loop_stick_slips_at_low_speed_and_high_wob(
     i, j = WOBS.index(150e3), SPEEDS.index(3.0)
     assert m.severity[i, j] > 0.8
     assert m.stuck_fraction[i, j] > 0.1
-    # SPEC section 6: up to about 6 rad/s at 120-150 kN and about 8 rad/s at 200 kN.
+    # docs/specification.md section 6: up to about 6 rad/s at 120-150 kN and about 8 rad/s at 200 kN.
     assert m.stuck_fraction[WOBS.index(200e3), SPEEDS.index(7.0)] > 0
 
 

@@ -83,7 +83,7 @@ def test_compute_map_rejects_bad_arguments(kwargs: dict[str, Any], message: str)
 @pytest.mark.parametrize("controller", ["stiff_pi", "proposed"])
 def test_map_cell_matches_a_plain_env_rollout(controller: str) -> None:
     """Each cell is the env's run from rest; severity and stuck fraction are computed over the
-    window by the SPEC formulas (here over a window that starts inside a 1 s chunk)."""
+    window by the formulas of docs/specification.md sections 4 and 14 (here over a window that starts inside a 1 s chunk)."""
     wob, speed = 150e3, 3.0
     result = compute_map(
         controller, [80e3, wob], [speed, 9.0], duration_s=12.0, window_s=7.5, progress=False
