@@ -42,9 +42,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"drill-gym: unknown subcommand {name!r}\n\n{_usage()}", file=sys.stderr)
         return 2
     module = importlib.import_module(SUBCOMMANDS[name][0])
-    if name == "compare":
-        return int(module.main(rest, agent_loader=_agent_loader()) or 0)
-    return int(module.main(rest) or 0)
+    try:
+        if name == "compare":
+            return int(module.main(rest, agent_loader=_agent_loader()) or 0)
+        return int(module.main(rest) or 0)
+    except (ValueError, FileNotFoundError) as err:  # user errors: one line, no traceback
+        print(f"drill-gym {name}: error: {' '.join(str(err).split())}", file=sys.stderr)
+        return 2
 
 
 def _agent_loader() -> Callable[[], Any] | None:
