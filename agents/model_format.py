@@ -19,6 +19,7 @@ module needs only NumPy and the standard library.
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import os
@@ -516,15 +517,17 @@ def read_npz(
     if not path.is_file():
         raise FileNotFoundError(f"{where!r}: no such file (expected {what})")
     allowed = sum(8 * math.prod(s) + MAX_NPY_HEADER for s in expected.values())
-    size = path.stat().st_size
-    if size > allowed + 1024 * (len(expected) + 1):
+    max_file = allowed + 1024 * (len(expected) + 1)
+    with path.open("rb") as f:  # read once: the checks and np.load see the same bytes
+        data = f.read(max_file + 1)
+    if len(data) > max_file:
+        size = max(path.stat().st_size, len(data))
         raise ValueError(
-            f"{where!r}: {size} bytes is too large for {what}: allowed at most "
-            f"{allowed + 1024 * (len(expected) + 1)}"
+            f"{where!r}: {size} bytes is too large for {what}: allowed at most {max_file}"
         )
     bad = f"{where!r} is not valid {what} (an .npz archive of float arrays)"
     try:
-        with zipfile.ZipFile(path) as archive:
+        with zipfile.ZipFile(io.BytesIO(data)) as archive:
             infos = archive.infolist()
             if len(infos) > len(expected):
                 raise ValueError(
@@ -564,7 +567,7 @@ def read_npz(
     except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError, RuntimeError) as err:
         raise ValueError(f"{bad}: {_one_line(str(err))}") from None
     try:
-        with np.load(path, allow_pickle=False) as archive:
+        with np.load(io.BytesIO(data), allow_pickle=False) as archive:
             arrays = {k: np.asarray(archive[k]) for k in expected}
     except (ValueError, zipfile.BadZipFile, OSError, EOFError, KeyError) as err:
         raise ValueError(f"{bad}: {_one_line(str(err))}") from None

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -290,6 +291,81 @@ def test_exported_policy_matches_sb3_predictions(variant: str, tmp_path: Path) -
         sb3_std = model.policy.get_distribution(z).distribution.stddev.detach().numpy()
         latent = policy.network.latent(policy.normalize(recorded[:50]).astype(np.float64))
         np.testing.assert_allclose(policy.network.action_std(latent), sb3_std, rtol=1e-3)
+
+
+def _old_sb3_model_folder(config: TrainConfig, folder: Path) -> tuple[Any, Any]:
+    """A model folder as earlier versions wrote it: SB3's model.zip (a pickle, ours), the
+    obs_norm.npz and a format-1 config.json."""
+    import torch as th
+
+    venv = make_training_env(config)
+    model = make_model(dataclasses.replace(config, zero_init_action=False), venv)
+    with th.no_grad():
+        model.policy.action_net.weight.mul_(100.0)
+    folder.mkdir()
+    model.save(folder / "model.zip")
+    rng = np.random.default_rng(2)
+    mean, var = rng.normal(size=11), rng.uniform(0.5, 2.0, 11)
+    np.savez(folder / "obs_norm.npz", mean=mean, var=var, clip_obs=10.0, epsilon=1e-8)
+    record = {
+        "format": 1,
+        "name": "old",
+        "env_kwargs": {
+            "base_controller": "proposed",
+            "control_dt_s": 0.1,
+            "residual_scale_nm": 10000.0,
+            "min_torque_nm": 0.0,
+            "max_torque_nm": 50000.0,
+        },
+        "observation_size": 11,
+        "train_config": json.loads(config.to_json()),
+        "timesteps": 0,
+    }
+    (folder / "config.json").write_text(json.dumps(record))
+    return model, venv
+
+
+def test_old_sb3_model_loads_and_converts_with_the_opt_in(tmp_path: Path) -> None:
+    from agents.convert import convert_sb3_model
+
+    model, venv = _old_sb3_model_folder(tiny_config(tmp_path), tmp_path / "old")
+    with pytest.raises(ValueError, match=r"model.zip' is a Stable-Baselines3 model \(a pickle\)"):
+        load_policy(tmp_path / "old")
+    obs = np.random.default_rng(5).normal(size=(64, 11)).astype(np.float32)
+    policy = load_policy(tmp_path / "old", trust_pickle=True)
+    expected = _sb3_reference(model, policy, obs)
+    assert np.ptp(expected) > 0.5
+    np.testing.assert_allclose(policy.predict(obs)[0], expected, atol=1e-5)
+    convert_sb3_model(tmp_path / "old", tmp_path / "new", trust_pickle=True)
+    assert {p.name for p in (tmp_path / "new").iterdir()} == set(MODEL_FILES)
+    converted = load_policy(tmp_path / "new")
+    np.testing.assert_array_equal(converted.predict(obs)[0], policy.predict(obs)[0])
+    assert converted.metadata["source"].startswith("converted from a Stable-Baselines3")
+    assert converted.metadata["train_config"]["n_steps"] == 64
+    venv.close()
+
+
+def test_resume_from_an_old_pickled_checkpoint_with_the_opt_in(tmp_path: Path) -> None:
+    from agents.checkpoints import load_checkpoint as fill
+
+    config = tiny_config(tmp_path, total_timesteps=128, validate_every=0)
+    train(config)
+    run_dir = config.resolved_run_dir()
+    folder = run_dir / "checkpoints"
+    venv = make_training_env(config)
+    model = make_model(config, venv)
+    fill(model, venv, folder / "steps_128")
+    model.save(folder / "rl_model_128_steps.zip")  # what earlier versions wrote
+    venv.save(str(folder / "rl_model_vecnormalize_128_steps.pkl"))
+    venv.close()
+    shutil.rmtree(folder / "steps_128")
+    resumed = dataclasses.replace(config, total_timesteps=256, resume=True)
+    with pytest.raises(ValueError, match=r"pickled Stable-Baselines3 checkpoint .*--trust-pickle"):
+        train(resumed)
+    out = train(dataclasses.replace(resumed, trust_pickle=True))
+    assert json.loads((out / "config.json").read_text())["resumed_from"] == 128
+    last = find_last_checkpoint(run_dir)
+    assert last is not None and last.steps == 256 and not last.legacy
 
 
 def test_stochastic_actions_are_seeded_gaussian_samples(tmp_path: Path) -> None:
