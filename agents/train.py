@@ -366,7 +366,6 @@ def train(config: TrainConfig) -> Path:
     from stable_baselines3.common.utils import set_random_seed
 
     run_dir.mkdir(parents=True, exist_ok=True)
-    (run_dir / "config.json").write_text(config.to_json() + "\n")
 
     # ---- seeding: torch, numpy, random (SB3) and the environments' reset seeds
     th.set_num_threads(config.torch_threads)
@@ -394,6 +393,7 @@ def train(config: TrainConfig) -> Path:
         load_checkpoint(model, venv, last.path)
         model.set_random_seed(config.seed + start_steps)
     venv.seed(config.seed + start_steps)
+    (run_dir / "config.json").write_text(config.to_json() + "\n")  # once the agent is built
 
     # ---- logging: CSV always, TensorBoard and stdout on request
     suffix = "" if start_steps == 0 else f"-resumed-at-{start_steps}"
