@@ -1,16 +1,31 @@
-"""The residual PPO agent of drill-string-gym (needs the ``[rl]`` extra: torch, SB3).
+"""The residual PPO agent of drill-string-gym.
 
-Importing this package is cheap and works without torch; torch and Stable-Baselines3 are
-imported when a model is loaded, trained or evaluated.
+Loading and running a trained agent needs only NumPy (the core install): the model files
+(``config.json``, ``policy.npz``, ``obs_norm.npz``; ``docs/model-files.md``) hold no code and
+the policy network runs in NumPy. Training and converting models need the ``[rl]`` extra
+(torch, Stable-Baselines3), imported only when used.
 
 * :func:`load_policy` / :func:`load_default_policy`: a trained agent as a policy with SB3's
   ``predict()`` and the ``env_kwargs`` it needs (``gym.make("DrillString-v0", **scenario,
   **policy.env_kwargs)``);
-* ``drill-gym train`` (:mod:`agents.train`) and ``drill-gym evaluate`` (:mod:`agents.evaluate`).
+* :func:`export_policy`: an SB3 PPO model and its normalisation statistics as a model folder;
+* ``drill-gym train`` (:mod:`agents.train`) and ``drill-gym evaluate`` (:mod:`experiments.evaluate`).
 """
 
 from __future__ import annotations
 
-from agents.policy import DEFAULT_MODEL_DIR, ResidualPolicy, load_default_policy, load_policy
+from agents.policy import (
+    DEFAULT_MODEL_DIR,
+    ResidualPolicy,
+    export_policy,
+    load_default_policy,
+    load_policy,
+)
 
-__all__ = ["DEFAULT_MODEL_DIR", "ResidualPolicy", "load_default_policy", "load_policy"]
+__all__ = [
+    "DEFAULT_MODEL_DIR",
+    "ResidualPolicy",
+    "export_policy",
+    "load_default_policy",
+    "load_policy",
+]

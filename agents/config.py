@@ -11,6 +11,8 @@ import ast
 import dataclasses
 import inspect
 import json
+import math
+import re
 import textwrap
 import typing
 from collections.abc import Sequence
@@ -18,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["TrainConfig", "field_docs", "parse_config"]
+__all__ = ["TrainConfig", "field_docs", "parse_config", "plain_text"]
 
 
 @dataclass
@@ -32,8 +34,9 @@ class TrainConfig:
     """Seed of everything: the network initialisation, PPO's sampling and the training
     scenarios (string ``i`` of the vector env starts from reset seed ``seed + i``)."""
     total_timesteps: int = 2_000_000
-    """Agent decisions to train for, summed over the parallel environments (2 M: about 5 min
-    on 2 busy cores)."""
+    """Agent decisions to train for, summed over the parallel environments, rounded up to
+    whole rollouts of ``n_steps * num_envs`` (2 M: 125 rollouts of 16,000; about 5 min on
+    2 busy cores)."""
     num_envs: int = 16
     """Drill strings simulated in parallel (one native vector env, one compiled call per step)."""
     torch_threads: int = 1
@@ -43,19 +46,30 @@ class TrainConfig:
     """Folder of the run: TensorBoard logs, progress.csv, checkpoints and the final model.
     Empty: ``runs/{exp_name}__{seed}``."""
     save_dir: str = ""
-    """Where the final model goes (model.zip, obs_norm.npz, config.json). Empty:
+    """Where the final model goes (config.json, policy.npz, obs_norm.npz). Empty:
     ``{run_dir}/model``."""
     checkpoint_every: int = 100_000
-    """Save a checkpoint (model and normalisation statistics) every this many decisions;
-    0 disables checkpoints."""
+    """Save a checkpoint (policy, value network, optimizer state and normalisation statistics,
+    no pickle) at the first rollout end after every this many decisions; the last one is
+    always saved at the end of the run. 0: only the last one."""
     resume: bool = False
-    """Continue the run in ``run_dir`` from its last checkpoint up to ``total_timesteps``."""
+    """Continue the run in ``run_dir`` from its last checkpoint up to ``total_timesteps``
+    (with the settings of the run)."""
+    overwrite: bool = False
+    """Delete an existing run folder of ``drill-gym train`` first. Without it (or ``resume``)
+    a run folder that already holds files is refused."""
+    trust_pickle: bool = False
+    """Let ``resume`` read the pickled checkpoints of older versions (rl_model_*_steps.zip
+    and rl_model_vecnormalize_*.pkl). Unpickling runs any code the file's author put in it:
+    only for checkpoints you wrote yourself."""
     tensorboard: bool = True
-    """Write TensorBoard logs to ``{run_dir}/tb``."""
-    progress_bar: bool = True
-    """Show SB3's progress bar (tqdm + rich)."""
+    """Write TensorBoard logs (training statistics and validation ratios) to
+    ``{run_dir}/tb``."""
+    progress_bar: bool = False
+    """Show SB3's progress bar (needs the packages tqdm and rich, part of the rl extra).
+    Without it one line per rollout and per validation is printed."""
     verbose: int = 0
-    """SB3 verbosity: 0 silent, 1 prints the training statistics after each rollout."""
+    """SB3 verbosity: 0 silent, 1 prints SB3's training statistics after each rollout."""
     validate_every: int = 100_000
     """Run the validation scenarios every this many decisions, log mean IAE, RMSD and
     stick-slip severity relative to the base controller, and keep the best model;
@@ -169,22 +183,85 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         positive = ("total_timesteps", "num_envs", "torch_threads", "n_steps", "batch_size")
-        for name in positive + ("n_epochs", "validation_episodes"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{name} = {value!r} is out of range: allowed an integer >= 1")
+        for name in (*positive, "n_epochs", "validation_episodes"):
+            _check_int(name, getattr(self, name), 1)
         for name in ("checkpoint_every", "validate_every"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                raise ValueError(f"{name} = {value!r} is out of range: allowed an integer >= 0")
-        if not 0.0 < self.gamma <= 1.0:
-            raise ValueError(f"gamma = {self.gamma!r} is out of range: allowed (0, 1]")
-        if not 0.0 <= self.gae_lambda <= 1.0:
-            raise ValueError(f"gae_lambda = {self.gae_lambda!r} is out of range: allowed [0, 1]")
-        if not self.learning_rate > 0:
-            raise ValueError(f"learning_rate = {self.learning_rate!r} is out of range: allowed > 0")
-        if not self.net_arch or any(n < 1 for n in self.net_arch):
-            raise ValueError(f"net_arch = {self.net_arch!r}: allowed a list of sizes >= 1")
+            _check_int(name, getattr(self, name), 0)
+        _check_int("seed", self.seed, 0, 2**32 - 1)
+        _check_int("sde_sample_freq", self.sde_sample_freq, -1)
+        if self.verbose not in (0, 1, 2) or isinstance(self.verbose, bool):
+            raise ValueError(
+                f"{_option('verbose')} = {self.verbose!r} is not valid: allowed 0, 1, 2"
+            )
+        _check_number("gamma", self.gamma, 0.0, 1.0, open_low=True)
+        _check_number("gae_lambda", self.gae_lambda, 0.0, 1.0)
+        _check_number("learning_rate", self.learning_rate, 0.0, 1.0, open_low=True)
+        _check_number("clip_range", self.clip_range, 0.0, 10.0, open_low=True)
+        _check_number("max_grad_norm", self.max_grad_norm, 0.0, 1e6, open_low=True)
+        for name in ("ent_coef", "vf_coef", "target_kl"):
+            _check_number(name, getattr(self, name), 0.0, 1e6)
+        _check_number("log_std_init", self.log_std_init, -20.0, 5.0)
+        for name in (
+            "reward_tracking",
+            "reward_chattering",
+            "reward_stuck",
+            "reward_torque",
+            "reward_residual",
+        ):
+            _check_number(name, getattr(self, name), 0.0, 1e6)
+        _check_number("reward_chattering_scale_nm", self.reward_chattering_scale_nm, 0, 1e9, True)
+        _check_number("residual_scale_nm", self.residual_scale_nm, 0.0, 1e6)
+        _check_number("control_dt_s", self.control_dt_s, 0.0, 10.0, open_low=True)
+        _check_number("episode_s", self.episode_s, 0.0, 1e5, open_low=True)
+        _check_number("noise_std_rad_s", self.noise_std_rad_s, 0.0, 10.0)
+        if not self.net_arch or any(
+            isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 1024
+            for n in self.net_arch
+        ):
+            raise ValueError(
+                f"{_option('net_arch')} = {self.net_arch!r} is out of range: allowed 1 to 8 "
+                "layer sizes, each an integer in [1, 1024]"
+            )
+        if len(self.net_arch) > 8:
+            raise ValueError(f"{_option('net_arch')} = {self.net_arch!r}: allowed at most 8 layers")
+        if (
+            not self.exp_name
+            or not self.exp_name.replace("-", "_").replace(".", "_").isidentifier()
+        ):
+            raise ValueError(
+                f"{_option('exp_name')} = {self.exp_name!r} is not valid: allowed letters, "
+                "digits, '_', '-' and '.'"
+            )
+        if self.resume and self.overwrite:
+            raise ValueError("--resume and --overwrite exclude each other: choose one")
+
+
+def _option(name: str) -> str:
+    """A field as the command line spells it."""
+    return "--" + name.replace("_", "-")
+
+
+def _check_int(name: str, value: Any, low: int, high: int | None = None) -> None:
+    ok = not isinstance(value, bool) and isinstance(value, int) and value >= low
+    if ok and (high is None or value <= high):
+        return
+    allowed = f"an integer >= {low}" if high is None else f"an integer in [{low}, {high}]"
+    raise ValueError(f"{_option(name)} = {value!r} is out of range: allowed {allowed}")
+
+
+def _check_number(name: str, value: Any, low: float, high: float, open_low: bool = False) -> None:
+    ok = (
+        not isinstance(value, bool)
+        and isinstance(value, (int, float))
+        and math.isfinite(value)
+        and (value > low if open_low else value >= low)
+        and value <= high
+    )
+    if not ok:
+        bracket = "(" if open_low else "["
+        raise ValueError(
+            f"{_option(name)} = {value!r} is out of range: allowed {bracket}{low:g}, {high:g}]"
+        )
 
 
 def field_docs(cls: type = TrainConfig) -> dict[str, str]:
@@ -213,23 +290,59 @@ def _parse_bool(text: str) -> bool:
     raise argparse.ArgumentTypeError(f"expected true or false, got {text!r}")
 
 
+def plain_text(text: str, fields: Sequence[str] = ()) -> str:
+    """``text`` without Sphinx markup: roles such as ``:class:`x``` become ``x``, double
+    backticks are dropped, and the names in ``fields`` become their ``--options``."""
+    text = re.sub(r":[a-z]+:`~?([^`]+)`", r"\1", text)
+    known = set(fields)
+
+    def literal(match: re.Match[str]) -> str:
+        inner = match.group(1)
+        return _option(inner) if inner in known else inner
+
+    text = re.sub(r"``([^`]+)``", literal, text)
+    return text.replace("::\n", ":\n")
+
+
+def _show_default(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, list):
+        return " ".join(str(v) for v in value)
+    if value == "":
+        return "empty"
+    return str(value)
+
+
 def parse_config(
     argv: Sequence[str] | None, prog: str = "drill-gym train", description: str = ""
 ) -> TrainConfig:
     """A :class:`TrainConfig` from command-line arguments ``--field value`` (``--flag`` alone
-    sets a boolean to true, ``--no-flag`` to false; ``--net-arch 64 64`` for lists)."""
+    sets a boolean to true, ``--no-flag`` to false; ``--net-arch 64 64`` for lists).
+
+    Raises:
+        ValueError: A value out of range (one line naming the option and the allowed range;
+            ``drill-gym`` prints it and exits with status 2). Unparsable values (``--seed x``)
+            end the program as argparse does.
+    """
+    names = [f.name for f in dataclasses.fields(TrainConfig)]
     parser = argparse.ArgumentParser(
-        prog=prog, description=description, formatter_class=argparse.RawDescriptionHelpFormatter
+        prog=prog,
+        description=plain_text(description, names),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     docs = field_docs()
     hints = typing.get_type_hints(TrainConfig)
     defaults = TrainConfig()
     for f in dataclasses.fields(TrainConfig):
-        flag = "--" + f.name.replace("_", "-")
+        flag = _option(f.name)
         default = getattr(defaults, f.name)
-        help_text = f"{docs.get(f.name, '')} (default: {default})".replace("%", "%%")
+        doc = plain_text(docs.get(f.name, ""), names)
         hint = hints[f.name]
         if hint is bool:
+            off = "--no-" + flag[2:]
+            switch = f"; {off} turns it off" if default else ""
+            help_text = f"{doc} (default: {_show_default(default)}{switch})"
             parser.add_argument(
                 flag,
                 dest=f.name,
@@ -237,19 +350,26 @@ def parse_config(
                 const=True,
                 default=default,
                 type=_parse_bool,
+                metavar="true|false",
+                help=help_text.replace("%", "%%"),
+            )
+            parser.add_argument(off, dest=f.name, action="store_false", help=argparse.SUPPRESS)
+            continue
+        help_text = f"{doc} (default: {_show_default(default)})".replace("%", "%%")
+        metavar = {int: "N", float: "X"}.get(hint, "TEXT")
+        if typing.get_origin(hint) is list:
+            parser.add_argument(
+                flag,
+                dest=f.name,
+                nargs="+",
+                type=int,
+                default=default,
+                metavar="SIZE",
                 help=help_text,
             )
-            parser.add_argument(
-                "--no-" + f.name.replace("_", "-"),
-                dest=f.name,
-                action="store_false",
-                help=argparse.SUPPRESS,
-            )
-        elif typing.get_origin(hint) is list:
-            parser.add_argument(
-                flag, dest=f.name, nargs="+", type=int, default=default, help=help_text
-            )
         else:
-            parser.add_argument(flag, dest=f.name, type=hint, default=default, help=help_text)
+            parser.add_argument(
+                flag, dest=f.name, type=hint, default=default, metavar=metavar, help=help_text
+            )
     args = parser.parse_args(list(argv) if argv is not None else None)
     return TrainConfig(**vars(args))

@@ -1,29 +1,46 @@
-"""A trained PPO agent as a policy with SB3's ``predict()``, and how it is saved and loaded.
+"""A trained agent as a policy with SB3's ``predict()`` in pure NumPy, and its model files.
 
-A model is a folder of three files:
+A model folder holds three files that can be read without running any code
+(:mod:`agents.model_format`, ``docs/model-files.md``):
 
-* ``model.zip``: the Stable-Baselines3 PPO model (network weights and optimiser state);
-* ``obs_norm.npz``: the observation normalisation (``mean``, ``var``, ``clip_obs``,
-  ``epsilon``; VecNormalize's statistics at the end of training);
 * ``config.json``: ``name``, ``env_kwargs`` (the ``DrillString-v0`` keywords the policy needs:
-  base controller, decision period, residual scale), ``observation_size``, the training
-  configuration and its wall time.
+  base controller, decision period, residual scale, torque limits), ``observation_size``, the
+  architecture (``policy``) and the training record;
+* ``policy.npz``: the actor's weights, biases and log standard deviation;
+* ``obs_norm.npz``: the observation normalisation (``mean``, ``var``, ``clip_obs``,
+  ``epsilon``: VecNormalize's statistics at the end of training).
 
-:func:`load_policy` checks the three files against each other and against the environment
-they describe, and returns a :class:`ResidualPolicy`. Torch and SB3 are imported only when a
-model is loaded or saved.
+:func:`load_policy` checks the files against the schema, against each other and against the
+environment they describe, and returns a :class:`ResidualPolicy`; neither torch nor
+Stable-Baselines3 is imported. :func:`export_policy` converts a Stable-Baselines3 PPO model
+(and its normalisation statistics) to this format; it needs torch. An SB3 ``model.zip`` (the
+format of earlier versions) is a pickle and loads only with ``trust_pickle=True``.
 """
 
 from __future__ import annotations
 
-import json
-import zipfile
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 import numpy.typing as npt
 
+from agents.model_format import (
+    CONFIG_FILE,
+    NORM_FILE,
+    RECORD_FIELDS,
+    WEIGHTS_FILE,
+    GaussianMlp,
+    ModelConfig,
+    ObsNorm,
+    PolicySpec,
+    read_json,
+    read_npz,
+    validate_config,
+    validate_env_kwargs,
+    write_model_files,
+)
 from drill_env.layout import observation_size
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -31,67 +48,112 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "CONFIG_FILE",
+    "CONVERT_HINT",
     "DEFAULT_MODEL_DIR",
     "DEFAULT_MODEL_NAME",
-    "MODEL_FILE",
+    "LEGACY_MODEL_FILE",
     "NORM_FILE",
+    "PICKLE_RISK",
+    "WEIGHTS_FILE",
     "ResidualPolicy",
+    "export_policy",
+    "is_model_folder",
     "load_default_policy",
     "load_policy",
-    "save_policy",
+    "policy_from_sb3",
 ]
 
 DEFAULT_MODEL_DIR: Final = Path(__file__).resolve().parent / "models"
 """Folder of the shipped models (``agents/models/``)."""
 DEFAULT_MODEL_NAME: Final = "residual_ppo"
 """The shipped residual agent: ``DEFAULT_MODEL_DIR / DEFAULT_MODEL_NAME``."""
-MODEL_FILE: Final = "model.zip"
-NORM_FILE: Final = "obs_norm.npz"
-CONFIG_FILE: Final = "config.json"
-FORMAT_VERSION: Final = 1
-_EXPECTED = f"a model folder with {MODEL_FILE}, {NORM_FILE} and {CONFIG_FILE}"
+LEGACY_MODEL_FILE: Final = "model.zip"
+"""A Stable-Baselines3 model (format 1): pickled Python objects, read only on opt-in."""
+PICKLE_RISK: Final = (
+    "loading it unpickles Python objects, which runs any code the file's author put in it"
+)
+CONVERT_HINT: Final = (
+    "if you trust its source, load it with trust_pickle=True (drill-gym evaluate "
+    "--trust-pickle), or convert it once to the safe format with 'python -m agents.convert "
+    "OLD_FOLDER NEW_FOLDER --trust-pickle' (agents.convert.convert_sb3_model)"
+)
+_FILES: Final = (CONFIG_FILE, WEIGHTS_FILE, NORM_FILE)
+_EXPECTED: Final = f"a model folder with {', '.join(_FILES)}"
 
 
 class ResidualPolicy:
-    """A trained agent: observation normalisation, then the PPO policy network.
+    """A trained agent: observation normalisation, then a Gaussian MLP, all in NumPy.
 
     ``predict`` follows SB3 (one observation ``(obs_size,)`` or a batch ``(n, obs_size)``;
-    actions ``(1,)`` or ``(n, 1)`` in [-1, 1]). The deterministic action (the Gaussian's mean,
-    clipped) is computed in NumPy from the network weights; a stochastic one goes through SB3.
+    actions ``(1,)`` or ``(n, 1)`` clipped to the action bounds, [-1, 1]). The deterministic
+    action is the Gaussian's mean, computed in float64 from the stored weights (the same
+    arithmetic as SB3's forward pass, equal to float32 rounding). A stochastic action adds
+    Gaussian noise drawn from the policy's own ``np.random.Generator`` (:meth:`seed`), not
+    from torch's random generator as SB3 does, so samples differ from SB3's for one seed.
+
+    Args:
+        spec: The architecture.
+        weights: The arrays of ``spec.weight_shapes()``.
+        obs_norm: The observation normalisation.
+        env_kwargs: The ``DrillString-v0`` keywords the agent needs.
+        name: The agent's name.
+        metadata: The training record (``train_config``, ``timesteps``, ...).
+        rng: Generator of the stochastic actions (default: a fresh unseeded one).
 
     Attributes:
         name: The agent's name (``residual_ppo``, ``direct_ppo``, ...).
         env_kwargs: The ``DrillString-v0`` keywords the agent was trained with and needs:
             ``base_controller`` (``None`` for a from-scratch agent), ``control_dt_s``,
             ``residual_scale_nm``, ``min_torque_nm``, ``max_torque_nm``.
-        metadata: The rest of ``config.json`` (training configuration, wall time, ...).
-        model: The SB3 PPO model.
+        metadata: The rest of ``config.json`` (``format``, ``observation_size``, ``policy``,
+            the training configuration, wall time, ...).
+        spec: The architecture.
+        obs_norm: The observation normalisation.
     """
 
     def __init__(
         self,
-        model: PPO,
-        obs_mean: npt.ArrayLike,
-        obs_var: npt.ArrayLike,
-        env_kwargs: dict[str, Any],
+        spec: PolicySpec,
+        weights: Mapping[str, npt.ArrayLike],
+        obs_norm: ObsNorm,
+        env_kwargs: Mapping[str, Any],
         name: str,
-        clip_obs: float = 10.0,
-        epsilon: float = 1e-8,
-        metadata: dict[str, Any] | None = None,
+        metadata: Mapping[str, Any] | None = None,
+        rng: np.random.Generator | None = None,
     ) -> None:
-        self.model = model
+        if obs_norm.mean.shape != (spec.observation_size,):
+            raise ValueError(
+                f"obs_norm has shape {obs_norm.mean.shape}: expected ({spec.observation_size},)"
+            )
+        self.spec = spec
+        self.network = GaussianMlp(spec, weights)
+        self.obs_norm = obs_norm
         self.name = name
         self.env_kwargs = dict(env_kwargs)
-        self.metadata = dict(metadata or {})
-        self.obs_mean = np.asarray(obs_mean, dtype=np.float64)
-        self.obs_std = np.sqrt(np.asarray(obs_var, dtype=np.float64) + epsilon)
-        self.clip_obs = float(clip_obs)
-        self._layers = _numpy_actor(model)
+        self.metadata: dict[str, Any] = {
+            **dict(metadata or {}),
+            "format": 2,
+            "observation_size": spec.observation_size,
+            "policy": spec.to_json(),
+        }
+        self.obs_mean = np.asarray(obs_norm.mean, dtype=np.float64)
+        self.obs_std = np.sqrt(np.asarray(obs_norm.var, dtype=np.float64) + obs_norm.epsilon)
+        self.clip_obs = float(obs_norm.clip_obs)
+        self._rng = rng if rng is not None else np.random.default_rng()
 
     @property
     def observation_size(self) -> int:
         """Length of the observations the policy takes."""
-        return int(self.obs_mean.shape[0])
+        return self.spec.observation_size
+
+    @property
+    def weights(self) -> dict[str, npt.NDArray[np.float64]]:
+        """The network's arrays by name (``policy.npz``)."""
+        return self.network.weights
+
+    def seed(self, seed: int | None = None) -> None:
+        """Reseed the generator of the stochastic actions."""
+        self._rng = np.random.default_rng(seed)
 
     def normalize(self, observation: npt.ArrayLike) -> npt.NDArray[np.float32]:
         """Observation(s) as the network sees them: standardised and clipped."""
@@ -106,202 +168,338 @@ class ResidualPolicy:
         episode_start: Any = None,
         deterministic: bool = True,
     ) -> tuple[npt.NDArray[np.float32], Any]:
-        """Action(s) in [-1, 1] for one observation or a batch; ``state`` is passed through."""
+        """Action(s) for one observation or a batch; ``state`` is passed through.
+
+        Args:
+            observation: Shape ``(observation_size,)`` or ``(n, observation_size)``.
+            state: Returned unchanged (the policy has no memory).
+            episode_start: Ignored.
+            deterministic: The Gaussian's mean; else a sample from the policy's generator.
+
+        Returns:
+            The action(s), float32, shape ``(action_size,)`` or ``(n, action_size)``, and
+            ``state``.
+        """
         obs = np.asarray(observation, dtype=np.float32)
-        if obs.shape[-1] != self.observation_size or obs.ndim not in (1, 2):
+        if obs.ndim not in (1, 2) or obs.shape[-1] != self.observation_size:
             raise ValueError(
                 f"{self.name} takes observations of shape ({self.observation_size},) or "
                 f"(n, {self.observation_size}), got shape {obs.shape}"
             )
-        z = self.normalize(obs)
-        if not deterministic or self._layers is None:
-            action, _ = self.model.predict(z, deterministic=deterministic)
-            return np.asarray(action, dtype=np.float32), state
-        h = z.astype(np.float64)
-        for weight, bias, activation in self._layers:
-            h = h @ weight.T + bias
-            if activation == "tanh":
-                h = np.tanh(h)
-            elif activation == "relu":
-                h = np.maximum(h, 0.0)
-        return np.clip(h, -1.0, 1.0).astype(np.float32), state
+        z = self.normalize(obs).astype(np.float64)
+        latent = self.network.latent(z)
+        action = self.network.mean_action(latent)
+        if not deterministic:
+            std = self.network.action_std(latent)
+            action = action + std * self._rng.standard_normal(action.shape)
+        return self.network.clip(action).astype(np.float32), state
+
+    def save(self, folder: str | Path) -> Path:
+        """Write the model folder (``config.json``, ``policy.npz``, ``obs_norm.npz``)."""
+        return write_model_files(
+            Path(folder),
+            name=self.name,
+            env_kwargs=self.env_kwargs,
+            spec=self.spec,
+            weights={k: v.astype(np.float32) for k, v in self.weights.items()},
+            obs_norm=self.obs_norm,
+            record=self.metadata,
+        )
 
     def __repr__(self) -> str:
         return f"ResidualPolicy(name={self.name!r}, env_kwargs={self.env_kwargs!r})"
 
 
-def _numpy_actor(
-    model: Any,
-) -> list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], str]] | None:
-    """The actor's layers (weight, bias, activation after) for a plain MLP policy, else None."""
-    import torch as th
-
-    policy = model.policy
-    try:
-        extractor = getattr(policy, "pi_features_extractor", policy.features_extractor)
-        if type(extractor).__name__ != "FlattenExtractor":  # pragma: no cover
-            return None  # custom extractors go through SB3
-        modules = list(policy.mlp_extractor.policy_net) + [policy.action_net]
-    except AttributeError:  # pragma: no cover - not an ActorCriticPolicy
-        return None
-    layers: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], str]] = []
-    for module in modules:
-        if isinstance(module, th.nn.Linear):
-            layers.append(
-                (
-                    module.weight.detach().cpu().numpy().astype(np.float64),
-                    module.bias.detach().cpu().numpy().astype(np.float64),
-                    "",
-                )
-            )
-        elif isinstance(module, (th.nn.Tanh, th.nn.ReLU)) and layers:
-            w, b, _ = layers[-1]
-            layers[-1] = (w, b, "tanh" if isinstance(module, th.nn.Tanh) else "relu")
-        else:  # pragma: no cover - other architectures go through SB3
-            return None
-    if getattr(policy, "squash_output", False):  # pragma: no cover - gSDE with squashing
-        return None
-    return layers
-
-
-def save_policy(
+# -------------------------------------------------------------------------- from SB3 (torch)
+def policy_from_sb3(
     model: PPO,
-    directory: str | Path,
     *,
     name: str,
-    env_kwargs: dict[str, Any],
+    env_kwargs: Mapping[str, Any],
     obs_mean: npt.ArrayLike | None = None,
     obs_var: npt.ArrayLike | None = None,
     clip_obs: float = 10.0,
     epsilon: float = 1e-8,
-    metadata: dict[str, Any] | None = None,
-) -> Path:
-    """Write ``model.zip``, ``obs_norm.npz`` and ``config.json`` into ``directory``.
+    metadata: Mapping[str, Any] | None = None,
+) -> ResidualPolicy:
+    """Convert a Stable-Baselines3 PPO model (and VecNormalize statistics) to a
+    :class:`ResidualPolicy`: the one conversion from SB3 to the portable format.
 
-    Without normalisation statistics the identity is stored (mean 0, variance 1, epsilon 0,
-    no clipping).
+    The actor must be SB3's plain MLP (``FlattenExtractor``, Linear layers with one tanh or
+    ReLU activation, no squashing); the weights are copied as float32. Without normalisation
+    statistics the identity is stored (mean 0, variance 1, epsilon 0, no clipping).
+
+    Raises:
+        ValueError: Another architecture (custom extractor, squashed output, ...).
+    """
+    import torch as th
+
+    policy = model.policy
+    size = int(model.observation_space.shape[0])  # type: ignore[index]
+    where = f"cannot convert {type(policy).__name__} of {type(model).__name__}"
+    extractor = getattr(
+        policy, "pi_features_extractor", getattr(policy, "features_extractor", None)
+    )
+    if type(extractor).__name__ != "FlattenExtractor":
+        raise ValueError(f"{where}: features extractor {type(extractor).__name__} is not supported")
+    if getattr(policy, "squash_output", False):
+        raise ValueError(f"{where}: squashed (tanh) outputs are not supported")
+    if getattr(getattr(policy, "action_dist", None), "use_expln", False):
+        raise ValueError(f"{where}: gSDE with use_expln is not supported")
+    try:
+        modules = list(policy.mlp_extractor.policy_net)
+        action_net = policy.action_net
+        log_std = policy.log_std
+    except AttributeError as err:
+        raise ValueError(f"{where}: not an actor-critic MLP policy ({err})") from None
+
+    def array(t: th.Tensor) -> npt.NDArray[np.float32]:
+        return t.detach().cpu().numpy().astype(np.float32)
+
+    weights: dict[str, npt.NDArray[np.float32]] = {}
+    hidden: list[int] = []
+    activations: set[str] = set()
+    expect_linear = True
+    for module in modules:
+        if expect_linear and isinstance(module, th.nn.Linear):
+            i = len(hidden)
+            weights[f"hidden.{i}.weight"] = array(module.weight)
+            weights[f"hidden.{i}.bias"] = array(module.bias)
+            hidden.append(int(module.out_features))
+            expect_linear = False
+        elif not expect_linear and isinstance(module, (th.nn.Tanh, th.nn.ReLU)):
+            activations.add("tanh" if isinstance(module, th.nn.Tanh) else "relu")
+            expect_linear = True
+        else:
+            raise ValueError(f"{where}: layer {module!r} is not supported in the policy network")
+    if not expect_linear or len(activations) > 1 or not isinstance(action_net, th.nn.Linear):
+        raise ValueError(f"{where}: expected Linear layers each followed by one activation")
+    weights["action.weight"] = array(action_net.weight)
+    weights["action.bias"] = array(action_net.bias)
+    use_sde = bool(getattr(policy, "use_sde", False))
+    if use_sde:
+        std = getattr(policy.action_dist, "get_std")(log_std)  # noqa: B009
+        weights["log_std"] = np.log(array(std).astype(np.float64)).astype(np.float32)
+    else:
+        weights["log_std"] = array(log_std)
+    space = model.action_space
+    spec = PolicySpec(
+        observation_size=size,
+        hidden_sizes=tuple(hidden),
+        activation=activations.pop() if activations else "tanh",
+        action_size=int(action_net.out_features),
+        action_low=tuple(float(x) for x in np.asarray(space.low).ravel()),  # type: ignore[attr-defined]
+        action_high=tuple(float(x) for x in np.asarray(space.high).ravel()),  # type: ignore[attr-defined]
+        noise="state_dependent" if use_sde else "diagonal",
+    )
+    if obs_mean is None:
+        norm = ObsNorm.identity(size)
+    else:
+        var = np.ones(size) if obs_var is None else np.asarray(obs_var, dtype=np.float64)
+        norm = ObsNorm(np.asarray(obs_mean, dtype=np.float64), var, float(clip_obs), float(epsilon))
+    return ResidualPolicy(spec, weights, norm, env_kwargs, name, metadata)
+
+
+def export_policy(
+    model: PPO,
+    folder: str | Path,
+    *,
+    name: str,
+    env_kwargs: Mapping[str, Any],
+    obs_mean: npt.ArrayLike | None = None,
+    obs_var: npt.ArrayLike | None = None,
+    clip_obs: float = 10.0,
+    epsilon: float = 1e-8,
+    metadata: Mapping[str, Any] | None = None,
+) -> Path:
+    """Write an SB3 PPO model and its normalisation statistics as a portable model folder
+    (:func:`policy_from_sb3`, then :meth:`ResidualPolicy.save`).
+
+    Args:
+        model: The PPO model.
+        folder: The model folder (created; its three files are replaced).
+        name: The agent's name.
+        env_kwargs: The ``DrillString-v0`` keywords the policy needs.
+        obs_mean: Observation mean (VecNormalize's ``obs_rms.mean``); None: no normalisation.
+        obs_var: Observation variance.
+        clip_obs: Clipping of the normalised observation.
+        epsilon: Added to the variance.
+        metadata: Training-record fields of config.json (``train_config``, ``timesteps``,
+            ``selected``, ...; ``docs/model-files.md`` lists them).
 
     Returns:
         The folder.
     """
-    out = Path(directory)
-    out.mkdir(parents=True, exist_ok=True)
-    size = int(model.observation_space.shape[0])  # type: ignore[index]
-    mean = np.zeros(size) if obs_mean is None else np.asarray(obs_mean, dtype=np.float64)
-    var = np.ones(size) if obs_var is None else np.asarray(obs_var, dtype=np.float64)
-    if obs_mean is None:
-        clip_obs, epsilon = 1e6, 0.0
-    model.save(out / MODEL_FILE)
-    np.savez(out / NORM_FILE, mean=mean, var=var, clip_obs=clip_obs, epsilon=epsilon)
-    record = {
-        "format": FORMAT_VERSION,
-        "name": name,
-        "env_kwargs": env_kwargs,
-        "observation_size": size,
-        **(metadata or {}),
-    }
-    (out / CONFIG_FILE).write_text(json.dumps(record, indent=2) + "\n")
-    return out
+    policy = policy_from_sb3(
+        model,
+        name=name,
+        env_kwargs=env_kwargs,
+        obs_mean=obs_mean,
+        obs_var=obs_var,
+        clip_obs=clip_obs,
+        epsilon=epsilon,
+        metadata=metadata,
+    )
+    return policy.save(folder)
 
 
-def _model_files(path: Path) -> tuple[Path, Path, Path]:
-    if not path.exists():
-        raise FileNotFoundError(
-            f"no model at {str(path)!r}: expected {_EXPECTED}, or its {MODEL_FILE}"
-        )
-    folder = path if path.is_dir() else path.parent
-    model = path if path.is_file() else folder / MODEL_FILE
-    files = (model, folder / NORM_FILE, folder / CONFIG_FILE)
-    missing = [f.name for f in files if not f.is_file()]
-    if missing:
-        raise FileNotFoundError(
-            f"incomplete model in {str(folder)!r}: expected {_EXPECTED}; missing {', '.join(missing)}"
-        )
-    return files
+# ---------------------------------------------------------------------------------- loading
+def is_model_folder(folder: Path) -> bool:
+    """Whether ``folder`` has the three files of a portable model."""
+    return all((folder / name).is_file() for name in _FILES)
 
 
-def load_policy(path: str | Path, base_controller: Any = ...) -> ResidualPolicy:
-    """Load a saved agent (a model folder, or the ``model.zip`` in one).
-
-    Args:
-        path: The model folder (``model.zip``, ``obs_norm.npz``, ``config.json``) or its zip.
-        base_controller: When given, the base controller the caller expects (``None`` for a
-            from-scratch agent); a model trained on another one is an error.
-
-    Raises:
-        FileNotFoundError: The path or one of the three files does not exist.
-        ValueError: A file is corrupt, or the files disagree with each other or with the
-            environment (observation size, unknown or unexpected base controller); the message
-            says what was expected and what was found.
-    """
-    model_file, norm_file, config_file = _model_files(Path(path))
-    try:
-        record = json.loads(config_file.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise ValueError(f"{str(config_file)!r} is not valid JSON: {err}") from None
-    if not isinstance(record, dict) or not isinstance(record.get("env_kwargs"), dict):
-        raise ValueError(
-            f"{str(config_file)!r}: expected a JSON object with 'name' and 'env_kwargs', "
-            f"found {type(record).__name__} with keys {sorted(record) if isinstance(record, dict) else []}"
-        )
-    env_kwargs: dict[str, Any] = dict(record["env_kwargs"])
-    found = env_kwargs.get("base_controller")
+def _check_environment(config: ModelConfig, where: str, path: Path, base_controller: Any) -> None:
+    """The config against ``DrillString-v0``: registered base controller, observation and
+    action sizes."""
     from baselines import controller_names
 
+    found = config.env_kwargs.get("base_controller")
     if found is not None and found not in controller_names():
         raise ValueError(
-            f"{str(config_file)!r}: the model was trained on base controller {found!r}, which is "
-            f"not registered; expected one of {controller_names()} or None"
+            f"{where!r}: field env_kwargs.base_controller: the model was trained on base "
+            f"controller {found!r}, which is not registered; expected one of "
+            f"{controller_names()} or None"
         )
     if base_controller is not ... and found != base_controller:
         raise ValueError(
             f"{str(path)!r}: wrong base controller: expected a model trained on "
             f"{base_controller!r}, found one trained on {found!r}"
         )
-    expected_size = observation_size(found is not None)
-    try:
-        with np.load(norm_file) as stats:
-            mean, var = np.asarray(stats["mean"]), np.asarray(stats["var"])
-            clip_obs, epsilon = float(stats["clip_obs"]), float(stats["epsilon"])
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile, EOFError) as err:
+    expected = observation_size(found is not None)
+    if config.spec.observation_size != expected:
         raise ValueError(
-            f"{str(norm_file)!r} is not valid normalisation statistics (an .npz with mean, var, "
-            f"clip_obs, epsilon): {err}"
-        ) from None
-    if mean.shape != (expected_size,) or var.shape != (expected_size,):
-        raise ValueError(
-            f"{str(norm_file)!r}: wrong observation size: expected {expected_size} "
-            f"(base_controller={found!r}), found statistics of shape {mean.shape}"
+            f"{where!r}: field observation_size: wrong observation size: expected {expected} "
+            f"(DrillString-v0 with base_controller={found!r}), found "
+            f"{config.spec.observation_size}"
         )
-    if not zipfile.is_zipfile(model_file):
+    if config.spec.action_size != 1:
         raise ValueError(
-            f"{str(model_file)!r} is not a valid Stable-Baselines3 model: expected a zip archive, "
+            f"{where!r}: field policy.action_size = {config.spec.action_size}: DrillString-v0 "
+            "takes one action"
+        )
+
+
+def load_policy(
+    path: str | Path, base_controller: Any = ..., *, trust_pickle: bool = False
+) -> ResidualPolicy:
+    """Load a saved agent from its model folder (or a file in it).
+
+    Reads ``config.json`` (checked against the schema), then ``obs_norm.npz`` and
+    ``policy.npz`` (``np.load(allow_pickle=False)`` after checking the archives); imports
+    neither torch nor Stable-Baselines3.
+
+    Args:
+        path: The model folder, or one of its files.
+        base_controller: When given, the base controller the caller expects (``None`` for a
+            from-scratch agent); a model trained on another one is an error.
+        trust_pickle: Also load a Stable-Baselines3 ``model.zip`` (the earlier format). It is
+            a pickle: loading it runs any code its author put in it. Only for files you
+            made yourself or got from a source you trust; needs torch and SB3.
+
+    Raises:
+        FileNotFoundError: The path or one of the files does not exist.
+        ValueError: A file is corrupt or breaks the schema, the files disagree with each
+            other or with the environment (observation size, unknown or unexpected base
+            controller), or the model is a pickle and ``trust_pickle`` is False; one line
+            naming the file and what is wrong.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"no model at {str(path)!r}: expected {_EXPECTED}")
+    folder = path if path.is_dir() else path.parent
+    if path.is_file() and path.name not in (*_FILES, LEGACY_MODEL_FILE):
+        raise ValueError(f"{str(path)!r} is not a model file: expected {_EXPECTED}")
+    legacy = (folder / LEGACY_MODEL_FILE).is_file() and (
+        path.name == LEGACY_MODEL_FILE or not (folder / WEIGHTS_FILE).is_file()
+    )
+    if legacy:
+        zip_file = folder / LEGACY_MODEL_FILE
+        if not trust_pickle:
+            raise ValueError(
+                f"{str(zip_file)!r} is a Stable-Baselines3 model (a pickle): {PICKLE_RISK}; "
+                f"{CONVERT_HINT}"
+            )
+        return _load_sb3(zip_file, base_controller)
+    missing = [name for name in _FILES if not (folder / name).is_file()]
+    if missing:
+        raise FileNotFoundError(
+            f"incomplete model in {str(folder)!r}: expected {_EXPECTED}; missing "
+            f"{', '.join(missing)}"
+        )
+    config_file = folder / CONFIG_FILE
+    config = validate_config(read_json(config_file), str(config_file))
+    _check_environment(config, str(config_file), path, base_controller)
+    norm, weights = _read_arrays(folder, config.spec)
+    return ResidualPolicy(config.spec, weights, norm, config.env_kwargs, config.name, config.record)
+
+
+def _read_arrays(
+    folder: Path, spec: PolicySpec
+) -> tuple[ObsNorm, dict[str, npt.NDArray[np.float64]]]:
+    norm_file = folder / NORM_FILE
+    stats = read_npz(
+        norm_file, ObsNorm.shapes(spec.observation_size), "observation normalisation statistics"
+    )
+    norm = ObsNorm(stats["mean"], stats["var"], float(stats["clip_obs"]), float(stats["epsilon"]))
+    norm.check(str(norm_file))
+    weights = read_npz(folder / WEIGHTS_FILE, spec.weight_shapes(), "policy network weights")
+    return norm, weights
+
+
+def _load_sb3(zip_file: Path, base_controller: Any) -> ResidualPolicy:
+    """A Stable-Baselines3 ``model.zip`` with the ``config.json`` (format 1) and
+    ``obs_norm.npz`` beside it, converted by :func:`policy_from_sb3` (unpickles: opt-in)."""
+    import zipfile
+
+    folder = zip_file.parent
+    config_file, norm_file = folder / CONFIG_FILE, folder / NORM_FILE
+    for needed in (config_file, norm_file):
+        if not needed.is_file():
+            raise FileNotFoundError(
+                f"incomplete model in {str(folder)!r}: a {LEGACY_MODEL_FILE} needs "
+                f"{CONFIG_FILE} and {NORM_FILE} beside it; missing {needed.name}"
+            )
+    record = read_json(config_file)
+    env_kwargs = validate_env_kwargs(record.get("env_kwargs"), str(config_file))
+    name = record.get("name", folder.name)
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"{str(config_file)!r}: field name = {name!r}: expected a string")
+    found = env_kwargs["base_controller"]
+    size = observation_size(found is not None)
+    spec_stub = PolicySpec(observation_size=size, hidden_sizes=())
+    stub = ModelConfig(name, env_kwargs, spec_stub)
+    _check_environment(stub, str(config_file), zip_file, base_controller)
+    stats = read_npz(norm_file, ObsNorm.shapes(size), "observation normalisation statistics")
+    if not zipfile.is_zipfile(zip_file):
+        raise ValueError(
+            f"{str(zip_file)!r} is not a valid Stable-Baselines3 model: expected a zip archive, "
             "found something else (corrupt or truncated file?)"
         )
     from stable_baselines3 import PPO
 
     try:
-        model = PPO.load(model_file, device="cpu")
+        model = PPO.load(zip_file, device="cpu")
     except Exception as err:  # SB3 raises many types on a bad archive
         raise ValueError(
-            f"{str(model_file)!r} is not a valid Stable-Baselines3 PPO model: "
+            f"{str(zip_file)!r} is not a valid Stable-Baselines3 PPO model: "
             f"{type(err).__name__}: {err}"
         ) from None
-    model_size = model.observation_space.shape
-    if model_size != (expected_size,):
+    if model.observation_space.shape != (size,):
         raise ValueError(
-            f"{str(model_file)!r}: wrong observation size: expected {expected_size} "
-            f"(DrillString-v0 with base_controller={found!r}), found a model taking {model_size}"
+            f"{str(zip_file)!r}: wrong observation size: expected {size} "
+            f"(DrillString-v0 with base_controller={found!r}), found a model taking "
+            f"{model.observation_space.shape}"
         )
-    metadata = {k: v for k, v in record.items() if k not in ("name", "env_kwargs")}
-    return ResidualPolicy(
+    metadata = {k: v for k, v in record.items() if k in RECORD_FIELDS}
+    return policy_from_sb3(
         model,
-        mean,
-        var,
-        env_kwargs,
-        name=str(record.get("name", model_file.parent.name)),
-        clip_obs=clip_obs,
-        epsilon=epsilon,
+        name=name,
+        env_kwargs=env_kwargs,
+        obs_mean=stats["mean"],
+        obs_var=stats["var"],
+        clip_obs=float(stats["clip_obs"]),
+        epsilon=float(stats["epsilon"]),
         metadata=metadata,
     )
 
@@ -309,6 +507,6 @@ def load_policy(path: str | Path, base_controller: Any = ...) -> ResidualPolicy:
 def load_default_policy() -> ResidualPolicy | None:
     """The shipped residual agent (``agents/models/residual_ppo``), or None when absent."""
     folder = DEFAULT_MODEL_DIR / DEFAULT_MODEL_NAME
-    if not (folder / MODEL_FILE).is_file():
+    if not is_model_folder(folder):
         return None
     return load_policy(folder)

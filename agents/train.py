@@ -5,17 +5,24 @@ every field documented, every field a ``--flag``), one seeding block, the whole 
 stack in plain view, then PPO. Everything of a run goes to ``runs/{exp_name}__{seed}/``::
 
     config.json            the hyperparameters of the run
-    progress*.csv, tb/     training statistics (SB3 logger; TensorBoard with ``--tensorboard``)
+    progress*.csv, tb/     training statistics (SB3 logger) and, in tb/, the validation ratios
     validation.csv         validation IAE / RMSD / severity relative to the base controller
-    checkpoints/           model and VecNormalize statistics every ``--checkpoint-every`` steps
+    checkpoints/steps_N/   policy, value network, optimizer state and normalisation
+                           statistics (no pickle) every ``--checkpoint-every`` decisions and
+                           at the end; ``--resume`` continues from the last one
     best/                  the best model on the validation scenarios
-    model/                 the final model: model.zip, obs_norm.npz, config.json
+    model/                 the final model: config.json, policy.npz, obs_norm.npz
+
+PPO trains in whole rollouts of ``n_steps * num_envs`` decisions, so ``--total-timesteps`` is
+rounded up to a whole number of rollouts (the start line says so). An existing run folder is
+refused unless ``--resume`` continues it or ``--overwrite`` clears it. One line per rollout
+(decisions, decisions per second, mean episode return) and one per validation are printed.
 
 Examples::
 
     drill-gym train                                  # the shipped agent's settings
-    drill-gym train --total-timesteps 20000 --seed 3 # a short run
-    drill-gym train --resume                         # continue from the last checkpoint
+    drill-gym train --total-timesteps 20000 --seed 3 # a short run (32,000 decisions)
+    drill-gym train --resume --total-timesteps 4000000  # continue from the last checkpoint
     drill-gym train --base-controller none --exp-name direct_ppo  # from scratch, no SMC
 """
 
@@ -24,7 +31,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import re
 import shutil
 import sys
 import time
@@ -36,8 +42,9 @@ import gymnasium as gym
 import numpy as np
 
 import drill_env  # noqa: F401  (registers DrillString-v0)
+from agents.checkpoints import CHECKPOINT_DIR, PREFIX, Checkpoint, find_last_checkpoint
 from agents.config import TrainConfig, parse_config
-from agents.policy import ResidualPolicy, save_policy
+from agents.policy import ResidualPolicy, is_model_folder, load_policy, policy_from_sb3
 from drill_env import RewardWeights
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout
 from drill_env.limits import DEFAULT_TORQUE_LIMITS
@@ -49,6 +56,7 @@ __all__ = [
     "main",
     "make_model",
     "make_training_env",
+    "planned_timesteps",
     "policy_env_kwargs",
     "train",
 ]
@@ -58,7 +66,6 @@ VALIDATION_SEED = 20_000
 ``VALIDATION_SEED + k`` (training uses ``seed + i`` and their spawned children; the held-out
 set of ``drill-gym evaluate`` is a fixed list of scenarios)."""
 
-CHECKPOINT_PREFIX = "rl_model"
 RMSD_TARGET = 0.99
 """Model selection on validation: score = mean IAE ratio + 10 x the mean RMSD ratio's excess
 over this (a 1 % margin below the base controller's RMSD)."""
@@ -100,21 +107,6 @@ def env_kwargs(config: TrainConfig) -> dict[str, Any]:
     }
 
 
-def find_last_checkpoint(run_dir: Path) -> tuple[Path, Path | None, int] | None:
-    """The last checkpoint of a run: (model zip, VecNormalize pickle or None, timesteps)."""
-    folder = run_dir / "checkpoints"
-    best: tuple[Path, Path | None, int] | None = None
-    for path in folder.glob(f"{CHECKPOINT_PREFIX}_*_steps.zip"):
-        match = re.fullmatch(rf"{CHECKPOINT_PREFIX}_(\d+)_steps\.zip", path.name)
-        if match is None:
-            continue
-        steps = int(match.group(1))
-        norm = folder / f"{CHECKPOINT_PREFIX}_vecnormalize_{steps}_steps.pkl"
-        if best is None or steps > best[2]:
-            best = (path, norm if norm.is_file() else None, steps)
-    return best
-
-
 def _norm_stats(model: Any, venv: Any) -> dict[str, Any]:
     """The observation normalisation in use: mean, var, clip_obs, epsilon (identity if none)."""
     from stable_baselines3.common.vec_env import VecNormalize
@@ -131,33 +123,6 @@ def _norm_stats(model: Any, venv: Any) -> dict[str, Any]:
     return {"obs_mean": np.zeros(size), "obs_var": np.ones(size), "clip_obs": 1e6, "epsilon": 0.0}
 
 
-def _snapshot_policy(model: Any, venv: Any, config: TrainConfig) -> ResidualPolicy:
-    """The live model and the current normalisation statistics as a :class:`ResidualPolicy`."""
-    stats = _norm_stats(model, venv)
-    return ResidualPolicy(
-        model,
-        stats["obs_mean"],
-        stats["obs_var"],
-        policy_env_kwargs(config),
-        config.exp_name,
-        clip_obs=stats["clip_obs"],
-        epsilon=stats["epsilon"],
-    )
-
-
-def _save_final(
-    model: Any, venv: Any, config: TrainConfig, folder: Path, extra: dict[str, Any]
-) -> Path:
-    return save_policy(
-        model,
-        folder,
-        name=config.exp_name,
-        env_kwargs=policy_env_kwargs(config),
-        **_norm_stats(model, venv),
-        metadata={"train_config": json.loads(config.to_json()), **extra},
-    )
-
-
 def _learning_rate(config: TrainConfig) -> Any:
     lr = config.learning_rate
     return (lambda progress: lr * progress) if config.anneal_lr else lr
@@ -166,7 +131,9 @@ def _learning_rate(config: TrainConfig) -> Any:
 def make_training_env(config: TrainConfig, vecnormalize_file: Path | None = None) -> Any:
     """The training environment: ``num_envs`` randomised strings in one native vector env,
     seen through SB3's API, with episode statistics and observation (and reward)
-    normalisation; the statistics come from ``vecnormalize_file`` when given (resume)."""
+    normalisation. ``vecnormalize_file``: an older run's pickled VecNormalize statistics
+    (resume with ``--trust-pickle`` only; checkpoints of this version are loaded by
+    :func:`agents.checkpoints.load_checkpoint`)."""
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
     from agents.vec_env import GymnasiumVecEnv
@@ -230,44 +197,183 @@ def make_model(config: TrainConfig, venv: Any) -> Any:
     return model
 
 
+def planned_timesteps(config: TrainConfig) -> int:
+    """``total_timesteps`` rounded up to whole rollouts of ``n_steps * num_envs`` decisions
+    (PPO collects whole rollouts; the learning rate anneals over this many)."""
+    rollout = config.n_steps * config.num_envs
+    return math.ceil(config.total_timesteps / rollout) * rollout
+
+
+def _snapshot(
+    model: Any, venv: Any, config: TrainConfig, metadata: dict[str, Any] | None = None
+) -> ResidualPolicy:
+    """The live model and the current normalisation statistics as a portable policy."""
+    return policy_from_sb3(
+        model,
+        name=config.exp_name,
+        env_kwargs=policy_env_kwargs(config),
+        **_norm_stats(model, venv),
+        metadata=metadata,
+    )
+
+
+def _record(config: TrainConfig, extra: dict[str, Any]) -> dict[str, Any]:
+    return {"train_config": json.loads(config.to_json()), **extra}
+
+
+def _is_run_folder(run_dir: Path) -> bool:
+    """Whether ``run_dir`` has the config.json that ``drill-gym train`` writes."""
+    try:
+        record = json.loads((run_dir / "config.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(record, dict) and {"exp_name", "total_timesteps", "n_steps"} <= set(record)
+
+
+def _check_settings(config: TrainConfig) -> None:
+    """User errors that need no training: base controller, progress bar packages."""
+    import importlib.util
+
+    from baselines import controller_names
+
+    names = controller_names()
+    if config.base_controller.lower() != "none" and config.base_controller not in names:
+        raise ValueError(
+            f"--base-controller = {config.base_controller!r} is not registered: allowed "
+            f"{', '.join(names)} or none"
+        )
+    if config.progress_bar:
+        missing = [n for n in ("tqdm", "rich") if importlib.util.find_spec(n) is None]
+        if missing:
+            raise ValueError(
+                f"--progress-bar needs the package(s) {', '.join(missing)} (part of the rl "
+                "extra: pip install rich): install them or leave --progress-bar off (the "
+                "default; one line per rollout is printed instead)"
+            )
+
+
+def _prepare_run_dir(config: TrainConfig, run_dir: Path) -> Checkpoint | None:
+    """The checkpoint to resume (``--resume``), after refusing a run folder that already
+    holds files unless ``--resume`` or ``--overwrite`` (which deletes it) is given."""
+    from agents.policy import PICKLE_RISK
+
+    if config.resume:
+        last = find_last_checkpoint(run_dir)
+        if last is None:
+            raise FileNotFoundError(
+                f"--resume: no checkpoint in {str(run_dir / CHECKPOINT_DIR)!r} (expected "
+                f"folders {PREFIX}<decisions>/ written by drill-gym train); check --run-dir, "
+                "--exp-name and --seed, or start a new run without --resume"
+            )
+        if last.legacy and not config.trust_pickle:
+            raise ValueError(
+                f"--resume: the last checkpoint {str(last.path)!r} is a pickled "
+                f"Stable-Baselines3 checkpoint of an older version: {PICKLE_RISK}; pass "
+                "--trust-pickle only if you wrote it yourself"
+            )
+        return last
+    if run_dir.exists() and not run_dir.is_dir():
+        raise ValueError(f"--run-dir {str(run_dir)!r} is a file: expected a folder")
+    if run_dir.is_dir() and any(run_dir.iterdir()):
+        if not config.overwrite:
+            raise ValueError(
+                f"run folder {str(run_dir)!r} already holds files (an earlier or failed run): "
+                "pass --resume to continue it, --overwrite to delete it and start again, or "
+                "choose another --exp-name, --seed or --run-dir"
+            )
+        if not _is_run_folder(run_dir):
+            raise ValueError(
+                f"--overwrite: {str(run_dir)!r} does not look like a run folder of drill-gym "
+                "train (no config.json with its settings), so it is not deleted: delete it "
+                "yourself or choose another --run-dir"
+            )
+        shutil.rmtree(run_dir)
+    return None
+
+
+def _start_line(config: TrainConfig, total: int, last: Checkpoint | None) -> str:
+    rollout = config.n_steps * config.num_envs
+    shape = f"{config.n_steps:,} steps x {config.num_envs} envs"
+    if total != config.total_timesteps:
+        plan = (
+            f"training {total:,} decisions: --total-timesteps {config.total_timesteps:,} rounded "
+            f"up to whole rollouts of {rollout:,} ({shape})"
+        )
+    else:
+        plan = f"training {total:,} decisions: {total // rollout} rollouts of {rollout:,} ({shape})"
+    if last is None:
+        return plan
+    more = max(total - last.steps, 0)
+    return f"resuming from {last.path} at {last.steps:,} decisions ({more:,} more); {plan}"
+
+
+def _save_checkpoint(model: Any, venv: Any, config: TrainConfig, run_dir: Path) -> Path:
+    """A checkpoint folder ``checkpoints/steps_N`` (:mod:`agents.checkpoints`)."""
+    from agents.checkpoints import save_checkpoint
+
+    steps = int(model.num_timesteps)
+    folder = run_dir / CHECKPOINT_DIR / f"{PREFIX}{steps}"
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    policy = {
+        "name": config.exp_name,
+        "env_kwargs": policy_env_kwargs(config),
+        **_norm_stats(model, venv),
+        "metadata": _record(config, {"timesteps": steps, "selected": "checkpoint"}),
+    }
+    return save_checkpoint(model, venv, folder, policy=policy)
+
+
 def train(config: TrainConfig) -> Path:
-    """Run one training (see the module docstring); returns the final model's folder."""
+    """Run one training (see the module docstring); returns the final model's folder.
+
+    Raises:
+        ValueError: A setting the run cannot use (an unregistered base controller, an
+            existing run folder without ``resume`` or ``overwrite``, a pickled checkpoint
+            without ``trust_pickle``, a corrupt checkpoint); one line naming the option.
+        FileNotFoundError: ``resume`` without a checkpoint.
+    """
+    run_dir = config.resolved_run_dir()
+    _check_settings(config)
+    last = _prepare_run_dir(config, run_dir)
+    start_steps = 0 if last is None else last.steps
+    total = planned_timesteps(config)
+    print(_start_line(config, total, last), flush=True)
+
     import torch as th
     from stable_baselines3 import PPO
-    from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback
+    from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.logger import CSVOutputFormat, Logger, TensorBoardOutputFormat
     from stable_baselines3.common.utils import set_random_seed
 
-    run_dir = config.resolved_run_dir()
     run_dir.mkdir(parents=True, exist_ok=True)
-    last = find_last_checkpoint(run_dir) if config.resume else None
-    if config.resume and last is None:
-        raise FileNotFoundError(
-            f"--resume: no checkpoint in {str(run_dir / 'checkpoints')!r} "
-            f"(expected {CHECKPOINT_PREFIX}_<steps>_steps.zip)"
-        )
-    start_steps = 0 if last is None else last[2]
-    (run_dir / "config.json").write_text(config.to_json() + "\n")
 
     # ---- seeding: torch, numpy, random (SB3) and the environments' reset seeds
     th.set_num_threads(config.torch_threads)
     set_random_seed(config.seed + start_steps)
 
     # ---- environment: N strings in one native vector env -> SB3 API -> episode stats -> norm
-    venv = make_training_env(config, None if last is None else last[1])
+    legacy_norm = last.legacy_norm if last is not None and last.legacy else None
+    venv = make_training_env(config, legacy_norm)
 
     # ---- agent: PPO with a zero-initialised residual, or the checkpoint to resume
     if last is None:
         model = make_model(config, venv)
-    else:
+    elif last.legacy:  # an older run's pickled SB3 checkpoint (--trust-pickle)
         model = PPO.load(
-            last[0],
+            last.path,
             env=venv,
             device="cpu",
             custom_objects={"learning_rate": _learning_rate(config)},
         )
         model.set_random_seed(config.seed + start_steps)
+    else:
+        from agents.checkpoints import load_checkpoint
+
+        model = make_model(config, venv)
+        load_checkpoint(model, venv, last.path)
+        model.set_random_seed(config.seed + start_steps)
     venv.seed(config.seed + start_steps)
+    (run_dir / "config.json").write_text(config.to_json() + "\n")  # once the agent is built
 
     # ---- logging: CSV always, TensorBoard and stdout on request
     suffix = "" if start_steps == 0 else f"-resumed-at-{start_steps}"
@@ -280,32 +386,22 @@ def train(config: TrainConfig) -> Path:
         outputs.append(HumanOutputFormat(sys.stdout))
     model.set_logger(Logger(str(run_dir), outputs))
 
-    # ---- callbacks: checkpoints and validation
-    callbacks: list[BaseCallback] = []
-    if config.checkpoint_every:
-        callbacks.append(
-            CheckpointCallback(
-                save_freq=max(config.checkpoint_every // config.num_envs, 1),
-                save_path=str(run_dir / "checkpoints"),
-                name_prefix=CHECKPOINT_PREFIX,
-                save_vecnormalize=True,
-            )
-        )
-    validation: _Validation | None = None
-    if config.validate_every:
-        validation = _Validation(config, run_dir, BaseCallback)
-        callbacks.append(validation.callback)
+    # ---- callbacks: checkpoints at rollout boundaries, validation, one line per rollout
+    validation = _Validation(config, run_dir) if config.validate_every else None
+    callback = _run_callback(BaseCallback, config, run_dir, total, start_steps, validation)
 
     t0 = time.perf_counter()
     model.learn(
-        total_timesteps=max(config.total_timesteps - start_steps, 0),
-        callback=CallbackList(callbacks),
+        total_timesteps=max(total - start_steps, 0),
+        callback=callback,
         progress_bar=config.progress_bar,
         reset_num_timesteps=last is None,
     )
     wall_s = time.perf_counter() - t0
     if validation is not None:
         validation.run(model, venv)  # the final model competes too
+    if callback.last_checkpoint != model.num_timesteps:
+        _save_checkpoint(model, venv, config, run_dir)  # always one at the end
 
     # ---- the final model: the best on validation (or the last one), with its statistics
     extra = {
@@ -315,36 +411,89 @@ def train(config: TrainConfig) -> Path:
         "cpu_count": os.cpu_count(),
         "torch_threads": config.torch_threads,
     }
-    out = config.resolved_save_dir()
-    if validation is not None and validation.best_dir.is_dir():
-        if out.resolve() != validation.best_dir.resolve():
-            if out.exists():
-                shutil.rmtree(out)
-            shutil.copytree(validation.best_dir, out, ignore=shutil.ignore_patterns("score.json"))
-        record = json.loads((out / "config.json").read_text())
-        record["selected"] = "best on validation"
-        record.update(extra)
-        record["train_config"] = json.loads(config.to_json())
-        (out / "config.json").write_text(json.dumps(record, indent=2) + "\n")
+    if validation is not None and is_model_folder(validation.best_dir):
+        final = load_policy(validation.best_dir)
+        final.metadata.update({"selected": "best on validation", **extra})
+        final.metadata["train_config"] = json.loads(config.to_json())
     else:
-        _save_final(
-            model,
-            venv,
-            config,
-            out,
-            {**extra, "timesteps": extra["run_timesteps"], "selected": "last"},
-        )
+        record = {**extra, "timesteps": extra["run_timesteps"], "selected": "last"}
+        final = _snapshot(model, venv, config, _record(config, record))
+    out = final.save(config.resolved_save_dir())
+    model.logger.close()
     venv.close()
     return out
+
+
+def _run_callback(
+    base: type,
+    config: TrainConfig,
+    run_dir: Path,
+    total: int,
+    start_steps: int,
+    validation: _Validation | None,
+) -> Any:
+    """The SB3 callback of a run: a checkpoint at the first rollout boundary after every
+    ``checkpoint_every`` decisions (after the update, so that resuming continues from a
+    whole rollout), the validation every ``validate_every`` decisions, and one printed line
+    per rollout."""
+    every = config.checkpoint_every
+
+    class _RunCallback(base):
+        def __init__(self) -> None:
+            super().__init__()
+            self.last_checkpoint = start_steps
+            self.next_checkpoint: float = math.inf
+            self.t0 = time.perf_counter()
+
+        def _on_training_start(self) -> None:
+            steps = self.num_timesteps
+            self.t0 = time.perf_counter()
+            if every:
+                self.next_checkpoint = (steps // every + 1) * every
+            if validation is not None:
+                validation.next_at = (steps // config.validate_every + 1) * config.validate_every
+
+        def _on_rollout_start(self) -> None:
+            if self.num_timesteps >= self.next_checkpoint:
+                _save_checkpoint(self.model, self.model.get_env(), config, run_dir)
+                self.last_checkpoint = self.num_timesteps
+                while self.next_checkpoint <= self.num_timesteps:
+                    self.next_checkpoint += every
+
+        def _on_step(self) -> bool:
+            if validation is not None and self.num_timesteps >= validation.next_at:
+                validation.next_at += config.validate_every
+                validation.run(self.model, self.model.get_env())
+            return True
+
+        def _on_rollout_end(self) -> None:
+            if config.progress_bar:
+                return
+            from stable_baselines3.common.utils import safe_mean
+
+            steps = self.num_timesteps
+            rate = (steps - start_steps) / max(time.perf_counter() - self.t0, 1e-9)
+            episodes = self.model.ep_info_buffer
+            ret = (
+                f", mean episode return {safe_mean([e['r'] for e in episodes]):.2f}"
+                if episodes
+                else ""
+            )
+            print(f"{config.exp_name}: {steps:,}/{total:,} decisions, {rate:,.0f} decisions/s{ret}")
+            sys.stdout.flush()
+
+    return _RunCallback()
 
 
 class _Validation:
     """Every ``validate_every`` decisions: roll out the validation scenarios with the current
     policy (deterministic), compare with the base controller on the same seeds, log the ratios
-    and keep the best model in ``run_dir/best`` (lowest mean IAE ratio plus a penalty on a
-    mean RMSD ratio above ``RMSD_TARGET``)."""
+    (validation.csv, TensorBoard, one printed line) and keep the best model in ``run_dir/best``
+    (lowest mean IAE ratio plus a penalty on a mean RMSD ratio above ``RMSD_TARGET``)."""
 
-    def __init__(self, config: TrainConfig, run_dir: Path, base_callback: type) -> None:
+    def __init__(self, config: TrainConfig, run_dir: Path) -> None:
+        from agents.model_format import read_json
+
         self.config = config
         self.best_dir = run_dir / "best"
         self.csv = run_dir / "validation.csv"
@@ -364,28 +513,18 @@ class _Validation:
         self.best = math.inf
         score_file = self.best_dir / "score.json"
         if score_file.is_file():
-            self.best = float(json.loads(score_file.read_text())["score"])
+            score = read_json(score_file).get("score")
+            if isinstance(score, bool) or not isinstance(score, (int, float)):
+                raise ValueError(f"{str(score_file)!r}: field score = {score!r}: expected a number")
+            self.best = float(score)
         self.next_at = 0
         if not self.csv.exists():
             self.csv.write_text("timesteps,iae_ratio,rmsd_ratio,severity_ratio,score\n")
-        outer = self
-
-        class _Callback(base_callback):
-            def _on_training_start(self) -> None:
-                outer.next_at = (
-                    self.num_timesteps // config.validate_every + 1
-                ) * config.validate_every
-
-            def _on_step(self) -> bool:
-                if self.num_timesteps >= outer.next_at:
-                    outer.next_at += config.validate_every
-                    outer.run(self.model, self.model.get_env())
-                return True
-
-        self.callback = _Callback()
 
     def run(self, model: Any, venv: Any) -> float:
-        policy = _snapshot_policy(model, venv, self.config)
+        from stable_baselines3.common.logger import TensorBoardOutputFormat
+
+        policy = _snapshot(model, venv, self.config)
         metrics = [episode_metrics(rollout(self.env, policy, s)) for s in self.seeds]
         iae = np.mean([m["iae"] for m in metrics]) / np.mean([m["iae"] for m in self.reference])
         rmsd = np.mean([m["rmsd_nm"] for m in metrics]) / np.mean(
@@ -396,23 +535,33 @@ class _Validation:
         )
         score = float(iae + 10.0 * max(rmsd - RMSD_TARGET, 0.0))
         steps = int(model.num_timesteps)
-        model.logger.record("validation/iae_ratio", float(iae))
-        model.logger.record("validation/rmsd_ratio", float(rmsd))
-        model.logger.record("validation/severity_ratio", float(sev))
+        values = {
+            "validation/iae_ratio": float(iae),
+            "validation/rmsd_ratio": float(rmsd),
+            "validation/severity_ratio": float(sev),
+            "validation/score": score,
+        }
+        for output in model.logger.output_formats:  # written at once, at this step
+            if isinstance(output, TensorBoardOutputFormat):
+                output.write(values, {k: () for k in values}, step=steps)
         with self.csv.open("a") as f:
             f.write(f"{steps},{iae:.5f},{rmsd:.5f},{sev:.5f},{score:.5f}\n")
-        if score < self.best:
+        best = score < self.best
+        if best:
             self.best = score
-            _save_final(
-                model,
-                venv,
-                self.config,
-                self.best_dir,
-                {"validation_score": score, "timesteps": steps},
+            policy.metadata.update(
+                _record(self.config, {"validation_score": score, "timesteps": steps})
             )
+            policy.save(self.best_dir)
             (self.best_dir / "score.json").write_text(
                 json.dumps({"score": score, "timesteps": steps})
             )
+        print(
+            f"validation at {steps:,} decisions: IAE ratio {iae:.3f}, RMSD ratio {rmsd:.3f}, "
+            f"severity ratio {sev:.3f}, score {score:.3f}"
+            + (" (best so far, saved to best/)" if best else ""),
+            flush=True,
+        )
         return score
 
 

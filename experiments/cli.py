@@ -41,7 +41,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"drill-gym: unknown subcommand {name!r}\n\n{_usage()}", file=sys.stderr)
         return 2
     module = importlib.import_module(SUBCOMMANDS[name][0])
-    return int(module.main(rest) or 0)
+    try:
+        return int(module.main(rest) or 0)
+    except (ValueError, FileNotFoundError) as err:  # user errors: one line, no traceback
+        print(f"drill-gym {name}: error: {' '.join(str(err).split())}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -43,8 +43,9 @@ import baselines  # noqa: F401  (registers the built-in controllers, in their or
 from agents.policy import (
     DEFAULT_MODEL_DIR,
     DEFAULT_MODEL_NAME,
-    MODEL_FILE,
+    PICKLE_RISK,
     ResidualPolicy,
+    is_model_folder,
     load_policy,
 )
 from drill_env.control import controller_names
@@ -395,7 +396,7 @@ def shipped_models() -> list[Path]:
     """Model folders under ``agents/models/`` (the default residual agent first)."""
     if not DEFAULT_MODEL_DIR.is_dir():
         return []
-    found = sorted(p.parent for p in DEFAULT_MODEL_DIR.glob(f"*/{MODEL_FILE}"))
+    found = sorted(p for p in DEFAULT_MODEL_DIR.iterdir() if is_model_folder(p))
     found.sort(key=lambda p: p.name != DEFAULT_MODEL_NAME)
     return found
 
@@ -410,8 +411,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "models",
         nargs="*",
-        help="model folders (model.zip, obs_norm.npz, config.json); default: every model "
+        help="model folders (config.json, policy.npz, obs_norm.npz); default: every model "
         "shipped under agents/models/",
+    )
+    parser.add_argument(
+        "--trust-pickle",
+        action="store_true",
+        help=f"also load Stable-Baselines3 model.zip files (older models): {PICKLE_RISK}; "
+        "only for files you made yourself or got from a source you trust",
     )
     parser.add_argument("--out", default="results/evaluate", help="output folder")
     parser.add_argument(
@@ -426,7 +433,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     paths = [Path(p) for p in args.models] or shipped_models()
     if not paths:
         parser.error(f"no MODEL given and no model shipped under {DEFAULT_MODEL_DIR}")
-    agents = [load_policy(p) for p in paths]
+    agents = [load_policy(p, trust_pickle=args.trust_pickle) for p in paths]
     labels = [a.name for a in agents]
     if len(set(labels)) != len(labels):
         for a, p in zip(agents, paths, strict=True):

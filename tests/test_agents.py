@@ -1,13 +1,16 @@
 """Tests of the residual PPO agent (``agents``): the SB3 adapter of the vector env, a tiny
-training run end to end, resume, save/load, zero-residual equivalence and the loading errors.
+training run end to end, resume, export/load against SB3's own predictions, zero-residual
+equivalence, the run-folder rules, the command line and the loading errors.
 
 Tiny budgets only (a few hundred steps); the real training is timed in ``benchmarks/``.
+Hostile model files are in ``tests/test_model_files.py``.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -21,12 +24,23 @@ pytest.importorskip("stable_baselines3")
 pytest.importorskip("torch")
 
 import drill_env  # noqa: E402,F401
-from agents import DEFAULT_MODEL_DIR, ResidualPolicy, load_default_policy, load_policy  # noqa: E402
+from agents import DEFAULT_MODEL_DIR, export_policy, load_default_policy, load_policy  # noqa: E402
+from agents.checkpoints import load_checkpoint  # noqa: E402
 from agents.config import TrainConfig, field_docs, parse_config  # noqa: E402
-from agents.train import find_last_checkpoint, make_model, make_training_env, train  # noqa: E402
+from agents.policy import is_model_folder, policy_from_sb3  # noqa: E402
+from agents.train import (  # noqa: E402
+    find_last_checkpoint,
+    make_model,
+    make_training_env,
+    planned_timesteps,
+    train,
+)
 from agents.vec_env import GymnasiumVecEnv  # noqa: E402
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout  # noqa: E402
+from experiments.cli import main as cli_main  # noqa: E402
 from experiments.evaluate import main as evaluate_main  # noqa: E402
+
+MODEL_FILES = ("config.json", "policy.npz", "obs_norm.npz")
 
 
 def tiny_config(tmp_path: Path, **changes: Any) -> TrainConfig:
@@ -84,10 +98,37 @@ def test_parse_config_flags() -> None:
 
 
 def test_config_rejects_bad_values() -> None:
-    with pytest.raises(ValueError, match=r"num_envs = 0 is out of range"):
+    with pytest.raises(
+        ValueError, match=r"--num-envs = 0 is out of range: allowed an integer >= 1"
+    ):
         TrainConfig(num_envs=0)
     with pytest.raises(TypeError, match=r"unrecognized config key\(s\): nope"):
         TrainConfig.from_dict({"nope": 1})
+    with pytest.raises(
+        ValueError, match=r"^--total-timesteps = -5 is out of range: allowed an integer >= 1$"
+    ):
+        parse_config(["--total-timesteps", "-5"])
+    with pytest.raises(ValueError, match=r"--gamma = 1.5 is out of range: allowed \(0, 1\]"):
+        parse_config(["--gamma", "1.5"])
+    with pytest.raises(ValueError, match=r"--resume and --overwrite exclude each other"):
+        parse_config(["--resume", "--overwrite"])
+
+
+def test_help_is_plain_text_and_shows_every_default(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        parse_config(["--help"], description=sys.modules["agents.train"].__doc__ or "")
+    text = capsys.readouterr().out
+    assert "``" not in text and ":class:" not in text and ":func:" not in text
+    for f in dataclasses.fields(TrainConfig):
+        flag = "--" + f.name.replace("_", "-")
+        assert flag in text, flag
+    # one "(default: ...)" per option (argparse wraps lines, so join them first)
+    flat = " ".join(text.split())
+    assert flat.count("(default: ") == len(dataclasses.fields(TrainConfig))
+    assert (
+        "(default: 2000000)" in flat and "(default: false)" in flat and "(default: 64 64)" in flat
+    )
+    assert "--no-tensorboard turns it off" in flat
 
 
 # ----------------------------------------------------------------------------------- adapter
@@ -165,8 +206,9 @@ def test_adapter_resets_only_the_strings_that_ended() -> None:
 
 # ------------------------------------------------------------------------ training, loading
 def test_tiny_training_run_writes_a_loadable_model(trained: Path) -> None:
-    for name in ("model.zip", "obs_norm.npz", "config.json"):
+    for name in MODEL_FILES:
         assert (trained / name).is_file()
+    assert not (trained / "model.zip").exists()
     run_dir = trained.parent
     assert (run_dir / "config.json").is_file() and (run_dir / "validation.csv").is_file()
     record = json.loads((trained / "config.json").read_text())
@@ -181,37 +223,202 @@ def test_tiny_training_run_writes_a_loadable_model(trained: Path) -> None:
 
 
 def test_save_load_round_trip_predicts_the_same(trained: Path, tmp_path: Path) -> None:
-    from agents.policy import save_policy
-
     policy = load_policy(trained)
-    copy = save_policy(
-        policy.model,
-        tmp_path / "copy",
-        name="copy",
-        env_kwargs=policy.env_kwargs,
-        obs_mean=policy.obs_mean,
-        obs_var=policy.obs_std**2 - 1e-8,
-        clip_obs=policy.clip_obs,
-    )
+    copy = policy.save(tmp_path / "copy")
     again = load_policy(copy)
     obs = np.random.default_rng(0).normal(size=(32, 11)).astype(np.float32)
     a1, _ = policy.predict(obs)
     a2, _ = again.predict(obs)
-    np.testing.assert_allclose(a1, a2, atol=1e-6)
-    # The NumPy forward pass matches SB3's own deterministic prediction.
-    a3, _ = policy.model.predict(policy.normalize(obs), deterministic=True)
-    np.testing.assert_allclose(a1, a3, atol=1e-5)
+    np.testing.assert_array_equal(a1, a2)
+    assert again.metadata["train_config"] == policy.metadata["train_config"]
+
+
+def _sb3_reference(model: Any, policy: Any, obs: np.ndarray) -> np.ndarray:
+    """SB3's own deterministic action for raw observations ``obs`` (normalised here, in the
+    test, with VecNormalize's formula)."""
+    z = np.clip(
+        (obs.astype(np.float64) - policy.obs_norm.mean)
+        / np.sqrt(policy.obs_norm.var + policy.obs_norm.epsilon),
+        -policy.obs_norm.clip_obs,
+        policy.obs_norm.clip_obs,
+    ).astype(np.float32)
+    action, _ = model.predict(z, deterministic=True)
+    return np.asarray(action)
+
+
+@pytest.mark.parametrize("variant", ["tanh", "relu-3-layers", "gsde"])
+def test_exported_policy_matches_sb3_predictions(variant: str, tmp_path: Path) -> None:
+    """A freshly built SB3 PPO (random weights), exported and loaded back without torch, acts
+    as SB3 does on recorded observations, to float32 rounding."""
+    import torch as th
+    from stable_baselines3 import PPO
+
+    kwargs = {"base_controller": "proposed", "control_dt_s": 0.1, "residual_scale_nm": 1e4}
+    env = gym.make("DrillString-v0", max_episode_steps=-1, randomize=True, episode_s=20.0, **kwargs)
+    recorded = np.asarray(rollout(env, ZeroAction(), seed=4).observations, dtype=np.float32)
+    arch: dict[str, Any] = {"net_arch": [32, 32], "activation_fn": th.nn.Tanh}
+    if variant == "relu-3-layers":
+        arch = {"net_arch": [16, 24, 8], "activation_fn": th.nn.ReLU}
+    model = PPO(
+        "MlpPolicy", env, policy_kwargs=arch, use_sde=variant == "gsde", seed=3, device="cpu"
+    )
+    rng = np.random.default_rng(1)
+    mean = recorded.mean(axis=0) + rng.normal(size=11) * 0.1
+    var = rng.uniform(0.5, 2, 11) * recorded.var(axis=0) + 1e-4
+    z = np.clip((recorded - mean) / np.sqrt(var + 1e-8), -10, 10).astype(np.float32)
+    with th.no_grad():  # an action mean spread over [-1, 1] and beyond (clipped)
+        latent = model.policy.mlp_extractor.forward_actor(th.as_tensor(z))
+        weight = th.as_tensor(rng.normal(size=(1, latent.shape[1])), dtype=th.float32)
+        projection = latent @ weight.T
+        scale = 1.5 / float(projection.std())
+        model.policy.action_net.weight.copy_(weight * scale)
+        model.policy.action_net.bias.fill_(-float(projection.mean()) * scale)
+    env_kwargs = {**kwargs, "min_torque_nm": 0.0, "max_torque_nm": 50_000.0}
+    folder = export_policy(
+        model, tmp_path / "m", name="fresh", env_kwargs=env_kwargs, obs_mean=mean, obs_var=var
+    )
+    policy = load_policy(folder)
+    expected = _sb3_reference(model, policy, recorded)
+    assert np.ptp(expected) > 1.0 and np.any(np.abs(expected) == 1.0)  # clipped ones too
+    actions, _ = policy.predict(recorded)
+    np.testing.assert_allclose(actions, expected, atol=1e-5)  # float32 rounding
+    single = np.array([policy.predict(o)[0] for o in recorded[:20]])
+    np.testing.assert_allclose(single, expected[:20], atol=1e-5)
+    if variant == "gsde":
+        # The stochastic spread: SB3's distribution for the same observations.
+        z = th.as_tensor(policy.normalize(recorded[:50]))
+        sb3_std = model.policy.get_distribution(z).distribution.stddev.detach().numpy()
+        latent = policy.network.latent(policy.normalize(recorded[:50]).astype(np.float64))
+        np.testing.assert_allclose(policy.network.action_std(latent), sb3_std, rtol=1e-3)
+
+
+def _old_sb3_model_folder(config: TrainConfig, folder: Path) -> tuple[Any, Any]:
+    """A model folder as earlier versions wrote it: SB3's model.zip (a pickle, ours), the
+    obs_norm.npz and a format-1 config.json."""
+    import torch as th
+
+    venv = make_training_env(config)
+    model = make_model(dataclasses.replace(config, zero_init_action=False), venv)
+    with th.no_grad():
+        model.policy.action_net.weight.mul_(100.0)
+    folder.mkdir()
+    model.save(folder / "model.zip")
+    rng = np.random.default_rng(2)
+    mean, var = rng.normal(size=11), rng.uniform(0.5, 2.0, 11)
+    np.savez(folder / "obs_norm.npz", mean=mean, var=var, clip_obs=10.0, epsilon=1e-8)
+    record = {
+        "format": 1,
+        "name": "old",
+        "env_kwargs": {
+            "base_controller": "proposed",
+            "control_dt_s": 0.1,
+            "residual_scale_nm": 10000.0,
+            "min_torque_nm": 0.0,
+            "max_torque_nm": 50000.0,
+        },
+        "observation_size": 11,
+        "train_config": json.loads(config.to_json()),
+        "timesteps": 0,
+    }
+    (folder / "config.json").write_text(json.dumps(record))
+    return model, venv
+
+
+def test_old_sb3_model_loads_and_converts_with_the_opt_in(tmp_path: Path) -> None:
+    from agents.convert import convert_sb3_model
+
+    model, venv = _old_sb3_model_folder(tiny_config(tmp_path), tmp_path / "old")
+    with pytest.raises(ValueError, match=r"model.zip' is a Stable-Baselines3 model \(a pickle\)"):
+        load_policy(tmp_path / "old")
+    obs = np.random.default_rng(5).normal(size=(64, 11)).astype(np.float32)
+    policy = load_policy(tmp_path / "old", trust_pickle=True)
+    expected = _sb3_reference(model, policy, obs)
+    assert np.ptp(expected) > 0.5
+    np.testing.assert_allclose(policy.predict(obs)[0], expected, atol=1e-5)
+    convert_sb3_model(tmp_path / "old", tmp_path / "new", trust_pickle=True)
+    assert {p.name for p in (tmp_path / "new").iterdir()} == set(MODEL_FILES)
+    converted = load_policy(tmp_path / "new")
+    np.testing.assert_array_equal(converted.predict(obs)[0], policy.predict(obs)[0])
+    assert converted.metadata["source"].startswith("converted from a Stable-Baselines3")
+    assert converted.metadata["train_config"]["n_steps"] == 64
+    venv.close()
+
+
+def test_resume_from_an_old_pickled_checkpoint_with_the_opt_in(tmp_path: Path) -> None:
+    from agents.checkpoints import load_checkpoint as fill
+
+    config = tiny_config(tmp_path, total_timesteps=128, validate_every=0)
+    train(config)
+    run_dir = config.resolved_run_dir()
+    folder = run_dir / "checkpoints"
+    venv = make_training_env(config)
+    model = make_model(config, venv)
+    fill(model, venv, folder / "steps_128")
+    model.save(folder / "rl_model_128_steps.zip")  # what earlier versions wrote
+    venv.save(str(folder / "rl_model_vecnormalize_128_steps.pkl"))
+    venv.close()
+    shutil.rmtree(folder / "steps_128")
+    resumed = dataclasses.replace(config, total_timesteps=256, resume=True)
+    with pytest.raises(ValueError, match=r"pickled Stable-Baselines3 checkpoint .*--trust-pickle"):
+        train(resumed)
+    out = train(dataclasses.replace(resumed, trust_pickle=True))
+    assert json.loads((out / "config.json").read_text())["resumed_from"] == 128
+    last = find_last_checkpoint(run_dir)
+    assert last is not None and last.steps == 256 and not last.legacy
+
+
+def test_stochastic_actions_are_seeded_gaussian_samples(tmp_path: Path) -> None:
+    config = tiny_config(tmp_path, log_std_init=-2.0, zero_init_action=False)
+    venv = make_training_env(config)
+    model = make_model(config, venv)
+    policy = policy_from_sb3(model, name="s", env_kwargs={"base_controller": "proposed"})
+    obs = np.zeros((4000, 11), np.float32)
+    policy.seed(7)
+    a, _ = policy.predict(obs, deterministic=False)
+    policy.seed(7)
+    b, _ = policy.predict(obs, deterministic=False)
+    np.testing.assert_array_equal(a, b)
+    mean, _ = policy.predict(obs[0])
+    assert abs(float(mean[0])) < 0.5  # far from the clipping bounds
+    assert np.mean(a) == pytest.approx(float(mean[0]), abs=0.01)
+    assert np.std(a) == pytest.approx(np.exp(-2.0), rel=0.05)
+    venv.close()
 
 
 def test_resume_continues_from_the_last_checkpoint(tmp_path: Path) -> None:
     config = tiny_config(tmp_path, total_timesteps=256, validate_every=0)
-    train(config)
+    out = train(config)
     last = find_last_checkpoint(config.resolved_run_dir())
-    assert last is not None and last[2] == 256 and last[1] is not None
+    assert last is not None and last.steps == 256 and not last.legacy
+    assert {p.name for p in last.path.iterdir()} == {
+        *MODEL_FILES,
+        "training.json",
+        "training_state.npz",
+        "vecnormalize.npz",
+    }
+    # The checkpoint loads into a fresh model: the weights are the saved ones.
+    venv = make_training_env(config)
+    model = make_model(config, venv)
+    assert load_checkpoint(model, venv, last.path) == 256 and model.num_timesteps == 256
+    with np.load(last.path / "training_state.npz") as saved:
+        for name, tensor in model.policy.state_dict().items():
+            np.testing.assert_array_equal(tensor.numpy(), saved[f"policy/{name}"])
+    final = load_policy(out)  # the last model, exported separately at the end of the run
+    np.testing.assert_array_equal(
+        model.policy.action_net.weight.detach().numpy(), final.weights["action.weight"]
+    )
+    np.testing.assert_array_equal(venv.obs_rms.mean, final.obs_norm.mean)
+    # Adam continues: 2 updates x 2 epochs x 2 minibatches of 64 from rollouts of 128.
+    steps = {float(s["step"]) for s in model.policy.optimizer.state_dict()["state"].values()}
+    assert steps == {8.0}
+    venv.close()
+    # Resume: timesteps continue from 256 to 512, a new checkpoint at the end.
     out = train(dataclasses.replace(config, total_timesteps=512, resume=True))
     record = json.loads((out / "config.json").read_text())
     assert record["resumed_from"] == 256 and record["run_timesteps"] == 512
     assert (config.resolved_run_dir() / "progress-resumed-at-256.csv").is_file()
+    last = find_last_checkpoint(config.resolved_run_dir())
+    assert last is not None and last.steps == 512
 
 
 def test_training_twice_with_one_seed_gives_the_same_model(trained: Path, tmp_path: Path) -> None:
@@ -219,8 +426,9 @@ def test_training_twice_with_one_seed_gives_the_same_model(trained: Path, tmp_pa
     a = load_policy(trained)
     b = load_policy(again)
     np.testing.assert_array_equal(a.obs_mean, b.obs_mean)
-    for pa, pb in zip(a.model.policy.parameters(), b.model.policy.parameters(), strict=True):
-        np.testing.assert_array_equal(pa.detach().numpy(), pb.detach().numpy())
+    assert a.weights.keys() == b.weights.keys()
+    for name in a.weights:
+        np.testing.assert_array_equal(a.weights[name], b.weights[name])
 
 
 def test_resume_without_checkpoint_is_an_error(tmp_path: Path) -> None:
@@ -228,17 +436,84 @@ def test_resume_without_checkpoint_is_an_error(tmp_path: Path) -> None:
         train(tiny_config(tmp_path, resume=True))
 
 
+def test_budget_is_rounded_up_to_whole_rollouts(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert planned_timesteps(TrainConfig(total_timesteps=20_000)) == 32_000
+    assert planned_timesteps(TrainConfig()) == 2_000_000
+    config = tiny_config(tmp_path, total_timesteps=200, validate_every=0, checkpoint_every=0)
+    out = train(config)
+    text = capsys.readouterr().out
+    assert (
+        "training 256 decisions: --total-timesteps 200 rounded up to whole rollouts of 128" in text
+    )
+    assert "residual_ppo: 128/256 decisions" in text and "residual_ppo: 256/256 decisions" in text
+    assert json.loads((out / "config.json").read_text())["run_timesteps"] == 256
+    # A short run without periodic checkpoints still ends with one, so it can be resumed.
+    last = find_last_checkpoint(config.resolved_run_dir())
+    assert last is not None and last.steps == 256
+
+
+def test_existing_run_folder_is_refused_unless_resume_or_overwrite(tmp_path: Path) -> None:
+    config = tiny_config(tmp_path, total_timesteps=128, validate_every=0)
+    run_dir = config.resolved_run_dir()
+    run_dir.mkdir(parents=True)
+    (run_dir / "leftover.txt").write_text("half-written")
+    with pytest.raises(ValueError, match=r"already holds files .*--resume .*--overwrite"):
+        train(config)
+    with pytest.raises(ValueError, match=r"--overwrite: .* does not look like a run folder"):
+        train(dataclasses.replace(config, overwrite=True))
+    assert (run_dir / "leftover.txt").is_file()  # not deleted
+    (run_dir / "leftover.txt").unlink()
+    train(config)  # an empty folder is fine
+    train(dataclasses.replace(config, overwrite=True))  # a run folder: cleared and rerun
+    assert not (run_dir / "progress-resumed-at-128.csv").exists()
+
+
+def test_progress_bar_without_rich_is_a_clear_error(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda name, *a: None if name == "rich" else real(name, *a)
+    )
+    with pytest.raises(ValueError, match=r"--progress-bar needs the package\(s\) rich"):
+        train(tiny_config(tmp_path, progress_bar=True))
+    assert not (tmp_path / "run").exists()
+
+
+def test_command_line_prints_user_errors_on_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cases = [
+        (["train", "--total-timesteps", "-5"], "--total-timesteps = -5 is out of range"),
+        (["train", "--run-dir", str(tmp_path / "r"), "--resume"], "--resume: no checkpoint in"),
+        (
+            ["train", "--base-controller", "pid9000"],
+            "--base-controller = 'pid9000' is not registered",
+        ),
+        (["evaluate", str(tmp_path / "nowhere")], "no model at"),
+    ]
+    for argv, message in cases:
+        assert cli_main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"drill-gym {argv[0]}: error: ") and message in err
+        assert err.count("\n") == 1 and "Traceback" not in err
+
+
 def test_zero_residual_reproduces_the_base_controller(tmp_path: Path) -> None:
     config = tiny_config(tmp_path)
     venv = make_training_env(config)
     model = make_model(config, venv)
     rng = np.random.default_rng(1)
-    untrained = ResidualPolicy(
+    untrained = policy_from_sb3(
         model,
-        rng.normal(size=11),
-        rng.uniform(0.5, 2.0, 11),
-        {"base_controller": "proposed"},
-        "untrained",
+        name="untrained",
+        env_kwargs={"base_controller": "proposed"},
+        obs_mean=rng.normal(size=11),
+        obs_var=rng.uniform(0.5, 2.0, 11),
     )
     kwargs = {
         "base_controller": "proposed",
@@ -266,23 +541,16 @@ def test_load_missing_path(tmp_path: Path) -> None:
 def test_load_incomplete_folder(trained: Path, tmp_path: Path) -> None:
     folder = tmp_path / "m"
     folder.mkdir()
-    (folder / "model.zip").write_bytes((trained / "model.zip").read_bytes())
-    with pytest.raises(FileNotFoundError, match=r"missing obs_norm.npz, config.json"):
+    (folder / "policy.npz").write_bytes((trained / "policy.npz").read_bytes())
+    with pytest.raises(FileNotFoundError, match=r"missing config.json, obs_norm.npz"):
         load_policy(folder)
 
 
 def _copy_model(trained: Path, folder: Path) -> Path:
     folder.mkdir()
-    for name in ("model.zip", "obs_norm.npz", "config.json"):
+    for name in MODEL_FILES:
         (folder / name).write_bytes((trained / name).read_bytes())
     return folder
-
-
-def test_load_corrupt_zip(trained: Path, tmp_path: Path) -> None:
-    folder = _copy_model(trained, tmp_path / "m")
-    (folder / "model.zip").write_bytes(b"not a zip at all")
-    with pytest.raises(ValueError, match=r"not a valid Stable-Baselines3 model: expected a zip"):
-        load_policy(folder)
 
 
 def test_load_wrong_observation_size(trained: Path, tmp_path: Path) -> None:
@@ -291,12 +559,13 @@ def test_load_wrong_observation_size(trained: Path, tmp_path: Path) -> None:
     record["env_kwargs"]["base_controller"] = None  # direct mode: 9 observations
     (folder / "config.json").write_text(json.dumps(record))
     with pytest.raises(
-        ValueError, match=r"wrong observation size: expected 9 .*found statistics of shape \(11,\)"
+        ValueError, match=r"field observation_size: wrong observation size: expected 9 .*found 11"
     ):
         load_policy(folder)
-    np.savez(folder / "obs_norm.npz", mean=np.zeros(9), var=np.ones(9), clip_obs=10.0, epsilon=1e-8)
+    record["observation_size"] = 9
+    (folder / "config.json").write_text(json.dumps(record))
     with pytest.raises(
-        ValueError, match=r"wrong observation size: expected 9 .*found a model taking \(11,\)"
+        ValueError, match=r"obs_norm.npz': array mean has shape \(11,\): expected \(9,\)"
     ):
         load_policy(folder)
 
@@ -327,9 +596,7 @@ def test_load_bad_config_json(trained: Path, tmp_path: Path) -> None:
 # ------------------------------------------------------------------ shipped model, evaluation
 def test_default_policy_is_the_shipped_residual_agent() -> None:
     policy = load_default_policy()
-    if not (DEFAULT_MODEL_DIR / "residual_ppo" / "model.zip").is_file():
-        assert policy is None
-        return
+    assert is_model_folder(DEFAULT_MODEL_DIR / "residual_ppo")
     assert policy is not None and policy.name == "residual_ppo"
     assert policy.env_kwargs["base_controller"] == "proposed"
     env = gym.make("DrillString-v0", randomize=False, episode_s=5.0, **policy.env_kwargs)

@@ -1,4 +1,4 @@
-"""``drill-gym compare`` (``baselines.compare``): a short smoke run and the files it writes."""
+"""``drill-gym compare`` (``experiments.compare``): a short smoke run and the files it writes."""
 
 from __future__ import annotations
 

@@ -1,0 +1,258 @@
+"""Training checkpoints of ``drill-gym train`` that are read without pickle.
+
+A checkpoint is a folder ``{run_dir}/checkpoints/steps_{N}/`` (``N`` decisions trained):
+
+* ``config.json``, ``policy.npz``, ``obs_norm.npz``: the policy at that point as a portable
+  model (:func:`agents.policy.export_policy`; ``drill-gym evaluate`` takes the folder);
+* ``training_state.npz``: what training needs to continue: every parameter of the SB3 policy
+  (actor, value network, log-std) as ``policy/{name}``, and Adam's state per parameter
+  (``adam/{i}/step``, ``adam/{i}/exp_avg``, ``adam/{i}/exp_avg_sq``);
+* ``vecnormalize.npz``: VecNormalize's running statistics (``obs_mean``, ``obs_var``,
+  ``obs_count``, ``ret_mean``, ``ret_var``, ``ret_count``);
+* ``training.json``: ``num_timesteps``, ``n_updates`` and whether Adam had state, written last.
+
+The folder is written under a temporary name and renamed when complete. Loading builds a
+fresh PPO model from the run's settings and fills it: every array is read by
+:func:`agents.model_format.read_npz` (checked names, shapes, dtypes, sizes; no pickle). Older
+runs wrote SB3's pickled ``rl_model_{N}_steps.zip`` and ``rl_model_vecnormalize_{N}_steps.pkl``;
+they are found here and resumed only with ``--trust-pickle``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Final
+
+import numpy as np
+import numpy.typing as npt
+
+from agents.model_format import _Fields, read_json, read_npz, write_npz
+
+__all__ = [
+    "CHECKPOINT_DIR",
+    "Checkpoint",
+    "find_last_checkpoint",
+    "load_checkpoint",
+    "save_checkpoint",
+]
+
+CHECKPOINT_DIR: Final = "checkpoints"
+PREFIX: Final = "steps_"
+TRAINING_FILE: Final = "training.json"
+STATE_FILE: Final = "training_state.npz"
+VECNORM_FILE: Final = "vecnormalize.npz"
+LEGACY_PREFIX: Final = "rl_model"
+_ADAM_KEYS: Final = ("step", "exp_avg", "exp_avg_sq")
+
+
+@dataclass(frozen=True)
+class Checkpoint:
+    """One checkpoint of a run.
+
+    Attributes:
+        path: The checkpoint folder, or an old run's pickled ``rl_model_{N}_steps.zip``.
+        steps: Decisions trained when it was written.
+        legacy_norm: For an old checkpoint, its pickled VecNormalize file (or None).
+    """
+
+    path: Path
+    steps: int
+    legacy_norm: Path | None = None
+
+    @property
+    def legacy(self) -> bool:
+        """Whether it is an old pickled SB3 checkpoint."""
+        return self.path.suffix == ".zip"
+
+
+def find_last_checkpoint(run_dir: Path) -> Checkpoint | None:
+    """The checkpoint of ``run_dir`` with the most decisions (complete folders only; an old
+    pickled one only when it has more decisions than every folder)."""
+    folder = Path(run_dir) / CHECKPOINT_DIR
+    found: list[Checkpoint] = []
+    if not folder.is_dir():
+        return None
+    for path in folder.iterdir():
+        match = re.fullmatch(rf"{PREFIX}(\d+)", path.name)
+        if match and path.is_dir() and (path / TRAINING_FILE).is_file():
+            found.append(Checkpoint(path, int(match.group(1))))
+            continue
+        match = re.fullmatch(rf"{LEGACY_PREFIX}_(\d+)_steps\.zip", path.name)
+        if match and path.is_file():
+            steps = int(match.group(1))
+            norm = folder / f"{LEGACY_PREFIX}_vecnormalize_{steps}_steps.pkl"
+            found.append(Checkpoint(path, steps, norm if norm.is_file() else None))
+    if not found:
+        return None
+    return max(found, key=lambda c: (c.steps, not c.legacy))
+
+
+def _parameters(model: Any) -> tuple[dict[str, Any], list[Any]]:
+    """The policy's state dict and the optimizer's parameters in its order."""
+    state = dict(model.policy.state_dict())
+    params = [p for group in model.policy.optimizer.param_groups for p in group["params"]]
+    return state, params
+
+
+def _running_stats(venv: Any) -> tuple[Any, Any]:
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    if not isinstance(venv, VecNormalize):
+        raise TypeError(f"expected a VecNormalize environment, got {type(venv).__name__}")
+    return venv.obs_rms, venv.ret_rms
+
+
+def save_checkpoint(
+    model: Any, venv: Any, folder: Path, *, policy: dict[str, Any] | None = None
+) -> Path:
+    """Write a checkpoint folder (see the module docstring) of ``model`` and ``venv``.
+
+    Args:
+        model: The PPO model.
+        venv: Its VecNormalize environment.
+        folder: The checkpoint folder (replaced if it exists).
+        policy: Keywords of :func:`agents.policy.export_policy` (``name``, ``env_kwargs``,
+            normalisation statistics, ``metadata``) for the portable model inside.
+
+    Returns:
+        The folder.
+    """
+    from agents.policy import export_policy
+
+    tmp = folder.with_name(folder.name + ".partial")
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    export_policy(model, tmp, **(policy or {"name": "checkpoint", "env_kwargs": {}}))
+    state, params = _parameters(model)
+    arrays: dict[str, npt.NDArray[Any]] = {
+        f"policy/{k}": v.detach().cpu().numpy() for k, v in state.items()
+    }
+    opt_state = model.policy.optimizer.state_dict()["state"]
+    for i in range(len(params)):
+        entry = opt_state.get(i)
+        if entry is None:
+            continue
+        unknown = sorted(set(entry) - set(_ADAM_KEYS))
+        if unknown:
+            raise ValueError(f"cannot checkpoint optimizer state {unknown}: only Adam's is saved")
+        for key in _ADAM_KEYS:
+            arrays[f"adam/{i}/{key}"] = np.asarray(entry[key].detach().cpu().numpy())
+    with_adam = bool(opt_state)
+    if with_adam and len(opt_state) != len(params):
+        raise ValueError("cannot checkpoint an optimizer with state for only some parameters")
+    write_npz(tmp / STATE_FILE, arrays)
+    obs_rms, ret_rms = _running_stats(venv)
+    write_npz(
+        tmp / VECNORM_FILE,
+        {
+            "obs_mean": obs_rms.mean,
+            "obs_var": obs_rms.var,
+            "obs_count": np.asarray(obs_rms.count, np.float64),
+            "ret_mean": np.asarray(ret_rms.mean, np.float64),
+            "ret_var": np.asarray(ret_rms.var, np.float64),
+            "ret_count": np.asarray(ret_rms.count, np.float64),
+        },
+    )
+    record = {
+        "format": 2,
+        "num_timesteps": int(model.num_timesteps),
+        "n_updates": int(model._n_updates),
+        "optimizer_state": with_adam,
+    }
+    (tmp / TRAINING_FILE).write_text(json.dumps(record, indent=2) + "\n")
+    if folder.exists():
+        shutil.rmtree(folder)
+    os.replace(tmp, folder)
+    return folder
+
+
+def _read_training_record(folder: Path) -> dict[str, Any]:
+    path = folder / TRAINING_FILE
+    f = _Fields(str(path), read_json(path))
+    f.known(("format", "num_timesteps", "n_updates", "optimizer_state"))
+    f.choice("format", (2,))
+    return {
+        "num_timesteps": f.integer("num_timesteps", 0, 2**53),
+        "n_updates": f.integer("n_updates", 0, 2**53),
+        "optimizer_state": f.choice("optimizer_state", (True, False)),
+    }
+
+
+def load_checkpoint(model: Any, venv: Any, folder: Path) -> int:
+    """Fill a fresh PPO ``model`` (built with the run's settings) and its VecNormalize
+    ``venv`` from a checkpoint folder; sets ``model.num_timesteps``.
+
+    Returns:
+        The decisions trained when the checkpoint was written.
+
+    Raises:
+        FileNotFoundError: A file of the checkpoint is missing.
+        ValueError: A file is corrupt or does not fit the model (other settings than the
+            run's: the message names the file and the array).
+    """
+    import torch as th
+
+    record = _read_training_record(folder)
+    match = re.fullmatch(rf"{PREFIX}(\d+)", folder.name)
+    if match and int(match.group(1)) != record["num_timesteps"]:
+        raise ValueError(
+            f"{str(folder / TRAINING_FILE)!r}: field num_timesteps = {record['num_timesteps']} "
+            f"does not match the folder name {folder.name!r}"
+        )
+    state, params = _parameters(model)
+    expected = {f"policy/{k}": tuple(v.shape) for k, v in state.items()}
+    if record["optimizer_state"]:
+        for i, p in enumerate(params):
+            expected[f"adam/{i}/step"] = ()
+            expected[f"adam/{i}/exp_avg"] = tuple(p.shape)
+            expected[f"adam/{i}/exp_avg_sq"] = tuple(p.shape)
+    what = "training state (policy parameters and Adam state) for this run's settings"
+    arrays = read_npz(folder / STATE_FILE, expected, what)
+    size = int(model.observation_space.shape[0])
+    vec_shapes = {
+        "obs_mean": (size,),
+        "obs_var": (size,),
+        "obs_count": (),
+        "ret_mean": (),
+        "ret_var": (),
+        "ret_count": (),
+    }
+    stats = read_npz(folder / VECNORM_FILE, vec_shapes, "VecNormalize statistics")
+    where = str(folder / VECNORM_FILE)
+    for key in ("obs_var", "ret_var"):
+        if np.any(stats[key] < 0):
+            raise ValueError(f"{where!r}: array {key} has negative entries: allowed >= 0")
+    for key in ("obs_count", "ret_count"):
+        if not stats[key] > 0:
+            raise ValueError(f"{where!r}: array {key} = {float(stats[key])!r}: allowed > 0")
+    with th.no_grad():
+        model.policy.load_state_dict(
+            {k: th.as_tensor(arrays[f"policy/{k}"], dtype=v.dtype) for k, v in state.items()}
+        )
+    optimizer = model.policy.optimizer
+    opt_state: dict[int, dict[str, Any]] = {}
+    if record["optimizer_state"]:
+        for i, p in enumerate(params):
+            opt_state[i] = {
+                "step": th.tensor(float(arrays[f"adam/{i}/step"]), dtype=th.float32),
+                "exp_avg": th.as_tensor(arrays[f"adam/{i}/exp_avg"], dtype=p.dtype),
+                "exp_avg_sq": th.as_tensor(arrays[f"adam/{i}/exp_avg_sq"], dtype=p.dtype),
+            }
+    optimizer.load_state_dict(
+        {"state": opt_state, "param_groups": optimizer.state_dict()["param_groups"]}
+    )
+    obs_rms, ret_rms = _running_stats(venv)
+    obs_rms.mean = stats["obs_mean"].copy()
+    obs_rms.var = stats["obs_var"].copy()
+    obs_rms.count = float(stats["obs_count"])
+    ret_rms.mean = np.float64(stats["ret_mean"])
+    ret_rms.var = np.float64(stats["ret_var"])
+    ret_rms.count = float(stats["ret_count"])
+    model.num_timesteps = record["num_timesteps"]
+    model._n_updates = record["n_updates"]
+    return int(record["num_timesteps"])
