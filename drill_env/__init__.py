@@ -19,21 +19,31 @@ from gymnasium.envs.registration import register, registry  # noqa: E402
 
 from drill_env.config import EnvConfig  # noqa: E402
 from drill_env.control import CompiledController, CompiledLaw, Controller  # noqa: E402
+from drill_env.distributed import (  # noqa: E402
+    DISTRIBUTED_PRESETS,
+    DistributedStringParameters,
+    StringDamping,
+    StringSection,
+)
 from drill_env.parameters import PLANT_DT_S, PRESETS, DrillStringParameters  # noqa: E402
 from drill_env.rewards import RewardWeights  # noqa: E402
 from drill_env.scenarios import Randomization, SpeedProfile, WobProfile  # noqa: E402
 
 __all__ = [
+    "DISTRIBUTED_PRESETS",
     "PLANT_DT_S",
     "PRESETS",
     "CompiledController",
     "CompiledLaw",
     "Controller",
+    "DistributedStringParameters",
     "DrillStringParameters",
     "EnvConfig",
     "Randomization",
     "RewardWeights",
     "SpeedProfile",
+    "StringDamping",
+    "StringSection",
     "WobProfile",
     "make",
 ]
