@@ -1,6 +1,6 @@
 """Simulated seconds per wall second of the distributed-string plant step, in one process.
 
-For the ``field_2500m`` string discretised into about 25, 100 and 400 elements (the element
+For the ``field_2500m`` string discretised into 25, 50, 100, 200 and 400 elements (the element
 length is chosen so that the count is exact), this prints the throughput of
 
 (a) ``drill_env.chain.chain_step``, the event-located step the kernel uses, on an open-loop
@@ -8,11 +8,12 @@ length is chosen so that the count is exact), this prints the throughput of
 (b) a plain compiled RK4 of the same chain (interleaved state, ``chain_derivative``, frozen slip
     mode, no events), the textbook implementation,
 
-their ratio, and the cost per element and step (linear in the element count when it stays flat).
+their ratio, the cost per element and step, and a straight-line fit of the cost per step against
+the element count (a fixed part per step plus a part per element).
 All numbers are warm (compiled code cached, one untimed warm-up run). The machine is shared, so
 only the ratios measured in the same run are meaningful.
 
-Run: ``OMP_NUM_THREADS=1 python benchmarks/chain_throughput.py [--seconds 2]``.
+Run: ``OMP_NUM_THREADS=1 .venv/bin/python benchmarks/chain_throughput.py [--seconds 2]``.
 """
 
 from __future__ import annotations
@@ -48,15 +49,14 @@ def string_with_elements(count: int) -> DistributedStringParameters:
 
 
 @njit(cache=True)
-def _run_chain_step(x, p, t_a, t_0, u, h, n_steps, work) -> int:
-    mode = STUCK
+def _run_chain_step(x, mode, p, t_a, t_0, u, h, n_steps, work) -> tuple[int, int]:
     switches = 0
     for _ in range(n_steps):
         new_mode = chain_step(x, mode, u, p, t_a, t_0, h, work)
         if new_mode != mode:
             switches += 1
         mode = new_mode
-    return switches
+    return mode, switches
 
 
 @njit(cache=True)
@@ -78,7 +78,7 @@ def _run_plain_rk4(x, p, t_a, t_0, u, h, n_steps, k1, k2, k3, k4, tmp) -> None:
 
 
 def measure(count: int, seconds: float) -> tuple[int, float, float, int]:
-    """(elements, chain_step sim-s/s, plain RK4 sim-s/s, mode switches) for one string."""
+    """(elements, chain_step sim-s/s, plain RK4 sim-s/s, mode switches seen) for one string."""
     params = string_with_elements(count)
     p = chain_parameter_vector(params)
     n = int(p[0])
@@ -88,7 +88,7 @@ def measure(count: int, seconds: float) -> tuple[int, float, float, int]:
     size = 2 * n - 1
     scratch = [np.zeros(size) for _ in range(5)]
     n_steps = 1000
-    _run_chain_step(np.zeros(size), p, t_a, t_0, TORQUE_NM, STEP_S, n_steps, work)  # warm-up
+    _run_chain_step(np.zeros(size), STUCK, p, t_a, t_0, TORQUE_NM, STEP_S, n_steps, work)
     _run_plain_rk4(np.zeros(size), p, t_a, t_0, TORQUE_NM, STEP_S, n_steps, *scratch)
 
     def rate(call) -> float:
@@ -102,11 +102,15 @@ def measure(count: int, seconds: float) -> tuple[int, float, float, int]:
             best = max(best, steps * STEP_S / (time.perf_counter() - start))
         return best
 
-    x_event = np.zeros(size)
-    switches = [0]
+    x_event = np.zeros(size)  # from rest, bit stuck; the mode is carried from call to call
+    state = [STUCK, 0]  # mode, switches
 
     def event_run() -> None:
-        switches[0] += _run_chain_step(x_event, p, t_a, t_0, TORQUE_NM, STEP_S, n_steps, work)
+        mode, switches = _run_chain_step(
+            x_event, state[0], p, t_a, t_0, TORQUE_NM, STEP_S, n_steps, work
+        )
+        state[0] = mode
+        state[1] += switches
 
     x_plain = np.zeros(size)
     x_plain[0::2] = 5.0  # slipping, well away from any event
@@ -116,7 +120,7 @@ def measure(count: int, seconds: float) -> tuple[int, float, float, int]:
 
     event_rate = rate(event_run)
     plain_rate = rate(plain_run)
-    return n - 1, event_rate, plain_rate, switches[0]
+    return n - 1, event_rate, plain_rate, state[1]
 
 
 def main() -> None:
@@ -128,13 +132,22 @@ def main() -> None:
         f"{'elements':>8} {'chain_step sim-s/s':>19} {'plain RK4 sim-s/s':>18} "
         f"{'ratio':>6} {'ns/element/step':>16} {'switches':>9}"
     )
-    for count in (25, 100, 400):
+    sizes, costs = [], []
+    for count in (25, 50, 100, 200, 400):
         elements, event_rate, plain_rate, switches = measure(count, args.seconds)
         per_element = 1e9 * STEP_S / event_rate / elements
         print(
             f"{elements:>8} {event_rate:>19,.0f} {plain_rate:>18,.0f} "
             f"{event_rate / plain_rate:>6.2f} {per_element:>16.2f} {switches:>9}"
         )
+        sizes.append(elements)
+        costs.append(1e9 * STEP_S / event_rate)  # ns of wall time per step
+    slope, intercept = np.polyfit(sizes, costs, 1)
+    worst = max(abs(c - (intercept + slope * e)) / c for e, c in zip(sizes, costs, strict=True))
+    print(
+        f"chain_step cost per step = {intercept:.0f} ns + {slope:.2f} ns x elements "
+        f"(least-squares line over the sizes, worst deviation {worst:.0%})"
+    )
 
 
 if __name__ == "__main__":

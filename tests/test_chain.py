@@ -7,7 +7,7 @@ the package's own output.
 
 Print the measured accuracy figures with::
 
-    python -m pytest tests/test_chain.py -k "accuracy or energy" -s -q
+    .venv/bin/python -m pytest tests/test_chain.py -k "accuracy or energy" -s -q
 """
 
 from __future__ import annotations

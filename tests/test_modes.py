@@ -7,7 +7,7 @@ with ``k = omega / c``; a free top drive of inertia ``J_td`` starts ``(1, -omega
 bit of inertia ``J_b`` ends with ``T = omega^2 J_b theta``; a clamped top starts ``(0, 1)``, a
 stuck bit ends with ``theta = 0``. Roots by bracketing on a fine grid and ``scipy.optimize.brentq``.
 
-Print the figures with ``python -m pytest tests/test_modes.py -s -q``.
+Print the figures with ``.venv/bin/python -m pytest tests/test_modes.py -s -q``.
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ from drill_env.distributed import (
 )
 from drill_env.modes import (
     damped_modes,
+    highest_frequency_rad_s,
     linearize,
     lumped_equivalent,
     natural_frequencies_hz,
@@ -130,6 +131,16 @@ def test_stick_slip_frequency_of_a_uniform_pipe_is_the_quarter_wave() -> None:
     # With the bit stuck both ends are fixed: the half-wave c pi / L.
     half = stick_slip_frequency_rad_s(_uniform_pipe(length, 25.0), bit="stuck")
     assert half == pytest.approx(2 * quarter, rel=1e-4)
+
+
+def test_highest_frequency_is_twice_the_wave_speed_over_the_element_length() -> None:
+    """A uniform lumped chain cuts off at 2 c / l; the field string at 1 ms is far inside the
+    RK4 stability limit (h omega = 2.8)."""
+    c = math.sqrt(79.3e9 / 7850.0)
+    assert highest_frequency_rad_s(_uniform_pipe(3000.0, 25.0)) == pytest.approx(
+        2 * c / 25.0, rel=1e-3
+    )
+    assert 1e-3 * highest_frequency_rad_s(FIELD) < 0.35
 
 
 def test_stick_slip_frequency_of_the_field_string() -> None:
