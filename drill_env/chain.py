@@ -424,7 +424,8 @@ def _integrate(x0, mode0, p, t_a, t_0, u, h, n_steps, every, out_x, out_mode, wo
 
 # --------------------------------------------------------------------------- numpy helpers
 def _wob(wob_n: float) -> float:
-    if not (isinstance(wob_n, (int, float, np.floating, np.integer)) and math.isfinite(wob_n)):
+    is_number = isinstance(wob_n, (int, float, np.floating, np.integer))
+    if isinstance(wob_n, bool) or not (is_number and math.isfinite(wob_n)):
         raise ValueError(f"wob_n = {wob_n!r} is out of range: allowed a finite number > 0")
     if not wob_n > 0:
         raise ValueError(f"wob_n = {wob_n!r} is out of range: allowed > 0")
