@@ -23,6 +23,12 @@ from drill_env.control import (  # noqa: E402
     make_controller,
     register_controller,
 )
+from drill_env.distributed import (  # noqa: E402
+    DISTRIBUTED_PRESETS,
+    DistributedStringParameters,
+    StringDamping,
+    StringSection,
+)
 from drill_env.limits import DEFAULT_TORQUE_LIMITS, TorqueLimits  # noqa: E402
 from drill_env.options import EnvConfig  # noqa: E402
 from drill_env.parameters import PLANT_DT_S, PRESETS, DrillStringParameters  # noqa: E402
@@ -32,11 +38,13 @@ from drill_env.scenarios import Randomization, Scenario, SpeedProfile, WobProfil
 __all__ = [
     "DEFAULT_TORQUE_LIMITS",
     "ENV_ID",
+    "DISTRIBUTED_PRESETS",
     "PLANT_DT_S",
     "PRESETS",
     "CompiledController",
     "CompiledLaw",
     "Controller",
+    "DistributedStringParameters",
     "DrillStringParameters",
     "EnvConfig",
     "Randomization",
@@ -44,6 +52,8 @@ __all__ = [
     "Scenario",
     "SpeedProfile",
     "TorqueLimits",
+    "StringDamping",
+    "StringSection",
     "WobProfile",
     "controller_names",
     "make_controller",
