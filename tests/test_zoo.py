@@ -1,0 +1,140 @@
+"""Tests of the RL Zoo setup of the residual agent (``agents/zoo``)."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3", reason="agents.zoo needs the [rl] extra")
+
+import drill_env  # noqa: E402, F401  (registers DrillString-v0)
+from agents.config import TrainConfig  # noqa: E402
+from agents.zoo import HYPERPARAMS_FILE, TrainingReward, ZeroInitAction  # noqa: E402
+from drill_env import kernel  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+HAVE_ZOO = importlib.util.find_spec("rl_zoo3") is not None
+ENV_KWARGS = {
+    "base_controller": "proposed",
+    "control_dt_s": 0.1,
+    "residual_scale_nm": 10_000.0,
+    "randomize": True,
+    "episode_s": 100.0,
+}
+
+
+def test_training_reward_is_the_drill_gym_train_reward() -> None:
+    """The wrapper's reward, recomputed here from the plant samples of each decision:
+    ``-(T + 0.1 min(TV / 50 kN m, 1)) / 1.1 - 0.5 mean((u - u_base)^2) / (10 kN m)^2`` with T
+    the mean relative tracking error and TV the torque variation (from the previous
+    decision's last torque)."""
+    env = TrainingReward(gym.make("DrillString-v0", **ENV_KWARGS))
+    env.reset(seed=3)
+    rng = np.random.default_rng(0)
+    last_u = 0.0
+    for _ in range(30):
+        _, reward, terminated, _, _ = env.step(rng.uniform(-1, 1, 1).astype(np.float32))
+        assert not terminated
+        rec = env.unwrapped.batch.records[0]  # type: ignore[attr-defined]
+        ref = rec[:, kernel.REC_REFERENCE]
+        tracking = np.mean(np.minimum(np.abs(ref - rec[:, 6]) / np.maximum(ref, 1.0), 1.0))
+        u = rec[:, kernel.REC_TORQUE]
+        variation = np.abs(np.diff(np.concatenate(([last_u], u)))).sum()
+        last_u = float(u[-1])
+        added = u - rec[:, kernel.REC_BASE_TORQUE]
+        expected = -(tracking + 0.1 * min(variation / 50_000.0, 1.0)) / 1.1
+        expected -= 0.5 * np.mean(added**2) / 10_000.0**2
+        assert float(reward) == pytest.approx(expected, rel=1e-9, abs=1e-12)
+
+
+def test_training_reward_takes_the_yaml_weights_and_rejects_others() -> None:
+    """Weights given to the wrapper override TrainConfig's defaults; unknown ones are
+    named."""
+    env = TrainingReward(gym.make("DrillString-v0", **ENV_KWARGS), reward_stuck=0.25)
+    assert env.weights.stuck == 0.25
+    assert env.weights.chattering_scale_nm == TrainConfig().reward_chattering_scale_nm
+    with pytest.raises(TypeError, match=r"unrecognized TrainingReward keyword\(s\): gamma"):
+        TrainingReward(gym.make("DrillString-v0", **ENV_KWARGS), gamma=0.9)
+
+
+def test_zero_init_action_zeroes_only_an_untrained_model() -> None:
+    """At the start of training the action mean is exactly 0; a model that was already
+    updated keeps its weights."""
+    import torch as th
+    from stable_baselines3 import PPO
+
+    env = gym.make("DrillString-v0", **ENV_KWARGS)
+    model = PPO("MlpPolicy", env, n_steps=64, batch_size=64, device="cpu", seed=0)
+    callback = ZeroInitAction()
+    callback.init_callback(model)
+    callback.on_training_start({}, {})
+    weights = [p.detach().clone() for p in model.policy.action_net.parameters()]
+    assert all(bool(th.all(w == 0)) for w in weights)
+    obs, _ = env.reset(seed=0)
+    action, _ = model.predict(obs, deterministic=True)
+    assert float(np.abs(action).max()) == 0.0
+    with th.no_grad():
+        for p in model.policy.action_net.parameters():
+            p.fill_(0.5)
+    model._n_updates = 3
+    callback.on_training_start({}, {})
+    assert all(bool(th.all(p == 0.5)) for p in model.policy.action_net.parameters())
+
+
+def test_hyperparameters_are_the_train_config_defaults() -> None:
+    """The YAML file carries TrainConfig's defaults (read with the zoo's own YAML loader)."""
+    yaml = pytest.importorskip("yaml", reason="reading the file needs pyyaml (the [zoo] extra)")
+    params = yaml.safe_load(HYPERPARAMS_FILE.read_text())["DrillString-v0"]
+    c = TrainConfig()
+    assert params["n_envs"] == c.num_envs
+    assert params["n_timesteps"] == c.total_timesteps
+    assert params["n_steps"] == c.n_steps and params["batch_size"] == c.batch_size
+    assert params["n_epochs"] == c.n_epochs
+    assert params["learning_rate"].startswith("lin_") and c.anneal_lr
+    assert float(params["learning_rate"][4:]) == c.learning_rate
+    for key in ("gamma", "gae_lambda", "clip_range", "ent_coef", "vf_coef", "max_grad_norm"):
+        assert params[key] == getattr(c, key), key
+    assert params["normalize"]["norm_obs"] == c.norm_obs
+    assert params["normalize"]["norm_reward"] == c.norm_reward
+    assert "pi=[64, 64], vf=[64, 64]" in params["policy_kwargs"] and c.net_arch == [64, 64]
+    assert f"log_std_init={c.log_std_init}" in params["policy_kwargs"]
+    kwargs = params["env_kwargs"]
+    assert kwargs["base_controller"] == c.base_controller
+    assert kwargs["control_dt_s"] == c.control_dt_s
+    assert kwargs["residual_scale_nm"] == c.residual_scale_nm
+    assert kwargs["episode_s"] == c.episode_s and kwargs["noise_std_rad_s"] == c.noise_std_rad_s
+    (wrapper,) = params["env_wrapper"]
+    for name, value in wrapper["agents.zoo.TrainingReward"].items():
+        assert value == getattr(c, name), name
+    assert params["callback"] == ["agents.zoo.ZeroInitAction"] and c.zero_init_action
+
+
+@pytest.mark.skipif(not HAVE_ZOO, reason="rl_zoo3 is not installed: pip install -e '.[zoo]'")
+def test_zoo_trains_and_saves_a_model(tmp_path: Path) -> None:
+    """``python -m rl_zoo3.train`` with the shipped file trains 2000 decisions on 2 envs (one
+    rollout, one update) and saves the model and its normalisation statistics."""
+    cmd = [
+        sys.executable, "-m", "rl_zoo3.train", "--algo", "ppo", "--env", "DrillString-v0",
+        "--gym-packages", "drill_env", "--conf-file", str(HYPERPARAMS_FILE),
+        "-n", "2000", "-params", "n_envs:2", "--eval-freq", "-1", "--seed", "1",
+        "--num-threads", "1", "--device", "cpu", "--verbose", "0", "-f", str(tmp_path),
+    ]  # fmt: skip
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    out = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, env=env, timeout=600)
+    assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
+    run = tmp_path / "ppo" / "DrillString-v0_1"
+    assert (run / "DrillString-v0.zip").stat().st_size > 10_000
+    assert (run / "DrillString-v0" / "vecnormalize.pkl").is_file()
+    from stable_baselines3 import PPO
+
+    model = PPO.load(run / "DrillString-v0.zip", device="cpu")
+    assert model.num_timesteps == 2000
+    assert model.n_steps == 1000 and model.gamma == 0.995
+    assert model.observation_space.shape == (11,)
