@@ -287,15 +287,17 @@ def _stable_range(
     lo: float, hi: float, current: tuple[float, float] | None, floor: float, headroom: float
 ) -> tuple[float, float]:
     """Axis limits for data in ``[lo, hi]``: 0 included, rounded to 1, 2, 5 x 10^k, the top
-    at least ``floor``; the ``current`` limits stay while they hold the data and are at most
-    2.5 times too wide (so that a frame seldom needs its axes redrawn)."""
+    at least ``floor``; the ``current`` limits stay while they hold the data and the data
+    (with its headroom) spans at least 40 % of each side (so that axes seldom change)."""
     if not (math.isfinite(lo) and math.isfinite(hi)):
         lo, hi = 0.0, floor
     top = max(_nice_ceiling(hi * headroom) if hi > 0 else 0.0, floor)
     bottom = -_nice_ceiling(-lo * headroom) if lo < 0 else 0.0
     if current is not None:
         c_lo, c_hi = current
-        if c_lo <= lo and hi <= c_hi and c_hi <= 2.5 * top and c_lo >= 2.5 * bottom:
+        keep_top = c_hi == top or 2.5 * headroom * hi >= c_hi
+        keep_bottom = c_lo == bottom or 2.5 * headroom * lo <= c_lo
+        if c_lo <= lo and hi <= c_hi and keep_top and keep_bottom:
             return current
     return bottom, top
 
