@@ -173,6 +173,7 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         render.check_render_mode(render_mode)
         self.render_mode = render_mode
         self.metadata = {
+            **type(self).metadata,
             "render_modes": render.available_render_modes(),
             "render_fps": 1.0 / self.config.control_dt_s,
         }

@@ -13,8 +13,8 @@ as an ``H x W x 3`` uint8 frame:
 * left, the string: one dial per element, its pointer at the element's absolute angle
   ``phi_k = phi_0 - sum_{j<k} (phi_j - phi_{j+1})`` (``phi_0`` integrates the top-drive speed,
   trapezoidal rule between samples), seen from above with the string turning clockwise; on
-  each dial a dashed pointer shows the element above and the shaded wedge between the two is
-  the twist (modulo one turn; the label gives the whole twist in rad and turns). The bit's dial
+  each dial a dashed pointer shows the element above and the shaded ring sector between the
+  two is the twist (modulo one turn; the label gives the whole twist in rad and turns). The bit's dial
   is red and labelled STUCK while the bit sticks, green and SLIPPING while it turns. With more
   than :data:`MAX_DIALS` nodes (a distributed string) a subset is drawn, evenly spread in depth;
 * right, traces of the last ``window_s`` seconds against time before now: bit, top-drive and
