@@ -90,7 +90,7 @@ def test_zero_init_action_zeroes_only_an_untrained_model() -> None:
 
 def test_hyperparameters_are_the_train_config_defaults() -> None:
     """The YAML file carries TrainConfig's defaults (read with the zoo's own YAML loader)."""
-    yaml = pytest.importorskip("yaml", reason="reading the file needs pyyaml (the [zoo] extra)")
+    yaml = pytest.importorskip("yaml", reason="reading the file needs pyyaml (the [dev] extra)")
     params = yaml.safe_load(HYPERPARAMS_FILE.read_text())["DrillString-v0"]
     c = TrainConfig()
     assert params["n_envs"] == c.num_envs
