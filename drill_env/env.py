@@ -10,6 +10,7 @@ import numpy as np
 import numpy.typing as npt
 from gymnasium.envs.registration import EnvSpec
 
+from drill_env import render
 from drill_env.batch import StringBatch
 from drill_env.evaluation import PlantSamples
 from drill_env.layout import (
@@ -143,6 +144,7 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
     | ``min_torque_nm``, ``max_torque_nm`` | torque limits, N m | 0, 50,000 |
     | ``randomization`` | ``Randomization`` ranges | see Starting State |
     | ``reward_weights`` | ``RewardWeights`` | see Rewards |
+    | ``render_mode`` | ``None``, ``"rgb_array"`` or ``"human"`` (see Rendering) | ``None`` |
 
     ``reset(options=...)`` takes the scenario keywords (``drill_env.options.PER_EPISODE_KEYWORDS``)
     for one episode; unknown keys are errors that list the valid ones.
@@ -152,6 +154,18 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
     ``top_drive_torque_nm``, ``wob_n``, ``bit_stuck``, ``reward_terms``, ``action_clipped``,
     ``actions_clipped_total``; in residual mode also ``base_torque_nm``, ``residual_torque_nm``,
     ``sliding_variable_rad_s``, ``adaptive_gain``; ``termination_reason`` when terminated.
+
+    ## Rendering
+    ``render_mode="rgb_array"``: ``render()`` returns a ``(480, 800, 3)`` uint8 frame of the
+    last 20 s (:mod:`drill_env.render`): the four elements as dials turning at their absolute
+    angles, the twists between them, the bit marked STUCK (red) or SLIPPING (green), traces
+    of bit, top-drive and reference speed, top-drive torque and the twists along the string,
+    the time and the WOB. ``render_mode="human"`` shows the same frames in a matplotlib window
+    after every reset and step, at most ``render_fps`` a second, and needs a display (else a
+    ``RuntimeError`` that says so). ``metadata["render_fps"]`` is ``1 / control_dt_s``, one
+    frame per decision, so a video (``gymnasium.wrappers.RecordVideo``) plays in real time;
+    an instance lists ``"human"`` in its ``metadata["render_modes"]`` only where a display
+    exists. Without a render mode the env keeps no history and imports no matplotlib.
 
     ## Version History
     * v0: initial version.
@@ -163,9 +177,12 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
     >>> obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
     """
 
-    metadata: dict[str, Any] = {"render_modes": []}
+    metadata: dict[str, Any] = {
+        "render_modes": list(render.RENDER_MODES),
+        "render_fps": 20,  # one frame per decision at the default control_dt_s = 0.05 s
+    }
 
-    def __init__(self, **kwargs: Any) -> None:
+    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
         self._spec: EnvSpec | None = None
         self.config = EnvConfig.from_kwargs(kwargs)
         self._batch = StringBatch(self.config, 1)
@@ -174,6 +191,21 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         self._residual_scale = self.config.residual_scale_nm if self.config.residual else None
         self.action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
         self._started = False
+        # Rendering (drill_env.render): nothing is kept or drawn unless a render_mode is set.
+        render.check_render_mode(render_mode)
+        self.render_mode = render_mode
+        self.metadata = {
+            **type(self).metadata,
+            "render_modes": render.available_render_modes(),
+            "render_fps": 1.0 / self.config.control_dt_s,
+        }
+        self._rendering = (
+            None
+            if render_mode is None
+            else render.EnvRendering(
+                render_mode, (self._batch.x.shape[1] + 1) // 2, self.config.control_dt_s
+            )
+        )
 
     @property
     def spec(self) -> EnvSpec | None:
@@ -208,6 +240,8 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         self._started = True
         obs = self._batch.obs[0].copy()
         report = self._batch.report[0].tolist()
+        if self._rendering is not None:
+            self._record(report, new_episode=True)
         return obs, self._info(dict.fromkeys(TERMS, 0.0), report)
 
     def step(
@@ -234,7 +268,41 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         info["action_clipped"] = was_clipped
         if terminated:
             info["termination_reason"] = "diverged"
+        if self._rendering is not None:
+            self._record(report)
         return b.obs[0].copy(), reward, terminated, truncated, info
+
+    # ------------------------------------------------------------------ rendering
+    def _record(self, report: list[float], new_episode: bool = False) -> None:
+        """Append the state now to the render history (only with a ``render_mode``)."""
+        assert self._rendering is not None
+        self._rendering.record(
+            report[REP_TIME],
+            self._batch.x[0],
+            report[REP_TORQUE],
+            report[REP_REFERENCE],
+            report[REP_WOB],
+            report[REP_BIT_STUCK] > 0.5,
+            new_episode=new_episode,
+        )
+
+    def render(self) -> npt.NDArray[np.uint8] | None:
+        """The frame of the last ``WINDOW_S`` s, ``(480, 800, 3)`` uint8, in ``rgb_array``
+        mode; ``None`` in ``human`` mode (the window shows every reset and step) and without a
+        ``render_mode`` (a warning, as Gymnasium's envs do)."""
+        if self._rendering is None:
+            gym.logger.warn(
+                "render() called without a render_mode: pass render_mode='rgb_array' or "
+                "'human' to gym.make"
+            )
+            return None
+        if not self._started:
+            raise RuntimeError("call reset() before render()")
+        return self._rendering.render()
+
+    def close(self) -> None:
+        if self._rendering is not None:
+            self._rendering.close()
 
     def _info(self, terms: dict[str, float], report: list[float]) -> dict[str, Any]:
         b = self._batch

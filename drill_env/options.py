@@ -8,6 +8,7 @@ The same names are accepted by ``gym.make`` and, per episode (the scenario ones)
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Final
 
@@ -52,7 +53,11 @@ spaces or the compiled loop and are fixed at ``make``."""
 
 @dataclass(frozen=True)
 class EnvConfig:
-    """Every keyword of the environment; see :class:`drill_env.env.DrillStringEnv`."""
+    """Every keyword of the environment; see :class:`drill_env.env.DrillStringEnv`.
+
+    ``randomization`` and ``reward_weights`` also take a plain mapping of their fields (from
+    YAML or JSON), validated like the dataclass.
+    """
 
     parameters: str | DrillStringParameters = "zribi2024"
     randomize: bool = True
@@ -73,6 +78,13 @@ class EnvConfig:
     reward_weights: RewardWeights = field(default_factory=RewardWeights)
 
     def __post_init__(self) -> None:
+        # The dataclass keywords also take plain mappings of their fields (YAML, JSON).
+        for name, kind in (("randomization", Randomization), ("reward_weights", RewardWeights)):
+            value = getattr(self, name)
+            if isinstance(value, Mapping):
+                check_unknown(value, [f.name for f in dataclasses.fields(kind)], "field", name)
+                fields = {k: tuple(v) if isinstance(v, list) else v for k, v in value.items()}
+                object.__setattr__(self, name, kind(**fields))  # type: ignore[arg-type]
         check_bool("randomize", self.randomize)
         self.fixed_scenario()  # validates the scenario keywords
         check_range("control_dt_s", self.control_dt_s, PLANT_DT_S, 10.0)

@@ -144,7 +144,9 @@ BAD_KEYWORDS = [
     pytest.param({"base_controller": 42}, TypeError, r"base_controller must be None, a controller name or an object with reset\(\)", id="controller-type"),
     pytest.param({"residual_scale_nm": -1.0}, ValueError, r"residual_scale_nm = -1.0 is out of range", id="residual-scale"),
     pytest.param({"wob_step_time_s": 10.0}, ValueError, r"wob_step_time_s and wob_final_n must be given together", id="wob-step-alone"),
-    pytest.param({"randomization": {"wob_range_n": (1, 2)}}, TypeError, r"randomization must be a Randomization", id="randomization-dict"),
+    pytest.param({"randomization": {"wob_range": (1, 2)}}, TypeError, r"unrecognized field\(s\) for randomization: wob_range", id="randomization-dict"),
+    pytest.param({"randomization": 3}, TypeError, r"randomization must be a Randomization", id="randomization-int"),
+    pytest.param({"reward_weights": {"tracking": -1.0}}, ValueError, r"reward weight tracking = -1.0 is out of range", id="reward-dict"),
     pytest.param({"reward_weights": (1, 0, 0)}, TypeError, r"reward_weights must be a RewardWeights", id="reward-weights"),
 ]  # fmt: skip
 
