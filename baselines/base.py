@@ -11,12 +11,45 @@ import numpy as np
 import numpy.typing as npt
 
 from drill_env.control import CompiledLaw
-from drill_env.layout import N_STATE
+from drill_env.distributed import DistributedStringParameters, resolve_plant
+from drill_env.layout import M_STATE, M_TOP_DRIVE_SPEED, N_MEASUREMENT, N_STATE
 from drill_env.limits import DEFAULT_TORQUE_LIMITS, TorqueLimits
-from drill_env.parameters import DrillStringParameters, resolve_parameters
+from drill_env.parameters import DrillStringParameters
 from drill_env.validation import check_finite_fields, check_unknown, require
 
-__all__ = ["CompiledLawController", "Gains"]
+__all__ = ["CompiledLawController", "Gains", "Model", "measurement_vector", "resolve_model"]
+
+Model = DrillStringParameters | DistributedStringParameters
+"""A controller's model of the string: the 4-DOF parameters or a distributed string."""
+
+
+def resolve_model(value: str | Model) -> Model:
+    """A controller's model from a preset name (either kind) or the parameters themselves."""
+    model = resolve_plant(value)
+    if not isinstance(model, (DrillStringParameters, DistributedStringParameters)):
+        raise TypeError(
+            "model must be a preset name, a DrillStringParameters or a "
+            f"DistributedStringParameters, got {type(value).__name__}"
+        )
+    return model
+
+
+def measurement_vector(measurement: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """The measurement vector (``drill_env.layout.M_*``) from either a measured 4-DOF state
+    (7,) (the surface signals then unknown, NaN, but the top-drive speed) or a whole
+    measurement vector."""
+    m = np.ascontiguousarray(measurement, dtype=np.float64)
+    if m.shape == (N_MEASUREMENT,):
+        return m
+    if m.shape != (N_STATE,):
+        raise ValueError(
+            f"measurement must have shape ({N_STATE},) (the measured state) or "
+            f"({N_MEASUREMENT},) (the measurement vector), got {m.shape}"
+        )
+    full = np.full(N_MEASUREMENT, np.nan)
+    full[M_STATE : M_STATE + N_STATE] = m
+    full[M_TOP_DRIVE_SPEED] = m[0]
+    return full
 
 
 class Gains:
@@ -56,7 +89,7 @@ class CompiledLawController:
     def __init__(
         self,
         gains: Any = None,
-        model: str | DrillStringParameters = "zribi2024",
+        model: str | Model = "zribi2024",
         **overrides: Any,
     ) -> None:
         base = self.gains_type() if gains is None else gains
@@ -67,16 +100,14 @@ class CompiledLawController:
         valid = [f.name for f in dataclasses.fields(base)]
         check_unknown(overrides, valid, "gain", self.name)
         self.gains = dataclasses.replace(base, **overrides) if overrides else base
-        self.model = resolve_parameters(model)
+        self.model = resolve_model(model)
         self._params = self._pack(self.model, self._own_torque_limits())
         self._state = self._initial_state()
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.gains!r})"
 
-    def _pack(
-        self, model: DrillStringParameters, torque_limits: TorqueLimits
-    ) -> npt.NDArray[np.float64]:
+    def _pack(self, model: Model, torque_limits: TorqueLimits) -> npt.NDArray[np.float64]:
         """The law's parameter vector for ``model`` and the top drive's ``torque_limits``."""
         raise NotImplementedError
 
@@ -94,7 +125,7 @@ class CompiledLawController:
 
     def compiled_law(
         self,
-        model: DrillStringParameters | None = None,
+        model: Model | None = None,
         torque_limits: TorqueLimits | None = None,
     ) -> CompiledLaw:
         """The law for the compiled loop; ``model`` replaces the controller's own model and
@@ -116,10 +147,9 @@ class CompiledLawController:
     def torque(
         self, measurement: npt.ArrayLike, reference_speed_rad_s: float, dt_s: float
     ) -> float:
-        """Top-drive torque (N m) from the measured state (7,) and the reference bit speed
-        (rad/s); advances the law's state by ``dt_s`` seconds. The same compiled function
-        runs inside the env's plant loop."""
-        m = np.ascontiguousarray(measurement, dtype=np.float64)
-        if m.shape != (N_STATE,):
-            raise ValueError(f"measurement must have shape ({N_STATE},), got {m.shape}")
+        """Top-drive torque (N m) from the measured state (7,) or the env's measurement vector
+        (``drill_env.layout.M_*``) and the reference bit speed (rad/s); advances the law's
+        state by ``dt_s`` seconds. The same compiled function runs inside the env's plant
+        loop."""
+        m = measurement_vector(measurement)
         return self._python_torque(m, float(reference_speed_rad_s), float(dt_s))

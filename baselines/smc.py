@@ -25,10 +25,11 @@ import numpy as np
 import numpy.typing as npt
 from numba import carray, njit
 
-from baselines.base import CompiledLawController, Gains
+from baselines.base import CompiledLawController, Gains, Model
+from drill_env.distributed import DistributedStringParameters
 from drill_env.layout import M_STATE, N_MEASUREMENT
 from drill_env.limits import TorqueLimits
-from drill_env.parameters import DrillStringParameters
+from drill_env.modes import lumped_equivalent
 
 __all__ = [
     "N_SMC_PARAMS",
@@ -163,9 +164,9 @@ class SlidingModeController(CompiledLawController):
     error_slot = S_SLIDING
     gain_slot = S_GAIN
 
-    def _pack(
-        self, model: DrillStringParameters, torque_limits: TorqueLimits
-    ) -> npt.NDArray[np.float64]:
+    def _pack(self, model: Model, torque_limits: TorqueLimits) -> npt.NDArray[np.float64]:
+        if isinstance(model, DistributedStringParameters):
+            model = lumped_equivalent(model)  # the 4-DOF model the law is written for
         p = np.zeros(N_SMC_PARAMS)
         g = self.gains
         head = (model.J_dt, model.c_dt, model.c_pi, model.k_pi, g.lam, g.delta)

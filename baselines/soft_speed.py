@@ -31,7 +31,8 @@ from dataclasses import dataclass, field
 
 from baselines.base import Gains
 from baselines.speed_loop import DriveLimits, SpeedLoopController, SpeedLoopTuning
-from baselines.string_modes import pipe_impedance, stick_slip_frequency
+from baselines.string_modes import string_view
+from drill_env.distributed import DistributedStringParameters
 from drill_env.parameters import DrillStringParameters
 
 __all__ = ["SoftSpeed", "SoftSpeedGains"]
@@ -74,17 +75,19 @@ class SoftSpeed(SpeedLoopController):
     name = "soft_speed"
     gains_type = SoftSpeedGains
 
-    def tuning(self, model: DrillStringParameters | None = None) -> SpeedLoopTuning:
+    def tuning(
+        self, model: DrillStringParameters | DistributedStringParameters | None = None
+    ) -> SpeedLoopTuning:
         """``kp = impedance_factor Z - c_dt``, ``ki = (frequency_factor w_s)^2 J_dt``,
         ``j_ff = J_dt`` (when compensating).
 
         Raises:
             ValueError: when ``impedance_factor Z <= c_dt`` (no positive ``kp`` matches).
         """
-        m = self.model if model is None else model
+        m = string_view(self.model if model is None else model)
         g: SoftSpeedGains = self.gains
-        z = pipe_impedance(m)
-        w_s = stick_slip_frequency(m)
+        z = m.impedance
+        w_s = m.stick_slip_rad_s
         kp = g.impedance_factor * z - m.c_dt
         if not kp > 0:
             raise ValueError(

@@ -16,6 +16,7 @@ the scaled ones under the ``controller`` uncertainty reading).
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Final
 
@@ -25,7 +26,8 @@ from numba import carray, cfunc, njit
 
 from baselines.base import CompiledLawController, Gains
 from drill_env.control import LAW_SIGNATURE
-from drill_env.layout import M_STATE, N_MEASUREMENT
+from drill_env.distributed import DistributedStringParameters
+from drill_env.layout import M_STATE, M_SURFACE_TORQUE, M_TOP_DRIVE_SPEED, N_MEASUREMENT
 from drill_env.limits import DEFAULT_TORQUE_LIMITS, TorqueLimits
 from drill_env.parameters import DrillStringParameters
 
@@ -49,8 +51,10 @@ N_PI_STATE: Final = 5
 def speed_loop_torque(lp, ls, m, ref: float, dt: float) -> float:
     """Top-drive speed PI loop with optional set-point feed-forward and torque feedback, N m.
 
-    With the measured string torque at the top drive ``T = k_pi x2 + c_pi (x1 - x3)`` and its
-    running mean ``T_mean`` (first-order low-pass, time constant ``tau_mean``)::
+    With the string torque at the top drive ``T`` (from the measured state,
+    ``T = k_pi x2 + c_pi (x1 - x3)``, or, when only surface signals are measured, the measured
+    surface torque) and its running mean ``T_mean`` (first-order low-pass, time constant
+    ``tau_mean``), ``x1`` the measured top-drive speed::
 
         w_set = ref - (T - T_mean) / z              (z = 0: no torque feedback, w_set = ref)
         e     = w_set - x1
@@ -63,10 +67,13 @@ def speed_loop_torque(lp, ls, m, ref: float, dt: float) -> float:
     torque is returned unclipped (the env clips it); then ``I``, ``T_mean`` and the previous
     set-point advance by ``dt``. ``ls[PS_ERROR]`` keeps the speed error ``x1 - w_set`` (rad/s).
     """
-    x1, x2, x3 = m[M_STATE], m[M_STATE + 1], m[M_STATE + 2]
+    x1 = m[M_TOP_DRIVE_SPEED]
     kp, ki, j_ff, z = lp[PI_KP], lp[PI_KI], lp[PI_J_FF], lp[PI_Z]
     w_set = ref
-    t_string = lp[PI_K_PI] * x2 + lp[PI_C_PI] * (x1 - x3)
+    if math.isnan(m[M_STATE + 1]):  # surface signals only: the measured torque
+        t_string = m[M_SURFACE_TORQUE]
+    else:  # the whole state: the torque from the model's top spring
+        t_string = lp[PI_K_PI] * m[M_STATE + 1] + lp[PI_C_PI] * (m[M_STATE] - m[M_STATE + 2])
     first = ls[PS_STARTED] == 0.0
     if first:
         ls[PS_T_MEAN] = t_string
@@ -162,7 +169,9 @@ class SpeedLoopController(CompiledLawController):
         **overrides: Individual gains replacing those of ``gains`` (validated).
     """
 
-    def tuning(self, model: DrillStringParameters | None = None) -> SpeedLoopTuning:
+    def tuning(
+        self, model: DrillStringParameters | DistributedStringParameters | None = None
+    ) -> SpeedLoopTuning:
         """The gains derived from ``model`` (the controller's own model when omitted)."""
         raise NotImplementedError
 
@@ -170,7 +179,9 @@ class SpeedLoopController(CompiledLawController):
     error_slot = PS_ERROR
 
     def _pack(
-        self, model: DrillStringParameters, torque_limits: TorqueLimits
+        self,
+        model: DrillStringParameters | DistributedStringParameters,
+        torque_limits: TorqueLimits,
     ) -> npt.NDArray[np.float64]:
         t = self.tuning(model)
         p = np.zeros(N_PI_PARAMS)

@@ -25,7 +25,8 @@ from dataclasses import dataclass, field
 
 from baselines.base import Gains
 from baselines.speed_loop import DriveLimits, SpeedLoopController, SpeedLoopTuning
-from baselines.string_modes import pipe_impedance, stick_slip_frequency
+from baselines.string_modes import string_view
+from drill_env.distributed import DistributedStringParameters
 from drill_env.parameters import DrillStringParameters
 
 __all__ = ["StiffPI", "StiffPIGains"]
@@ -61,13 +62,13 @@ class StiffPI(SpeedLoopController):
     name = "stiff_pi"
     gains_type = StiffPIGains
 
-    def tuning(self, model: DrillStringParameters | None = None) -> SpeedLoopTuning:
+    def tuning(
+        self, model: DrillStringParameters | DistributedStringParameters | None = None
+    ) -> SpeedLoopTuning:
         """``kp = bandwidth_factor Z``, ``ki = kp^2 / (4 damping_ratio^2 J_dt)``."""
-        m = self.model if model is None else model
+        m = string_view(self.model if model is None else model)
         g: StiffPIGains = self.gains
-        z = pipe_impedance(m)
+        z = m.impedance
         kp = g.bandwidth_factor * z
         ki = kp**2 / (4.0 * g.damping_ratio**2 * m.J_dt)
-        return SpeedLoopTuning(
-            kp=kp, ki=ki, pipe_impedance=z, stick_slip_rad_s=stick_slip_frequency(m)
-        )
+        return SpeedLoopTuning(kp=kp, ki=ki, pipe_impedance=z, stick_slip_rad_s=m.stick_slip_rad_s)

@@ -29,22 +29,27 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Final, Literal, overload
+from typing import Final, Literal, NamedTuple, overload
 
 import numpy as np
 import numpy.typing as npt
 
+from drill_env.distributed import DistributedStringParameters
+from drill_env.modes import lumped_equivalent, stick_slip_frequency_rad_s
+from drill_env.modes import pipe_impedance as distributed_pipe_impedance
 from drill_env.parameters import DrillStringParameters, resolve_parameters
 
 __all__ = [
     "BIT_ENDS",
     "TOP_ENDS",
     "StringModes",
+    "StringView",
     "pipe_impedance",
     "pipe_travel_time_s",
     "reflection_coefficient",
     "stick_slip_frequency",
     "string_modes",
+    "string_view",
     "top_drive_impedance",
 ]
 
@@ -138,6 +143,59 @@ def string_modes(
         dofs=tuple(names[j] for j in index),
         frequencies_rad_s=np.sqrt(w2),
         shapes=shapes,
+    )
+
+
+class StringView(NamedTuple):
+    """What a top-drive controller takes from its model of the string, for either plant kind
+    (:func:`string_view`).
+
+    Attributes:
+        J_dt: Inertia of the top drive, kg m^2.
+        c_dt: Its damping to ground, N m s/rad.
+        k_pi: Stiffness of the spring at the top of the (4-DOF) string, N m/rad.
+        c_pi: Damping of that spring, N m s/rad.
+        impedance: Characteristic impedance of the drill pipe, N m s/rad.
+        stick_slip_rad_s: The string's stick-slip frequency, rad/s.
+    """
+
+    J_dt: float
+    c_dt: float
+    k_pi: float
+    c_pi: float
+    impedance: float
+    stick_slip_rad_s: float
+
+
+def string_view(model: DrillStringParameters | DistributedStringParameters) -> StringView:
+    """The numbers a controller tunes from, for the 4-DOF model or a distributed string.
+
+    4-DOF model: its own ``J_dt``, ``c_dt``, ``k_pi``, ``c_pi``, the pipe impedance
+    ``sqrt(k_pi J_pi)`` and the lowest clamped-top, stuck-bit mode (:func:`stick_slip_frequency`).
+    Distributed string: the top drive's own inertia and bearing damping, the top spring of its
+    4-DOF equivalent (:func:`drill_env.modes.lumped_equivalent`), the drill pipe's wave
+    impedance ``I_p sqrt(G rho)`` and the lowest mode with the top drive clamped and the bit
+    free (:func:`drill_env.modes.stick_slip_frequency_rad_s`): along a long pipe with a stiff
+    BHA that pendulum mode is the one a stick-slip cycle rings at, while the stuck-bit mode is
+    pinned by the BHA several times higher.
+    """
+    if isinstance(model, DistributedStringParameters):
+        lumped = lumped_equivalent(model)
+        return StringView(
+            J_dt=model.top_drive_inertia_kg_m2,
+            c_dt=model.damping.top_drive_nm_s_rad,
+            k_pi=lumped.k_pi,
+            c_pi=lumped.c_pi,
+            impedance=distributed_pipe_impedance(model),
+            stick_slip_rad_s=stick_slip_frequency_rad_s(model, bit="free"),
+        )
+    return StringView(
+        J_dt=model.J_dt,
+        c_dt=model.c_dt,
+        k_pi=model.k_pi,
+        c_pi=model.c_pi,
+        impedance=pipe_impedance(model),
+        stick_slip_rad_s=stick_slip_frequency(model),
     )
 
 

@@ -35,7 +35,8 @@ from dataclasses import dataclass, field
 
 from baselines.base import Gains
 from baselines.speed_loop import DriveLimits, SpeedLoopController, SpeedLoopTuning
-from baselines.string_modes import pipe_impedance, stick_slip_frequency
+from baselines.string_modes import string_view
+from drill_env.distributed import DistributedStringParameters
 from drill_env.parameters import DrillStringParameters
 
 __all__ = ["ZTorque", "ZTorqueGains"]
@@ -79,13 +80,15 @@ class ZTorque(SpeedLoopController):
     name = "z_torque"
     gains_type = ZTorqueGains
 
-    def tuning(self, model: DrillStringParameters | None = None) -> SpeedLoopTuning:
+    def tuning(
+        self, model: DrillStringParameters | DistributedStringParameters | None = None
+    ) -> SpeedLoopTuning:
         """``z = impedance_factor Z``, ``tau_mean = mean_periods 2 pi / w_s`` and the stiff
         inner loop of :class:`baselines.stiff_pi.StiffPI`."""
-        m = self.model if model is None else model
+        m = string_view(self.model if model is None else model)
         g: ZTorqueGains = self.gains
-        z = pipe_impedance(m)
-        w_s = stick_slip_frequency(m)
+        z = m.impedance
+        w_s = m.stick_slip_rad_s
         kp = g.bandwidth_factor * z
         ki = kp**2 / (4.0 * g.damping_ratio**2 * m.J_dt)
         return SpeedLoopTuning(

@@ -1,8 +1,9 @@
-"""drill-string-gym: a 4-DOF torsional drill string with Karnopp bit-rock friction, and the
-Gymnasium environment ``DrillString-v0`` around it.
+"""drill-string-gym: torsional drill strings with Karnopp bit-rock friction, the paper's
+4-DOF string and a field-length distributed one, and the Gymnasium environments around them.
 
-Importing this package registers ``DrillString-v0``; ``gym.make("drill_env:DrillString-v0")``
-imports it for you.
+Importing this package registers ``DrillString-v0`` (the 4-DOF string) and
+``DrillStringField-v0`` (the distributed string as a rig sees it);
+``gym.make("drill_env:DrillString-v0")`` imports it for you.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from drill_env.scenarios import Randomization, Scenario, SpeedProfile, WobProfil
 __all__ = [
     "DEFAULT_TORQUE_LIMITS",
     "ENV_ID",
+    "FIELD_ENV_ID",
     "DISTRIBUTED_PRESETS",
     "PLANT_DT_S",
     "PRESETS",
@@ -63,12 +65,14 @@ __all__ = [
 __version__ = "0.1.0"
 
 ENV_ID = "DrillString-v0"
+FIELD_ENV_ID = "DrillStringField-v0"
 
-if ENV_ID not in registry:
-    # No registered step limit: the env truncates itself after ``episode_s`` and reports the
-    # number of decisions that takes as ``env.spec.max_episode_steps``.
-    register(
-        id=ENV_ID,
-        entry_point="drill_env.env:DrillStringEnv",
-        vector_entry_point="drill_env.vector:DrillStringVectorEnv",
-    )
+# No registered step limit: the envs truncate themselves after ``episode_s`` and report the
+# number of decisions that takes as ``env.spec.max_episode_steps``.
+for _id, _name in ((ENV_ID, "DrillString"), (FIELD_ENV_ID, "DrillStringField")):
+    if _id not in registry:
+        register(
+            id=_id,
+            entry_point=f"drill_env.env:{_name}Env",
+            vector_entry_point=f"drill_env.vector:{_name}VectorEnv",
+        )

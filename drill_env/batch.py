@@ -2,7 +2,9 @@
 
 :class:`StringBatch` owns the per-string arrays that the compiled kernel advances, the
 per-string scenarios and random generators, and the base controllers. The single env is a
-batch of one, so the vector env reproduces it bit for bit.
+batch of one, so the vector env reproduces it bit for bit. The strings are all 4-DOF plants
+(``DrillString-v0``) or all distributed strings (``DrillStringField-v0``), possibly of different
+lengths (padded to the longest the configuration allows).
 """
 
 from __future__ import annotations
@@ -10,21 +12,50 @@ from __future__ import annotations
 import copy
 import math
 from dataclasses import dataclass
-from typing import Any, Final
+from typing import Final
 
 import numpy as np
 import numpy.typing as npt
 
 from drill_env import kernel
+from drill_env.actuator import lag_factor
+from drill_env.chain import CHAIN_WORK_ROWS, chain_parameter_length, chain_parameter_vector
 from drill_env.control import CompiledController, CompiledLaw, Controller, resolve_controller
+from drill_env.distributed import (
+    DistributedStringParameters,
+    section_element_counts,
+    with_measured_depth,
+)
 from drill_env.friction import STUCK
 from drill_env.layout import (
+    CH_ACTUATOR,
+    CH_HOLD,
+    CH_TELEMETRY,
+    F_BASE_TORQUE,
+    F_COMMAND,
+    F_NOISE_STD,
+    F_TELEMETRY_NOISE_STD,
+    F_TORQUE_NOISE_STD,
+    I_MODE,
+    I_NOISE_POS,
+    I_REF_KNOTS,
+    I_STATUS,
+    I_STEP,
+    I_WOB_KNOTS,
+    N_CHANNEL,
+    N_FIXED_SOURCES,
+    N_INTS,
     N_MEASUREMENT,
     N_PLANT_PARAMS,
+    N_PROFILES,
     N_RECORD,
     N_REPORT,
-    N_SOURCES,
+    N_SCALARS,
     N_STATE,
+    PROF_REF_T,
+    PROF_REF_V,
+    PROF_WOB_T,
+    PROF_WOB_V,
     REP_LAW_ERROR,
     REP_LAW_GAIN,
     REP_RESIDUAL_SQUARED,
@@ -33,17 +64,26 @@ from drill_env.layout import (
     REP_TORQUE_SQUARED,
     REP_TRACKING_SUM,
     REP_VARIATION,
-    SPEED_INDICES,
     STATUS_OK,
+    chain_state_fields,
     observation_fields,
     observation_scales,
     observation_sources,
 )
-from drill_env.options import EnvConfig, episode_config
+from drill_env.modes import probe_nodes
+from drill_env.options import EnvConfig, episode_config, steps_of
 from drill_env.parameters import PLANT_DT_S, plant_parameter_vector
-from drill_env.scenarios import MAX_KNOTS, Scenario, knot_arrays, profile_value, spawn_generators
+from drill_env.scenarios import (
+    MAX_KNOTS,
+    FieldRandomization,
+    Scenario,
+    knot_arrays,
+    profile_value,
+    spawn_generators,
+)
+from drill_env.sensors import reset_channel, telemetry_buffer_size
 
-__all__ = ["StringBatch"]
+__all__ = ["StringBatch", "node_count"]
 
 PARALLEL_THRESHOLD: Final = 64
 """Batches at least this large use numba's threads."""
@@ -53,6 +93,21 @@ _SUMS: Final = slice(REP_TRACKING_SUM, REP_RESIDUAL_SQUARED + 1)
 assert tuple(range(1, 5)) == (REP_VARIATION, REP_STUCK_STEPS, REP_STEPS, REP_TORQUE_SQUARED)
 
 
+def node_count(parameters: DistributedStringParameters) -> int:
+    """Nodes of the chain of a distributed string."""
+    return 1 + sum(section_element_counts(parameters))
+
+
+def _max_nodes(config: EnvConfig) -> int:
+    """The most nodes a string of this configuration can have (its deepest string)."""
+    string = config.string()
+    count = node_count(string)
+    if config.randomize and isinstance(config.randomization, FieldRandomization):
+        deepest = max(config.randomization.measured_depth_range_m)
+        count = max(count, node_count(with_measured_depth(string, deepest)))
+    return count
+
+
 @dataclass
 class _StringEpisode:
     config: EnvConfig
@@ -60,6 +115,10 @@ class _StringEpisode:
     seed_root: np.random.SeedSequence
     noise_rng: np.random.Generator
     noise_out: npt.NDArray[np.float64] | None  # where the step's noise is drawn; None: no noise
+    sensor_rng: np.random.Generator
+    sensor_out: npt.NDArray[np.float64] | None  # the same for the surface torque and telemetry
+    node_rng: np.random.Generator | None  # node-speed noise of a distributed string's state
+    duration_s: float = 0.0  # the episode's length (config.duration_s, kept for the hot path)
     actions_clipped: int = 0
 
 
@@ -71,7 +130,16 @@ class StringBatch:
         self.num = num
         self.substeps = config.substeps
         self.residual = config.residual
-        self.fields = observation_fields(self.residual)
+        self.chain = config.distributed
+        self.max_nodes = _max_nodes(config) if self.chain else 4
+        state_size = 2 * self.max_nodes - 1 if self.chain else N_STATE
+        state_fields = chain_state_fields(self.max_nodes) if self.chain else None
+        self.fields = observation_fields(
+            self.residual,
+            config.observation,
+            config.telemetry,
+            *((state_fields,) if state_fields is not None else ()),
+        )
         self.obs_size = len(self.fields)
         controller = resolve_controller(config.base_controller)
         self.controllers: list[Controller] = []
@@ -85,32 +153,36 @@ class StringBatch:
         # Noise is drawn in blocks: row noise_pos is the current measurement's, the rows after
         # it the next steps'. A block holds several decision periods (fewer for big batches).
         periods = max(1, min(2000, 200_000 // n) // s)
+        rows = periods * s + 1
+        period = steps_of(config.telemetry_period_s) if config.telemetry_period_s else 0
+        delay = steps_of(config.telemetry_delay_s)
+        node_cols = self.max_nodes if self.chain else 1
         self.arrays = kernel.BatchArrays(
-            x=np.zeros((n, N_STATE)),
-            mode=np.zeros(n, dtype=np.int64),
-            step_index=np.zeros(n, dtype=np.int64),
-            status=np.zeros(n, dtype=np.int64),
-            plant=np.zeros((n, N_PLANT_PARAMS)),
-            wob_t=np.zeros((n, MAX_KNOTS)),
-            wob_v=np.zeros((n, MAX_KNOTS)),
-            wob_n=np.ones(n, dtype=np.int64),
-            ref_t=np.zeros((n, MAX_KNOTS)),
-            ref_v=np.zeros((n, MAX_KNOTS)),
-            ref_n=np.ones(n, dtype=np.int64),
-            noise=np.zeros((n, periods * s + 1, 4)),
-            noise_pos=np.zeros(n, dtype=np.int64),
-            noise_std=np.zeros(n),
+            x=np.zeros((n, state_size)),
+            x_backup=np.zeros((n, state_size if self.chain else 1)),
+            ints=np.zeros((n, N_INTS), dtype=np.int64),
+            scalars=np.zeros((n, N_SCALARS)),
+            plant=np.zeros(
+                (n, chain_parameter_length(self.max_nodes) if self.chain else N_PLANT_PARAMS)
+            ),
+            work=np.zeros((n, CHAIN_WORK_ROWS, node_cols) if self.chain else (n, 1, 1)),
+            probes=np.tile(np.arange(4, dtype=np.int64), (n, 1)),
+            profiles=np.zeros((n, N_PROFILES, MAX_KNOTS)),
+            noise=np.zeros((n, rows, 4)),
+            sensor_noise=np.zeros((n, rows, 2)),
+            node_noise=np.zeros((n, node_cols)),
             law_params=np.zeros((n, 1 if law is None else law.params.size)),
             law_state=np.zeros((n, 1 if law is None else law.initial_state.size)),
             measurement=np.zeros((n, N_MEASUREMENT)),
-            command=np.zeros(n),
-            base_torque=np.zeros(n),
-            last_u=np.zeros(n),
+            channel=np.zeros((n, N_CHANNEL)),
+            delay_line=np.zeros((n, steps_of(config.actuator_dead_time_s) + 1)),
+            telemetry_buffer=np.zeros((n, telemetry_buffer_size(period, delay), 2)),
             records=np.zeros((n, s, N_RECORD)),
             report=np.zeros((n, N_REPORT)),
-            sources=np.zeros((n, N_SOURCES)),
+            sources=np.zeros((n, N_FIXED_SOURCES + state_size)),
             obs=np.zeros((n, self.obs_size), dtype=np.float32),
         )
+        rate = config.torque_rate_limit_nm_per_s
         self.settings = kernel.LoopSettings(
             law_address=0 if law is None else law.address,
             error_slot=-1 if law is None else law.error_slot,
@@ -121,32 +193,46 @@ class StringBatch:
             dt=PLANT_DT_S,
             obs_source=observation_sources(self.fields),
             obs_scale=observation_scales(self.fields, config.torque_scale_nm),
+            state_mode=config.observation == "state",
+            sensor_steps=steps_of(config.sensor_period_s),
+            telemetry_period=period,
+            telemetry_delay=delay,
+            ideal_actuator=config.ideal_actuator,
+            lag=lag_factor(config.actuator_lag_s, PLANT_DT_S),
+            rate_step=math.inf if rate is None else rate * PLANT_DT_S,
+            chain=self.chain,
         )
         self.episodes: list[_StringEpisode | None] = [None] * n
+        self._noise_rows = rows
+        self._node_noise = self.chain and config.observation == "state"
         # Action to command torque: residual_scale * a, or min + (a + 1) / 2 * (max - min).
         span = config.max_torque_nm - config.min_torque_nm
         self._action_gain = config.residual_scale_nm if self.residual else 0.5 * span
         self._action_offset = 0.0 if self.residual else config.min_torque_nm + 0.5 * span
-        dispatcher = (
-            kernel.advance_batch_parallel if n >= PARALLEL_THRESHOLD else kernel.advance_batch
-        )
+        if self.chain:
+            serial, parallel = kernel.advance_chain_batch, kernel.advance_chain_batch_parallel
+        else:
+            serial, parallel = kernel.advance_batch, kernel.advance_batch_parallel
+        dispatcher = parallel if n >= PARALLEL_THRESHOLD else serial
         self._advance = kernel.fast_entry(dispatcher, self.arrays, self.settings)
 
     # ------------------------------------------------------------- arrays by name
     @property
     def x(self) -> npt.NDArray[np.float64]:
-        """True states, (num, 7), rad/s and rad."""
+        """True states, (num, 7) for the 4-DOF plant, (num, 2 n_max - 1) for distributed
+        strings (zero-padded), rad/s and rad."""
         return self.arrays.x
 
     @property
     def status(self) -> npt.NDArray[np.int64]:
-        """Run status of each string (``drill_env.layout.STATUS_*``), (num,)."""
-        return self.arrays.status
+        """Run status of each string (``drill_env.layout.STATUS_*``), (num,) (a writable view)."""
+        return self.arrays.ints[:, I_STATUS]
 
     @property
     def command(self) -> npt.NDArray[np.float64]:
-        """The command torque of the last step (the residual in residual mode), (num,), N m."""
-        return self.arrays.command
+        """The command torque of the last step (the residual in residual mode), (num,), N m
+        (a writable view)."""
+        return self.arrays.scalars[:, F_COMMAND]
 
     @property
     def records(self) -> npt.NDArray[np.float64]:
@@ -164,12 +250,19 @@ class StringBatch:
         """The current observations, (num, obs_size) (not a copy)."""
         return self.arrays.obs
 
+    def nodes(self, i: int) -> int:
+        """Nodes of string ``i`` (4 for the 4-DOF plant)."""
+        episode = self.episodes[i]
+        if not self.chain or episode is None:
+            return 4
+        return node_count(episode.scenario.plant)  # type: ignore[arg-type]
+
     # ------------------------------------------------------------------ reset
     def reset_string(
         self,
         i: int,
         seed: int | None,
-        options: dict[str, Any] | None,
+        options: dict[str, object] | None,
         previous_root: np.random.SeedSequence | None = None,
     ) -> None:
         """Start a new episode of string ``i``.
@@ -190,24 +283,56 @@ class StringBatch:
         generators = spawn_generators(root)
         scenario = config.scenario(generators)
         a = self.arrays
+        if self.chain:
+            n_nodes = node_count(scenario.plant)  # type: ignore[arg-type]
+            if n_nodes > self.max_nodes:
+                raise ValueError(
+                    f"the string of this episode has {n_nodes} nodes: allowed at most "
+                    f"{self.max_nodes} in this env (set the deeper string or depth range at "
+                    "make)"
+                )
         noise_out = a.noise[i, 1:] if scenario.noise_std_rad_s > 0 else None
-        self.episodes[i] = _StringEpisode(config, scenario, root, generators["noise"], noise_out)
+        sensed = config.torque_noise_std_nm > 0 or config.telemetry_noise_std_rad_s > 0
+        sensor_out = a.sensor_noise[i, 1:] if sensed else None
+        node_rng = (
+            generators["nodes"]
+            if self.chain and config.observation == "state" and scenario.noise_std_rad_s > 0
+            else None
+        )
+        self.episodes[i] = _StringEpisode(
+            config, scenario, root, generators["noise"], noise_out, generators["sensors"],
+            sensor_out, node_rng, config.duration_s,
+        )  # fmt: skip
         a.noise[i] = 0.0
         if noise_out is not None:
             generators["noise"].standard_normal(out=a.noise[i, 0])
             generators["noise"].standard_normal(out=noise_out)
-        a.noise_pos[i] = 0
+        a.sensor_noise[i] = 0.0
+        if sensor_out is not None:
+            generators["sensors"].standard_normal(out=a.sensor_noise[i, 0])
+            generators["sensors"].standard_normal(out=sensor_out)
+        a.node_noise[i] = 0.0
+        self._draw_node_noise(i)
         a.x[i] = 0.0
-        a.mode[i] = STUCK
-        a.step_index[i] = 0
-        a.status[i] = STATUS_OK
-        a.plant[i] = plant_parameter_vector(scenario.plant)
-        a.wob_t[i], a.wob_v[i], a.wob_n[i] = knot_arrays(scenario.wob)
-        a.ref_t[i], a.ref_v[i], a.ref_n[i] = knot_arrays(scenario.reference)
-        a.noise_std[i] = scenario.noise_std_rad_s
-        a.last_u[i] = 0.0
-        a.command[i] = 0.0
-        a.base_torque[i] = 0.0
+        a.ints[i] = 0
+        a.ints[i, I_MODE] = STUCK
+        a.ints[i, I_STATUS] = STATUS_OK
+        if self.chain:
+            a.plant[i] = chain_parameter_vector(scenario.plant, a.plant.shape[1])
+            a.probes[i] = probe_nodes(scenario.plant)  # type: ignore[arg-type]
+        else:
+            a.plant[i] = plant_parameter_vector(scenario.plant)  # type: ignore[arg-type]
+        prof = a.profiles[i]
+        prof[PROF_WOB_T], prof[PROF_WOB_V], a.ints[i, I_WOB_KNOTS] = knot_arrays(scenario.wob)
+        reference = knot_arrays(scenario.reference)
+        prof[PROF_REF_T], prof[PROF_REF_V], a.ints[i, I_REF_KNOTS] = reference
+        a.scalars[i] = 0.0
+        a.scalars[i, F_NOISE_STD] = scenario.noise_std_rad_s
+        a.scalars[i, F_TORQUE_NOISE_STD] = config.torque_noise_std_nm
+        a.scalars[i, F_TELEMETRY_NOISE_STD] = config.telemetry_noise_std_rad_s
+        a.channel[i] = 0.0
+        a.delay_line[i] = 0.0
+        reset_channel(a.channel[i, CH_HOLD:CH_TELEMETRY], a.channel[i, CH_TELEMETRY:CH_ACTUATOR])
         a.records[i] = 0.0
         a.law_state[i] = 0.0
         if self.controllers:
@@ -221,44 +346,43 @@ class StringBatch:
                     raise ValueError("every string of a batch must run the same compiled law")
                 a.law_params[i] = law.params
                 a.law_state[i] = law.initial_state
-        ref = scenario.reference.value(0.0)
-        x0 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        s = self.settings
-        error = a.law_state[i, s.error_slot] if s.error_slot >= 0 else 0.0
-        gain = a.law_state[i, s.gain_slot] if s.gain_slot >= 0 else 0.0
-        kernel.fill_sources(a.sources[i], self.measurement(i), ref, 0.0, 0.0, error)
-        kernel.write_observation(a.obs[i], a.sources[i], s.obs_source, s.obs_scale)
         a.report[i] = 0.0
-        kernel.write_report(
-            a.report[i], x0, STUCK, 0.0, ref, 0.0, scenario.wob.initial_n, 0.0, error, gain,
-            float(STATUS_OK),
-        )  # fmt: skip
+        kernel.observe(a, self.settings, i)
 
     def measurement(self, i: int) -> npt.NDArray[np.float64]:
-        """The measured state of string ``i`` now: true state plus its speed noise, (7,)."""
-        a = self.arrays
-        meas = a.x[i].copy()
-        meas[list(SPEED_INDICES)] += a.noise_std[i] * a.noise[i, a.noise_pos[i]]
-        return meas
+        """The measurement vector of string ``i`` now (``drill_env.layout.M_*``: the measured
+        state in ``state`` mode, the surface signals, the telemetry), a copy."""
+        kernel.measure(self.arrays, self.settings, i)
+        return self.arrays.measurement[i].copy()
+
+    def _draw_node_noise(self, i: int) -> None:
+        episode = self.episodes[i]
+        if episode is not None and episode.node_rng is not None:
+            episode.node_rng.standard_normal(out=self.arrays.node_noise[i])
 
     def _refill_noise(self) -> None:
         """Start a new noise block for the strings whose block cannot hold the next period."""
         a = self.arrays
         s = self.substeps
-        rows = a.noise.shape[1]
+        rows = self._noise_rows
+        position = a.ints[:, I_NOISE_POS]
         if self.num == 1:
-            if a.noise_pos[0] + s < rows:
+            if position[0] + s < rows:
                 return
             refill = [0]
         else:
-            refill = np.flatnonzero(a.noise_pos + s >= rows).tolist()
+            refill = np.flatnonzero(position + s >= rows).tolist()
         for i in refill:
             episode = self.episodes[i]
             assert episode is not None
-            a.noise[i, 0] = a.noise[i, a.noise_pos[i]]
-            a.noise_pos[i] = 0
+            row = position[i]
+            a.noise[i, 0] = a.noise[i, row]
+            a.sensor_noise[i, 0] = a.sensor_noise[i, row]
+            position[i] = 0
             if episode.noise_out is not None:
                 episode.noise_rng.standard_normal(out=episode.noise_out)
+            if episode.sensor_out is not None:
+                episode.sensor_rng.standard_normal(out=episode.sensor_out)
 
     # ------------------------------------------------------------------- step
     def step(self, actions: npt.NDArray[np.float64]) -> None:
@@ -267,13 +391,15 @@ class StringBatch:
         Strings whose status is not OK (diverged, or paused by the vector env while it resets
         them) stay where they are.
         """
-        command = self.arrays.command
+        scalars = self.arrays.scalars
         if self.num == 1:
-            command[0] = float(actions[0]) * self._action_gain + self._action_offset
+            scalars[0, F_COMMAND] = float(actions[0]) * self._action_gain + self._action_offset
         else:
-            np.multiply(actions, self._action_gain, out=command)
-            command += self._action_offset
+            scalars[:, F_COMMAND] = actions * self._action_gain + self._action_offset
         self._refill_noise()
+        if self._node_noise:
+            for i in range(self.num):
+                self._draw_node_noise(i)
         if self.compiled or not self.controllers:
             self._advance(self.arrays, self.settings)
         else:
@@ -289,10 +415,11 @@ class StringBatch:
         sums = np.zeros((n, _SUMS.stop))
         for j in range(self.substeps):
             for i in range(n):
-                t = a.step_index[i] * PLANT_DT_S
-                ref = profile_value(a.ref_t[i], a.ref_v[i], a.ref_n[i], t)
-                torque = self.controllers[i].torque(self.measurement(i), ref, PLANT_DT_S)
-                a.base_torque[i] = float(torque) if math.isfinite(float(torque)) else math.nan
+                t = a.ints[i, I_STEP] * PLANT_DT_S
+                prof = a.profiles[i]
+                ref = profile_value(prof[PROF_REF_T], prof[PROF_REF_V], a.ints[i, I_REF_KNOTS], t)
+                torque = float(self.controllers[i].torque(self.measurement(i), ref, PLANT_DT_S))
+                a.scalars[i, F_BASE_TORQUE] = torque if math.isfinite(torque) else math.nan
             self._advance(step_arrays, one_step)
             a.records[:, j] = step_arrays.records[:, 0]
             sums += a.report[:, _SUMS]
@@ -308,7 +435,3 @@ class StringBatch:
     def reward_sums(self) -> npt.NDArray[np.float64]:
         """The last step's reward sums (the report's first columns), (num, 6)."""
         return self.arrays.report[:, _SUMS]
-
-    def steps_taken(self) -> npt.NDArray[np.float64]:
-        """Plant steps taken in the last step by each string, (num,)."""
-        return self.arrays.report[:, REP_STEPS]

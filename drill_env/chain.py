@@ -74,6 +74,9 @@ __all__ = [
     "CP_XI",
     "PlantLike",
     "chain_derivative",
+    "chain_in_bounds",
+    "chain_probe_state",
+    "chain_surface_torque",
     "chain_integrate_constant_torque",
     "chain_parameter_length",
     "chain_parameter_vector",
@@ -404,6 +407,43 @@ def chain_step(x, mode: int, u: float, p, t_a: float, t_0: float, h: float, work
         x[2 * i + 1] = work[_OUT_T, i]
     x[2 * m] = work[_OUT_W, m]
     return new_mode
+
+
+@njit(cache=True)
+def chain_probe_state(x, probes):
+    """The 4-DOF coordinates of the chain state ``x`` at the probe nodes ``probes`` (4 node
+    indices, top to bottom: top drive, pipe, collars, bit; :func:`drill_env.modes.probe_nodes`):
+    ``(w_a, phi_a - phi_b, w_b, phi_b - phi_c, w_c, phi_c - phi_d, w_d)``, rad/s and rad, each
+    twist the sum of the element twists between two probes."""
+    twists = [0.0, 0.0, 0.0]
+    for k in range(3):
+        total = 0.0
+        for e in range(probes[k], probes[k + 1]):
+            total += x[2 * e + 1]
+        twists[k] = total
+    return (
+        x[2 * probes[0]], twists[0], x[2 * probes[1]], twists[1], x[2 * probes[2]],
+        twists[2], x[2 * probes[3]],
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def chain_surface_torque(x, p) -> float:
+    """Torque at the top of the string, N m: the top element's ``k theta + c (w_0 - w_1)``."""
+    n = int(p[CP_N])
+    return p[CHAIN_HEADER + 2 * n] * x[1] + p[CHAIN_HEADER + 3 * n - 1] * (x[0] - x[2])
+
+
+@njit(cache=True)
+def chain_in_bounds(x, n: int, max_speed: float, max_twist: float) -> bool:
+    """Whether every entry of the chain state is finite and within the bounds."""
+    for k in range(2 * n - 1):
+        v = x[k]
+        if not math.isfinite(v):
+            return False
+        if abs(v) > (max_speed if k % 2 == 0 else max_twist):
+            return False
+    return True
 
 
 @njit(cache=True)

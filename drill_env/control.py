@@ -30,6 +30,7 @@ from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
+from drill_env.layout import N_MEASUREMENT
 from drill_env.limits import TorqueLimits
 from drill_env.parameters import DrillStringParameters
 
@@ -102,6 +103,11 @@ class CompiledLaw(NamedTuple):
                 or not array.flags.c_contiguous
             ):
                 raise TypeError(f"{name} must be a C-contiguous float64 array")
+        if state.shape != self.initial_state.shape or measurement.shape != (N_MEASUREMENT,):
+            raise ValueError(
+                f"state must have shape {self.initial_state.shape} and measurement "
+                f"({N_MEASUREMENT},), got {state.shape} and {measurement.shape}"
+            )
         pointer = ctypes.POINTER(ctypes.c_double)
         return float(
             self.function.ctypes(

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, SupportsFloat
+from typing import Any, ClassVar, Final, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
@@ -18,20 +18,77 @@ from drill_env.layout import (
     REP_BASE_TORQUE,
     REP_BIT_SPEED,
     REP_BIT_STUCK,
+    REP_COMMAND,
     REP_LAW_ERROR,
     REP_LAW_GAIN,
     REP_REFERENCE,
     REP_STATUS,
+    REP_SURFACE_TORQUE,
+    REP_TELEMETRY_AGE,
+    REP_TELEMETRY_BIT_SPEED,
     REP_TIME,
     REP_TOP_DRIVE_SPEED,
     REP_TORQUE,
     REP_WOB,
     STATUS_OK,
 )
-from drill_env.options import EnvConfig
+from drill_env.options import EnvConfig, FieldEnvConfig
 from drill_env.rewards import TERMS, reward_terms, total_reward
 
-__all__ = ["DrillStringEnv", "validate_actions"]
+__all__ = ["DrillStringEnv", "DrillStringFieldEnv", "report_info", "validate_actions"]
+
+
+def report_info(report: Any, residual: bool, telemetry: bool) -> dict[str, Any]:
+    """The physical ``info`` values (units in the keys) of one report row (a list of floats,
+    for one env) or of an array of rows (a vector env; the columns are copied).
+
+    Keys: ``time_s``, ``bit_speed_rad_s``, ``top_drive_speed_rad_s``, ``reference_speed_rad_s``,
+    ``top_drive_torque_nm`` (applied, after the actuator), ``torque_command_nm`` (before it),
+    ``surface_torque_nm`` (the measured torque at the top of the string), ``wob_n``,
+    ``bit_stuck``; in residual mode also ``base_torque_nm``, ``sliding_variable_rad_s`` (the
+    base controller's error signal) and ``adaptive_gain``; with telemetry also
+    ``telemetry_bit_speed_rad_s`` and ``telemetry_age_s`` (NaN before the first value).
+    """
+    if isinstance(report, np.ndarray):
+        r = report
+        info: dict[str, Any] = {key: r[:, index].copy() for key, index in _INFO_COLUMNS}
+        info["bit_stuck"] = r[:, REP_BIT_STUCK] > 0.5
+        columns = [
+            *(_RESIDUAL_COLUMNS if residual else ()),
+            *(_TELEMETRY_COLUMNS if telemetry else ()),
+        ]
+        info.update({key: r[:, index].copy() for key, index in columns})
+        return info
+    info = {key: report[index] for key, index in _INFO_COLUMNS}
+    info["bit_stuck"] = report[REP_BIT_STUCK] > 0.5
+    if residual:
+        for key, index in _RESIDUAL_COLUMNS:
+            info[key] = report[index]
+    if telemetry:
+        for key, index in _TELEMETRY_COLUMNS:
+            info[key] = report[index]
+    return info
+
+
+_INFO_COLUMNS: Final = (
+    ("time_s", REP_TIME),
+    ("bit_speed_rad_s", REP_BIT_SPEED),
+    ("top_drive_speed_rad_s", REP_TOP_DRIVE_SPEED),
+    ("reference_speed_rad_s", REP_REFERENCE),
+    ("top_drive_torque_nm", REP_TORQUE),
+    ("torque_command_nm", REP_COMMAND),
+    ("surface_torque_nm", REP_SURFACE_TORQUE),
+    ("wob_n", REP_WOB),
+)
+_RESIDUAL_COLUMNS: Final = (
+    ("base_torque_nm", REP_BASE_TORQUE),
+    ("sliding_variable_rad_s", REP_LAW_ERROR),
+    ("adaptive_gain", REP_LAW_GAIN),
+)
+_TELEMETRY_COLUMNS: Final = (
+    ("telemetry_bit_speed_rad_s", REP_TELEMETRY_BIT_SPEED),
+    ("telemetry_age_s", REP_TELEMETRY_AGE),
+)
 
 
 def validate_actions(
@@ -182,9 +239,12 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         "render_fps": 20,  # one frame per decision at the default control_dt_s = 0.05 s
     }
 
+    config_type: ClassVar[type[EnvConfig]] = EnvConfig
+    """The keywords this env takes."""
+
     def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
         self._spec: EnvSpec | None = None
-        self.config = EnvConfig.from_kwargs(kwargs)
+        self.config = self.config_type.from_kwargs(kwargs)
         self._batch = StringBatch(self.config, 1)
         size = self._batch.obs_size
         self.observation_space = gym.spaces.Box(-OBS_BOUND, OBS_BOUND, (size,), np.float32)
@@ -263,7 +323,7 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         terms = reward_terms(report, weights, self.config.max_torque_nm, self._residual_scale)
         terminated = report[REP_STATUS] != STATUS_OK
         reward = -1.0 if terminated else total_reward(terms, weights)
-        truncated = not terminated and report[REP_TIME] >= episode.config.duration_s
+        truncated = not terminated and report[REP_TIME] >= episode.duration_s
         info = self._info(terms, report)
         info["action_clipped"] = was_clipped
         if terminated:
@@ -308,21 +368,92 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         b = self._batch
         episode = b.episodes[0]
         assert episode is not None
-        info: dict[str, Any] = {
-            "time_s": report[REP_TIME],
-            "bit_speed_rad_s": report[REP_BIT_SPEED],
-            "top_drive_speed_rad_s": report[REP_TOP_DRIVE_SPEED],
-            "reference_speed_rad_s": report[REP_REFERENCE],
-            "top_drive_torque_nm": report[REP_TORQUE],
-            "wob_n": report[REP_WOB],
-            "bit_stuck": report[REP_BIT_STUCK] > 0.5,
-            "reward_terms": terms,
-            "action_clipped": False,
-            "actions_clipped_total": episode.actions_clipped,
-        }
+        info = report_info(report, b.residual, self.config.telemetry)
+        info["reward_terms"] = terms
+        info["action_clipped"] = False
+        info["actions_clipped_total"] = episode.actions_clipped
         if b.residual:
-            info["base_torque_nm"] = report[REP_BASE_TORQUE]
             info["residual_torque_nm"] = float(b.command[0])
-            info["sliding_variable_rad_s"] = report[REP_LAW_ERROR]
-            info["adaptive_gain"] = report[REP_LAW_GAIN]
         return info
+
+
+class DrillStringFieldEnv(DrillStringEnv):
+    """Torsional stick-slip control of a field-length drill string, as a rig sees it.
+
+    ## Description
+    The plant is a distributed string built from its geometry (docs/specification.md section
+    17): 1-6 km of drill pipe and a BHA discretised into elements of about 25 m, so the
+    torsional waves that travel between the top drive and the bit, the string's own stick-slip
+    period and the delay between surface and bit all follow from its length. The bit rubs on
+    rock with the same Karnopp friction as the 4-DOF plant of ``DrillString-v0``. By default
+    the controller sees what a rig measures: the top-drive speed and the surface torque (100 Hz,
+    with noise), the bit speed by mud-pulse telemetry (one value every 5 s, 5 s late), and acts
+    through a top drive with dead time, torque lag and a torque rate limit. Everything else is
+    the contract of ``DrillString-v0``: actions, residual mode, rewards, ``info``, bad input,
+    determinism, the native vector env.
+
+    ## Action Space
+    ``Box(-1, 1, (1,), float32)`` as in ``DrillString-v0``; the torque range is that of the top
+    drive (0 to 50.8 kN m by default).
+
+    ## Observation Space
+    ``Box(-50, 50, (n,), float32)``. ``observation="surface"`` (default): measured top-drive
+    speed (20 rad/s), measured surface torque (the torque scale), reference bit speed
+    (20 rad/s), last applied torque, then with telemetry the last bit speed received (20 rad/s;
+    0 before the first) and its age (10 s), then in residual mode the base controller's torque
+    and error signal. ``observation="state"``: the whole measured state instead of the first
+    two, node speeds (20 rad/s, noisy) and element twists (1 rad) from the top drive down,
+    padded with zeros to the deepest string the env can draw.
+
+    ## Rewards
+    Those of ``DrillString-v0`` (``drill_env.rewards``).
+
+    ## Starting State
+    At rest, bit stuck. With ``randomize=True`` each reset draws (``FieldRandomization``) the
+    WOB (50-200 kN, a 50 % chance of one step to another layer at 20-80 % of the episode), the
+    reference speed (40-160 rpm), the measured depth (1,000-5,000 m: the drill pipe's length),
+    the friction (``mu_a`` 0.6-1.0, ``mu_0 / mu_a`` 0.5-0.8, ``xi`` 0.3-1.0 s/rad) and the mud
+    damping (0.5-2 times nominal). The controllers' model of the string is the nominal string
+    at the drawn depth (the geometry is known on a rig; friction and damping are not).
+
+    ## Episode End
+    As ``DrillString-v0``.
+
+    ## Arguments
+    Those of ``DrillString-v0`` except ``uncertainty`` and ``uncertainty_reading``, with other
+    defaults, and:
+
+    | keyword | meaning | default |
+    |---|---|---|
+    | ``parameters`` | distributed preset (``field_2500m``, ``deep_5000m``) or parameters | ``field_2500m`` |
+    | ``measured_depth_m`` | change the string's depth (drill pipe length), m | the preset's |
+    | ``controller_parameters`` | the controllers' model of the string | the plant's |
+    | ``observation`` | ``"surface"`` or ``"state"`` | ``"surface"`` |
+    | ``noise_std_rad_s`` | noise of the measured speeds, rad/s | 0.05 |
+    | ``torque_noise_std_nm`` | noise of the measured surface torque, N m | 250 |
+    | ``sensor_period_s`` | sampling period of the surface signals, s | 0.01 |
+    | ``telemetry_period_s`` | bit-speed telemetry period, s (``None``: no downhole data) | 5 |
+    | ``telemetry_delay_s`` | telemetry delay, s | 5 |
+    | ``telemetry_noise_std_rad_s`` | telemetry noise, rad/s | 0.1 |
+    | ``actuator_dead_time_s`` | top-drive dead time, s | 0.02 |
+    | ``actuator_lag_s`` | first-order torque lag, s | 0.02 |
+    | ``torque_rate_limit_nm_per_s`` | torque rate limit, N m/s (``None``: none) | 100,000 |
+    | ``max_torque_nm`` | top-drive torque limit, N m | 50,800 |
+    | ``randomization`` | ``FieldRandomization`` ranges | see Starting State |
+
+    ## Info
+    That of ``DrillString-v0``; ``bit_speed_rad_s`` and ``top_drive_speed_rad_s`` are the true
+    speeds of the bit and top-drive nodes, plus ``telemetry_bit_speed_rad_s`` and
+    ``telemetry_age_s`` when telemetry is on.
+
+    ## Version History
+    * v0: initial version.
+
+    ## Example
+    >>> import gymnasium as gym, drill_env
+    >>> env = gym.make("DrillStringField-v0", randomize=False, base_controller="soft_speed")
+    >>> obs, info = env.reset(seed=0)
+    >>> obs, reward, terminated, truncated, info = env.step(env.action_space.sample() * 0)
+    """
+
+    config_type: ClassVar[type[EnvConfig]] = FieldEnvConfig

@@ -1,19 +1,26 @@
 """The compiled closed-loop engine: a batch of strings, their exogenous signals, measurement
-noise and an in-loop controller, advanced by many plant steps in one call.
+channel, in-loop controller and actuator, advanced by many plant steps in one call.
 
+Two loops share every step but the physics: :func:`advance_batch` for the 4-DOF plant (its
+state travels as a tuple of floats, in registers) and :func:`advance_chain_batch` for a
+distributed string (an array state advanced in place by :func:`drill_env.chain.chain_step`).
 Per plant step ``j`` of string ``i`` (time ``t_j = step_index * dt``):
 
 1. WOB and reference speed are read from piecewise-linear knot tables (a repeated knot time
    makes a step change);
-2. the measurement vector (``drill_env.layout.M_*``) is the true state plus
-   ``noise_std * noise[i, j]`` on the four speeds;
+2. the measurement channel (:mod:`drill_env.sensors`) samples the surface signals and the
+   downhole telemetry and fills the measurement vector (``drill_env.layout.M_*``): in
+   ``state`` mode the true 4-DOF state (a distributed string's at its probe nodes) plus
+   ``noise_std * noise[i, j]`` on the four speeds; NaN there in ``surface`` mode;
 3. the base torque ``u_base`` comes from the compiled law at ``law_address``
    (:mod:`drill_env.control`), or from ``base_torque[i]`` when there is none (0 N m without a
    base controller; a Python controller's torque on the slow path);
-4. the applied torque is ``clip(u_base + command[i], u_min, u_max)`` held over the step;
-5. the pre-step state, torques, reference, WOB, stuck flag and the law's error signal and
-   adaptive gain are written to ``records``, the reward sums and end state to ``report``;
-6. :func:`drill_env.integration.plant_step` advances the state.
+4. the command ``clip(u_base + command[i], u_min, u_max)`` passes through the actuator
+   (:mod:`drill_env.actuator`; the identity when ideal) to the applied torque, held over the
+   step;
+5. the pre-step (4-DOF) state, torques, reference, WOB, stuck flag and the law's error signal
+   and adaptive gain are written to ``records``, the reward sums and end state to ``report``;
+6. the plant advances one step.
 
 A state that is not finite or leaves the physical bounds (``drill_env.limits``) is not
 accepted: the string keeps its last good state, its status becomes ``STATUS_DIVERGED`` and it
@@ -36,28 +43,70 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit, prange
 
+from drill_env.actuator import actuator_step
+from drill_env.chain import (
+    CP_MU_0,
+    CP_MU_A,
+    CP_N,
+    CP_R,
+    chain_in_bounds,
+    chain_probe_state,
+    chain_step,
+    chain_surface_torque,
+)
 from drill_env.control import call_law
 from drill_env.friction import STUCK
 from drill_env.integration import plant_step
 from drill_env.layout import (
+    CH_ACTUATOR,
+    CH_HOLD,
+    CH_TELEMETRY,
+    F_BASE_TORQUE,
+    F_COMMAND,
+    F_LAST_COMMAND,
+    F_LAST_TORQUE,
+    F_NOISE_STD,
+    F_TELEMETRY_NOISE_STD,
+    F_TORQUE_NOISE_STD,
+    I_MODE,
+    I_NOISE_POS,
+    I_REF_KNOTS,
+    I_STATUS,
+    I_STEP,
+    I_WOB_KNOTS,
+    M_APPLIED_TORQUE,
     M_STATE,
+    M_SURFACE_TORQUE,
+    M_TELEMETRY_AGE,
+    M_TELEMETRY_BIT_SPEED,
+    M_TOP_DRIVE_SPEED,
+    N_CHANNEL,
     N_RECORD,
     N_STATE,
     OBS_BOUND,
+    P_C_PI,
+    P_K_PI,
     P_MU_0,
     P_MU_A,
     P_R,
+    PROF_REF_T,
+    PROF_REF_V,
+    PROF_WOB_T,
+    PROF_WOB_V,
     REC_BASE_TORQUE,
+    REC_COMMAND,
     REC_LAW_ERROR,
     REC_LAW_GAIN,
     REC_REFERENCE,
     REC_STUCK,
+    REC_SURFACE_TORQUE,
     REC_TORQUE,
     REC_WOB,
     REC_X0,
     REP_BASE_TORQUE,
     REP_BIT_SPEED,
     REP_BIT_STUCK,
+    REP_COMMAND,
     REP_LAW_ERROR,
     REP_LAW_GAIN,
     REP_REFERENCE,
@@ -65,6 +114,9 @@ from drill_env.layout import (
     REP_STATUS,
     REP_STEPS,
     REP_STUCK_STEPS,
+    REP_SURFACE_TORQUE,
+    REP_TELEMETRY_AGE,
+    REP_TELEMETRY_BIT_SPEED,
     REP_TIME,
     REP_TOP_DRIVE_SPEED,
     REP_TORQUE,
@@ -73,10 +125,15 @@ from drill_env.layout import (
     REP_VARIATION,
     REP_WOB,
     SRC_BASE_TORQUE,
+    SRC_LAST_COMMAND,
     SRC_LAST_TORQUE,
     SRC_LAW_ERROR,
-    SRC_MEASUREMENT,
     SRC_REFERENCE,
+    SRC_STATE,
+    SRC_SURFACE_TORQUE,
+    SRC_TELEMETRY_AGE,
+    SRC_TELEMETRY_BIT_SPEED,
+    SRC_TOP_DRIVE_SPEED,
     STATUS_DIVERGED,
     STATUS_OK,
     X_BIT_SPEED,
@@ -85,14 +142,24 @@ from drill_env.layout import (
 from drill_env.limits import MAX_SPEED_RAD_S, MAX_TWIST_RAD
 from drill_env.rewards import tracking_error
 from drill_env.scenarios import profile_value
+from drill_env.sensors import (
+    HOLD_SPEED,
+    HOLD_TORQUE,
+    sense_surface,
+    sense_telemetry,
+    telemetry_reading,
+)
 
 __all__ = [
     "BatchArrays",
     "LoopSettings",
     "advance_batch",
     "advance_batch_parallel",
+    "advance_chain_batch",
+    "advance_chain_batch_parallel",
     "fast_entry",
-    "fill_sources",
+    "measure",
+    "observe",
     "write_observation",
     "write_report",
 ]
@@ -100,54 +167,59 @@ __all__ = [
 
 class BatchArrays(NamedTuple):
     """The per-string arrays of a batch of N strings (K profile knots, B noise rows); the
-    kernel updates them in place.
+    kernel updates them in place. Columns are named in :mod:`drill_env.layout`.
 
     Attributes:
-        x: States, (N, 7) float64, rad/s and rad.
-        mode: Slip modes, (N,) int64 (0 stuck, +1/-1 slipping).
-        step_index: Plant steps taken so far, (N,) int64; time is ``step_index * dt``.
-        status: (N,) int64 ``STATUS_*``; strings not OK at the start are not advanced
+        x: States, (N, NX) float64, rad/s and rad: the 4-DOF state (NX = 7) or a distributed
+            string's node speeds and element twists (NX = 2 n_max - 1, zero-padded).
+        x_backup: Scratch, (N, NX): a distributed string's state before the step.
+        ints: Counters, (N, N_INTS) int64 (``I_*``: slip mode, plant steps taken, status,
+            noise row, profile knot counts); strings not OK at the start are not advanced
             (records NaN, reward sums 0).
-        plant: Plant parameter vectors, (N, N_PLANT_PARAMS).
-        wob_t, wob_v, wob_n: WOB knot times (s), values (N) and counts, (N, K), (N, K), (N,).
-        ref_t, ref_v, ref_n: Reference-speed knots (s, rad/s), same shapes.
-        noise: Standard normal draws, (N, B, 4), B > noise_pos + n_sub: row noise_pos + j is
-            the speed noise at step j, row noise_pos + n_sub that of the final measurement
-            (which is also the next call's first step: the same instant).
-        noise_pos: (N,) int64, the row of the current measurement; advanced by n_sub.
-        noise_std: Measurement noise on the speeds, (N,), rad/s.
+        scalars: Per-string numbers, (N, N_SCALARS) (``F_*``: noise levels, the agent's
+            command, the external base torque, the last applied torque and command).
+        plant: Plant parameter vectors, (N, P): the 4-DOF vector (``P_*``) or the chain vector
+            of :func:`drill_env.chain.chain_parameter_vector`, zero-padded.
+        work: Scratch of :func:`drill_env.chain.chain_step`, (N, CHAIN_WORK_ROWS, n_max).
+        probes: The nodes read as the 4-DOF coordinates, (N, 4) int64
+            (:func:`drill_env.modes.probe_nodes`; 0..3 for the 4-DOF plant).
+        profiles: WOB and reference knots, (N, N_PROFILES, K) (``PROF_*``; s, N, rad/s).
+        noise: Standard normal draws, (N, B, 4), B > noise row + n_sub: row r + j is the speed
+            noise at step j, row r + n_sub that of the final measurement (which is also the next
+            call's first step: the same instant).
+        sensor_noise: Standard normal draws for the surface torque and the telemetry, (N, B, 2),
+            the same rows.
+        node_noise: Standard normal draws of a distributed string's node-speed noise at the end
+            of the call (``state`` observation), (N, n_max).
         law_params, law_state: (N, P) and (N, S) vectors of the compiled law.
         measurement: Scratch, (N, N_MEASUREMENT): the measurement vector the law reads.
-        command: Torque added to the base torque (the whole torque without one), (N,), N m.
-        base_torque: The base torque when there is no compiled law, (N,), N m.
-        last_u: Torque applied in the step before this call, (N,), N m; updated.
+        channel: Measurement channel and actuator states, (N, N_CHANNEL) (``CH_*``).
+        delay_line: The actuator's dead-time lines, (N, dead_steps + 1), N m.
+        telemetry_buffer: Telemetry samples in flight, (N, capacity, 2).
         records: Output, (N, n_sub, N_RECORD): the pre-step record of every plant step (NaN
             for steps not taken).
         report: Output, (N, N_REPORT): the reward sums of this call and the end state.
-        sources: Scratch, (N, N_SOURCES): what the observation entries show.
+        sources: Scratch, (N, N_FIXED_SOURCES + NX): what the observation entries show.
         obs: Output, (N, obs_size) float32: the observation at the end.
     """
 
     x: npt.NDArray[np.float64]
-    mode: npt.NDArray[np.int64]
-    step_index: npt.NDArray[np.int64]
-    status: npt.NDArray[np.int64]
+    x_backup: npt.NDArray[np.float64]
+    ints: npt.NDArray[np.int64]
+    scalars: npt.NDArray[np.float64]
     plant: npt.NDArray[np.float64]
-    wob_t: npt.NDArray[np.float64]
-    wob_v: npt.NDArray[np.float64]
-    wob_n: npt.NDArray[np.int64]
-    ref_t: npt.NDArray[np.float64]
-    ref_v: npt.NDArray[np.float64]
-    ref_n: npt.NDArray[np.int64]
+    work: npt.NDArray[np.float64]
+    probes: npt.NDArray[np.int64]
+    profiles: npt.NDArray[np.float64]
     noise: npt.NDArray[np.float64]
-    noise_pos: npt.NDArray[np.int64]
-    noise_std: npt.NDArray[np.float64]
+    sensor_noise: npt.NDArray[np.float64]
+    node_noise: npt.NDArray[np.float64]
     law_params: npt.NDArray[np.float64]
     law_state: npt.NDArray[np.float64]
     measurement: npt.NDArray[np.float64]
-    command: npt.NDArray[np.float64]
-    base_torque: npt.NDArray[np.float64]
-    last_u: npt.NDArray[np.float64]
+    channel: npt.NDArray[np.float64]
+    delay_line: npt.NDArray[np.float64]
+    telemetry_buffer: npt.NDArray[np.float64]
     records: npt.NDArray[np.float64]
     report: npt.NDArray[np.float64]
     sources: npt.NDArray[np.float64]
@@ -167,6 +239,14 @@ class LoopSettings(NamedTuple):
         dt: Plant step, s.
         obs_source: Source-vector entry of each observation entry, (obs_size,) int64.
         obs_scale: Factor of each observation entry, (obs_size,).
+        state_mode: Whether the law measures the state (``state`` observation mode).
+        sensor_steps: Plant steps between two surface samples (1: every step).
+        telemetry_period: Plant steps between two telemetry samples (0: no telemetry).
+        telemetry_delay: Plant steps from a telemetry sample to its delivery.
+        ideal_actuator: No dead time, lag or rate limit: the applied torque is the command.
+        lag: The actuator's lag factor (:func:`drill_env.actuator.lag_factor`).
+        rate_step: Largest change of the applied torque per step, N m (``inf``: none).
+        chain: Whether the strings are distributed (:func:`advance_chain_batch`).
     """
 
     law_address: int
@@ -178,6 +258,14 @@ class LoopSettings(NamedTuple):
     dt: float
     obs_source: npt.NDArray[np.int64]
     obs_scale: npt.NDArray[np.float64]
+    state_mode: bool
+    sensor_steps: int
+    telemetry_period: int
+    telemetry_delay: int
+    ideal_actuator: bool
+    lag: float
+    rate_step: float
+    chain: bool
 
 
 @njit(cache=True)
@@ -192,41 +280,167 @@ def _in_bounds(x) -> bool:
     return True
 
 
-@njit(cache=True)
-def _measure(out, x, noise_std: float, noise_row) -> None:
-    """The measurement vector: speeds with their noise, twists exact."""
-    out[M_STATE] = x[0] + noise_std * noise_row[0]
-    out[M_STATE + 1] = x[1]
-    out[M_STATE + 2] = x[2] + noise_std * noise_row[1]
-    out[M_STATE + 3] = x[3]
-    out[M_STATE + 4] = x[4] + noise_std * noise_row[2]
-    out[M_STATE + 5] = x[5]
-    out[M_STATE + 6] = x[6] + noise_std * noise_row[3]
-
-
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _slot(ls, slot: int) -> float:
     return ls[slot] if slot >= 0 else 0.0
 
 
+@njit(cache=True, inline="always")
+def _sense(meas, hold, tel, tel_buf, s, k, x, surface, std, torque_std, tel_std, applied,
+           noise, sensor, r) -> None:  # fmt: skip
+    """The measurement channel at plant step ``k`` of a string whose 4-DOF (probe) state is
+    ``x`` and top torque ``surface``: sample the surface signals and the telemetry, then fill
+    the measurement vector ``meas``. ``noise``, ``sensor``: the string's noise blocks, ``r``
+    the row of this instant. (Every array is a row of the batch, taken once per call: a view
+    made at every step costs a reference count.)"""
+    top_speed = x[0] + std * noise[r, 0]
+    if sense_surface(hold, k, s.sensor_steps, top_speed, surface + torque_std * sensor[r, 0]):
+        bit = x[X_BIT_SPEED] + tel_std * sensor[r, 1]
+        sense_telemetry(tel, tel_buf, k, s.telemetry_period, s.telemetry_delay, bit)
+    if s.state_mode:
+        meas[M_STATE] = top_speed
+        meas[M_STATE + 1] = x[1]
+        meas[M_STATE + 2] = x[2] + std * noise[r, 1]
+        meas[M_STATE + 3] = x[3]
+        meas[M_STATE + 4] = x[4] + std * noise[r, 2]
+        meas[M_STATE + 5] = x[5]
+        meas[M_STATE + 6] = x[6] + std * noise[r, 3]
+    else:
+        for c in range(N_STATE):
+            meas[M_STATE + c] = math.nan
+    meas[M_TOP_DRIVE_SPEED] = hold[HOLD_SPEED]
+    meas[M_SURFACE_TORQUE] = hold[HOLD_TORQUE]
+    value, age = telemetry_reading(tel, k, s.dt)
+    meas[M_TELEMETRY_BIT_SPEED] = value
+    meas[M_TELEMETRY_AGE] = age
+    meas[M_APPLIED_TORQUE] = applied
+
+
+@njit(cache=True, inline="always")
+def _command_and_torque(s, act, line, u_base: float, command: float):
+    """The clipped command and the torque the actuator applies over this step, N m."""
+    u_command = min(max(u_base + command, s.u_min), s.u_max)
+    if s.ideal_actuator:
+        return u_command, u_command
+    applied = actuator_step(act, line, u_command, s.lag, s.rate_step, s.u_min, s.u_max)
+    return u_command, applied
+
+
+@njit(cache=True, inline="always")
+def _base_torque(s, lp, ls, meas, external: float, ref: float) -> float:
+    if s.law_address != 0:
+        value: float = call_law(s.law_address, lp, ls, meas, ref, s.dt)  # type: ignore[call-arg]
+        return value
+    return external
+
+
+@njit(cache=True, inline="always")
+def _record(rec, j, x, mi, u, u_command, ref, u_base, wob, error, gain, surface) -> None:
+    for c in range(N_STATE):
+        rec[j, REC_X0 + c] = x[c]
+    rec[j, REC_TORQUE] = u
+    rec[j, REC_REFERENCE] = ref
+    rec[j, REC_BASE_TORQUE] = u_base
+    rec[j, REC_STUCK] = 1.0 if mi == STUCK else 0.0
+    rec[j, REC_WOB] = wob
+    rec[j, REC_LAW_ERROR] = error
+    rec[j, REC_LAW_GAIN] = gain
+    rec[j, REC_COMMAND] = u_command
+    rec[j, REC_SURFACE_TORQUE] = surface
+
+
+@njit(cache=True, inline="always")
+def _sums(rep, tracking, variation, stuck, n_done, torque_squared, residual_squared) -> None:
+    rep[REP_TRACKING_SUM] = tracking
+    rep[REP_VARIATION] = variation
+    rep[REP_STUCK_STEPS] = stuck
+    rep[REP_STEPS] = n_done
+    rep[REP_TORQUE_SQUARED] = torque_squared
+    rep[REP_RESIDUAL_SQUARED] = residual_squared
+
+
+@njit(cache=True)
+def _sense_string(i, b, s, k, x, surface, r) -> None:
+    """:func:`_sense` for string ``i`` of the batch (outside the per-step loops)."""
+    f = b.scalars[i]
+    ch = b.channel[i]
+    _sense(
+        b.measurement[i], ch[CH_HOLD:CH_TELEMETRY], ch[CH_TELEMETRY:CH_ACTUATOR],
+        b.telemetry_buffer[i], s, k, x, surface, f[F_NOISE_STD], f[F_TORQUE_NOISE_STD],
+        f[F_TELEMETRY_NOISE_STD], f[F_LAST_TORQUE], b.noise[i], b.sensor_noise[i], r,
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def _finish(i, b, s, x, mi, k, wob, u_base_last, command_last) -> None:
+    """The end of a call for string ``i``: the observation and the report at step ``k``."""
+    ls = b.law_state[i]
+    prof = b.profiles[i]
+    ints = b.ints[i]
+    last_u = b.scalars[i, F_LAST_TORQUE]
+    ref_end = profile_value(prof[PROF_REF_T], prof[PROF_REF_V], ints[I_REF_KNOTS], k * s.dt)
+    error = _slot(ls, s.error_slot)
+    src = b.sources[i]
+    meas = b.measurement[i]
+    src[SRC_REFERENCE] = ref_end
+    src[SRC_LAST_TORQUE] = last_u
+    src[SRC_BASE_TORQUE] = u_base_last
+    src[SRC_LAW_ERROR] = error
+    src[SRC_TOP_DRIVE_SPEED] = meas[M_TOP_DRIVE_SPEED]
+    src[SRC_SURFACE_TORQUE] = meas[M_SURFACE_TORQUE]
+    value, age = meas[M_TELEMETRY_BIT_SPEED], meas[M_TELEMETRY_AGE]
+    src[SRC_TELEMETRY_BIT_SPEED] = 0.0 if math.isnan(value) else value
+    src[SRC_TELEMETRY_AGE] = k * s.dt if math.isnan(age) else age
+    src[SRC_LAST_COMMAND] = command_last
+    write_observation(b.obs[i], src, s.obs_source, s.obs_scale)
+    rep = b.report[i]
+    write_report(
+        rep, x, mi, k * s.dt, ref_end, last_u, wob, u_base_last, error,
+        _slot(ls, s.gain_slot), ints[I_STATUS],
+    )  # fmt: skip
+    rep[REP_COMMAND] = command_last
+    rep[REP_SURFACE_TORQUE] = meas[M_SURFACE_TORQUE]
+    rep[REP_TELEMETRY_BIT_SPEED] = value
+    rep[REP_TELEMETRY_AGE] = age
+
+
 @njit(cache=True)
 def _advance_one(i, b, s):
+    """One string of the 4-DOF plant (its state a tuple of floats)."""
     p = b.plant[i]
     xs = b.x[i]
     xi = (xs[0], xs[1], xs[2], xs[3], xs[4], xs[5], xs[6])
-    mi = b.mode[i]
+    ints = b.ints[i]
+    f = b.scalars[i]
+    ch = b.channel[i]
+    prof = b.profiles[i]
+    mi = ints[I_MODE]
     lp = b.law_params[i]
     ls = b.law_state[i]
-    meas = b.measurement[i]
     rep = b.report[i]
+    rec = b.records[i]
+    meas = b.measurement[i]
+    hold = ch[CH_HOLD:CH_TELEMETRY]
+    tel = ch[CH_TELEMETRY:CH_ACTUATOR]
+    tel_buf = b.telemetry_buffer[i]
+    act = ch[CH_ACTUATOR:N_CHANNEL]
+    line = b.delay_line[i]
+    noise = b.noise[i]
+    sensor = b.sensor_noise[i]
+    wob_t, wob_v, wob_n = prof[PROF_WOB_T], prof[PROF_WOB_V], ints[I_WOB_KNOTS]
+    ref_t, ref_v, ref_n = prof[PROF_REF_T], prof[PROF_REF_V], ints[I_REF_KNOTS]
+    std, torque_std, tel_std = f[F_NOISE_STD], f[F_TORQUE_NOISE_STD], f[F_TELEMETRY_NOISE_STD]
+    command = f[F_COMMAND]
+    external = f[F_BASE_TORQUE]
     mu_a_r = p[P_MU_A] * p[P_R]
     mu_0_r = p[P_MU_0] * p[P_R]
-    k = b.step_index[i]
-    row = b.noise_pos[i]
-    active = b.status[i] == STATUS_OK
-    command = b.command[i]
-    u_prev = b.last_u[i]
+    k = ints[I_STEP]
+    row = ints[I_NOISE_POS]
+    active = ints[I_STATUS] == STATUS_OK
+    ok = active
+    u_prev = f[F_LAST_TORQUE]
     u_base_last = rep[REP_BASE_TORQUE]
+    command_last = f[F_LAST_COMMAND]
     wob = rep[REP_WOB]
     tracking = 0.0
     variation = 0.0
@@ -235,37 +449,28 @@ def _advance_one(i, b, s):
     stuck = 0.0
     n_done = 0
     for j in range(s.n_sub):
-        if b.status[i] != STATUS_OK:
+        if not ok:
             for c in range(N_RECORD):
-                b.records[i, j, c] = math.nan
+                rec[j, c] = math.nan
             continue
         t = k * s.dt
-        wob = profile_value(b.wob_t[i], b.wob_v[i], b.wob_n[i], t)
-        ref = profile_value(b.ref_t[i], b.ref_v[i], b.ref_n[i], t)
-        _measure(meas, xi, b.noise_std[i], b.noise[i, row + j])
+        wob = profile_value(wob_t, wob_v, wob_n, t)
+        ref = profile_value(ref_t, ref_v, ref_n, t)
+        surface = p[P_K_PI] * xi[1] + p[P_C_PI] * (xi[0] - xi[2])
+        _sense(meas, hold, tel, tel_buf, s, k, xi, surface, std, torque_std, tel_std, u_prev,
+               noise, sensor, row + j)  # fmt: skip
         gain = _slot(ls, s.gain_slot)  # the gain this step's torque uses (the law advances it)
-        u_base: float
-        if s.law_address != 0:
-            u_base = call_law(s.law_address, lp, ls, meas, ref, s.dt)  # type: ignore[call-arg]
-        else:
-            u_base = b.base_torque[i]
-        u = min(max(u_base + command, s.u_min), s.u_max)
-        rec = b.records[i, j]
-        for c in range(N_STATE):
-            rec[REC_X0 + c] = xi[c]
-        rec[REC_TORQUE] = u
-        rec[REC_REFERENCE] = ref
-        rec[REC_BASE_TORQUE] = u_base
-        rec[REC_STUCK] = 1.0 if mi == STUCK else 0.0
-        rec[REC_WOB] = wob
-        rec[REC_LAW_ERROR] = _slot(ls, s.error_slot)
-        rec[REC_LAW_GAIN] = gain
+        u_base = _base_torque(s, lp, ls, meas, external, ref)
+        u_command, u = _command_and_torque(s, act, line, u_base, command)
+        _record(rec, j, xi, mi, u, u_command, ref, u_base, wob, _slot(ls, s.error_slot), gain,
+                surface)  # fmt: skip
         tracking += tracking_error(ref, xi[X_BIT_SPEED])
         variation += abs(u - u_prev)
         torque_squared += u * u
         residual_squared += (u - u_base) * (u - u_base)
         u_prev = u
         u_base_last = u_base
+        command_last = u_command
         if mi == STUCK:
             stuck += 1.0
         n_done += 1
@@ -274,31 +479,172 @@ def _advance_one(i, b, s):
             xi, mi = xn, mn
             k += 1
         else:
-            b.status[i] = STATUS_DIVERGED
-    rep[REP_TRACKING_SUM] = tracking
-    rep[REP_VARIATION] = variation
-    rep[REP_STUCK_STEPS] = stuck
-    rep[REP_STEPS] = n_done
-    rep[REP_TORQUE_SQUARED] = torque_squared
-    rep[REP_RESIDUAL_SQUARED] = residual_squared
+            ok = False
+            ints[I_STATUS] = STATUS_DIVERGED
+    _sums(rep, tracking, variation, stuck, n_done, torque_squared, residual_squared)
     if not active:
         return
     for c in range(N_STATE):
         xs[c] = xi[c]
-    b.mode[i] = mi
-    b.step_index[i] = k
-    b.last_u[i] = u_prev
+    ints[I_MODE] = mi
+    ints[I_STEP] = k
+    f[F_LAST_TORQUE] = u_prev
+    f[F_LAST_COMMAND] = command_last
     row += s.n_sub
-    b.noise_pos[i] = row
-    ref_end = profile_value(b.ref_t[i], b.ref_v[i], b.ref_n[i], k * s.dt)
-    _measure(meas, xi, b.noise_std[i], b.noise[i, row])
-    error = _slot(ls, s.error_slot)
-    fill_sources(b.sources[i], meas, ref_end, u_prev, u_base_last, error)
-    write_observation(b.obs[i], b.sources[i], s.obs_source, s.obs_scale)
-    write_report(
-        rep, xi, mi, k * s.dt, ref_end, u_prev, wob, u_base_last, error,
-        _slot(ls, s.gain_slot), b.status[i],
-    )  # fmt: skip
+    ints[I_NOISE_POS] = row
+    surface = p[P_K_PI] * xi[1] + p[P_C_PI] * (xi[0] - xi[2])
+    _sense(meas, hold, tel, tel_buf, s, k, xi, surface, std, torque_std, tel_std, u_prev,
+           noise, sensor, row)  # fmt: skip
+    src = b.sources[i]
+    for c in range(N_STATE):  # the measured state: speeds with their noise, twists exact
+        src[SRC_STATE + c] = xi[c] + std * noise[row, c // 2] if c % 2 == 0 else xi[c]
+    _finish(i, b, s, xi, mi, k, wob, u_base_last, command_last)
+
+
+@njit(cache=True)
+def _advance_chain_one(i, b, s):
+    """One distributed string (its state an array advanced in place)."""
+    p = b.plant[i]
+    xs = b.x[i]
+    backup = b.x_backup[i]
+    work = b.work[i]
+    probes = b.probes[i]
+    n = int(p[CP_N])
+    size = 2 * n - 1
+    ints = b.ints[i]
+    f = b.scalars[i]
+    ch = b.channel[i]
+    prof = b.profiles[i]
+    mi = ints[I_MODE]
+    lp = b.law_params[i]
+    ls = b.law_state[i]
+    rep = b.report[i]
+    rec = b.records[i]
+    meas = b.measurement[i]
+    hold = ch[CH_HOLD:CH_TELEMETRY]
+    tel = ch[CH_TELEMETRY:CH_ACTUATOR]
+    tel_buf = b.telemetry_buffer[i]
+    act = ch[CH_ACTUATOR:N_CHANNEL]
+    line = b.delay_line[i]
+    noise = b.noise[i]
+    sensor = b.sensor_noise[i]
+    wob_t, wob_v, wob_n = prof[PROF_WOB_T], prof[PROF_WOB_V], ints[I_WOB_KNOTS]
+    ref_t, ref_v, ref_n = prof[PROF_REF_T], prof[PROF_REF_V], ints[I_REF_KNOTS]
+    std, torque_std, tel_std = f[F_NOISE_STD], f[F_TORQUE_NOISE_STD], f[F_TELEMETRY_NOISE_STD]
+    command = f[F_COMMAND]
+    external = f[F_BASE_TORQUE]
+    mu_a_r = p[CP_MU_A] * p[CP_R]
+    mu_0_r = p[CP_MU_0] * p[CP_R]
+    k = ints[I_STEP]
+    row = ints[I_NOISE_POS]
+    active = ints[I_STATUS] == STATUS_OK
+    ok = active
+    u_prev = f[F_LAST_TORQUE]
+    u_base_last = rep[REP_BASE_TORQUE]
+    command_last = f[F_LAST_COMMAND]
+    wob = rep[REP_WOB]
+    tracking = 0.0
+    variation = 0.0
+    torque_squared = 0.0
+    residual_squared = 0.0
+    stuck = 0.0
+    n_done = 0
+    for j in range(s.n_sub):
+        if not ok:
+            for c in range(N_RECORD):
+                rec[j, c] = math.nan
+            continue
+        t = k * s.dt
+        wob = profile_value(wob_t, wob_v, wob_n, t)
+        ref = profile_value(ref_t, ref_v, ref_n, t)
+        xi = chain_probe_state(xs, probes)
+        surface = chain_surface_torque(xs, p)
+        _sense(meas, hold, tel, tel_buf, s, k, xi, surface, std, torque_std, tel_std, u_prev,
+               noise, sensor, row + j)  # fmt: skip
+        gain = _slot(ls, s.gain_slot)
+        u_base = _base_torque(s, lp, ls, meas, external, ref)
+        u_command, u = _command_and_torque(s, act, line, u_base, command)
+        _record(rec, j, xi, mi, u, u_command, ref, u_base, wob, _slot(ls, s.error_slot), gain,
+                surface)  # fmt: skip
+        tracking += tracking_error(ref, xi[X_BIT_SPEED])
+        variation += abs(u - u_prev)
+        torque_squared += u * u
+        residual_squared += (u - u_base) * (u - u_base)
+        u_prev = u
+        u_base_last = u_base
+        command_last = u_command
+        if mi == STUCK:
+            stuck += 1.0
+        n_done += 1
+        for c in range(size):
+            backup[c] = xs[c]
+        mn = chain_step(xs, mi, u, p, mu_a_r * wob, mu_0_r * wob, s.dt, work)
+        if chain_in_bounds(xs, n, MAX_SPEED_RAD_S, MAX_TWIST_RAD) and math.isfinite(u):
+            mi = mn
+            k += 1
+        else:
+            for c in range(size):
+                xs[c] = backup[c]
+            ok = False
+            ints[I_STATUS] = STATUS_DIVERGED
+    _sums(rep, tracking, variation, stuck, n_done, torque_squared, residual_squared)
+    if not active:
+        return
+    ints[I_MODE] = mi
+    ints[I_STEP] = k
+    f[F_LAST_TORQUE] = u_prev
+    f[F_LAST_COMMAND] = command_last
+    row += s.n_sub
+    ints[I_NOISE_POS] = row
+    xi = chain_probe_state(xs, probes)
+    _sense(meas, hold, tel, tel_buf, s, k, xi, chain_surface_torque(xs, p), std, torque_std,
+           tel_std, u_prev, noise, sensor, row)  # fmt: skip
+    src = b.sources[i]
+    node_noise = b.node_noise[i]
+    for c in range(size):  # the measured state of every node
+        src[SRC_STATE + c] = xs[c] + std * node_noise[c // 2] if c % 2 == 0 else xs[c]
+    _finish(i, b, s, xi, mi, k, wob, u_base_last, command_last)
+
+
+@njit(cache=True, inline="always")
+def _probe(i, b, s):
+    """The 4-DOF (probe) state of string ``i`` and the true torque at the top of its string."""
+    xs = b.x[i]
+    p = b.plant[i]
+    if s.chain:
+        return chain_probe_state(xs, b.probes[i]), chain_surface_torque(xs, p)
+    xi = (xs[0], xs[1], xs[2], xs[3], xs[4], xs[5], xs[6])
+    return xi, p[P_K_PI] * xi[1] + p[P_C_PI] * (xi[0] - xi[2])
+
+
+@njit(cache=True)
+def measure(b, s, i) -> None:
+    """Fill the measurement vector of string ``i`` at its current step (the slow path reads it
+    before each plant step; an instant already sensed is not sampled again)."""
+    xi, surface = _probe(i, b, s)
+    _sense_string(i, b, s, b.ints[i, I_STEP], xi, surface, b.ints[i, I_NOISE_POS])
+
+
+@njit(cache=True)
+def observe(b, s, i) -> None:
+    """The observation and the report of string ``i`` at its current step without stepping
+    (the start of an episode)."""
+    measure(b, s, i)
+    xi, _ = _probe(i, b, s)
+    xs = b.x[i]
+    src = b.sources[i]
+    std = b.scalars[i, F_NOISE_STD]
+    if s.chain:
+        for c in range(2 * int(b.plant[i, CP_N]) - 1):
+            src[SRC_STATE + c] = xs[c] + std * b.node_noise[i, c // 2] if c % 2 == 0 else xs[c]
+    else:
+        noise_row = b.noise[i, b.ints[i, I_NOISE_POS]]
+        for c in range(N_STATE):
+            src[SRC_STATE + c] = xi[c] + std * noise_row[c // 2] if c % 2 == 0 else xi[c]
+    k = b.ints[i, I_STEP]
+    prof = b.profiles[i]
+    wob = profile_value(prof[PROF_WOB_T], prof[PROF_WOB_V], b.ints[i, I_WOB_KNOTS], k * s.dt)
+    _finish(i, b, s, xi, b.ints[i, I_MODE], k, wob, 0.0, 0.0)
 
 
 @njit(cache=True)
@@ -318,17 +664,6 @@ def write_report(out, xi, mi, t, ref, u_last, wob, u_base, error, gain, state_st
 
 
 @njit(cache=True)
-def fill_sources(out, meas, ref: float, u_last: float, u_base: float, error: float) -> None:
-    """Fill one source vector (``drill_env.layout.SRC_*``)."""
-    for c in range(N_STATE):
-        out[SRC_MEASUREMENT + c] = meas[M_STATE + c]
-    out[SRC_REFERENCE] = ref
-    out[SRC_LAST_TORQUE] = u_last
-    out[SRC_BASE_TORQUE] = u_base
-    out[SRC_LAW_ERROR] = error
-
-
-@njit(cache=True)
 def write_observation(out, sources, source_index, scale) -> None:
     """Fill one observation row: entry ``c`` is ``sources[source_index[c]] * scale[c]``; NaN
     becomes 0 and everything is clipped to ``+-OBS_BOUND``."""
@@ -340,9 +675,10 @@ def write_observation(out, sources, source_index, scale) -> None:
 
 
 @njit(cache=True)
-def _check_noise_room(noise, noise_pos, n_sub):
-    for i in range(noise_pos.shape[0]):
-        if noise_pos[i] < 0 or noise_pos[i] + n_sub >= noise.shape[1]:
+def _check_noise_room(noise, ints, n_sub):
+    for i in range(ints.shape[0]):
+        row = ints[i, I_NOISE_POS]
+        if row < 0 or row + n_sub >= noise.shape[1]:
             raise ValueError("noise block too short for n_sub steps: refill it first")
 
 
@@ -350,7 +686,7 @@ def _check_noise_room(noise, noise_pos, n_sub):
 def advance_batch(b, s):
     """Advance every string of the batch ``b`` (:class:`BatchArrays`) by ``s.n_sub`` plant steps
     of ``s.dt`` seconds under the settings ``s`` (:class:`LoopSettings`)."""
-    _check_noise_room(b.noise, b.noise_pos, s.n_sub)
+    _check_noise_room(b.noise, b.ints, s.n_sub)
     for i in range(b.x.shape[0]):
         _advance_one(i, b, s)
 
@@ -358,9 +694,25 @@ def advance_batch(b, s):
 @njit(cache=True, parallel=True)
 def advance_batch_parallel(b, s):
     """:func:`advance_batch` with the strings spread over numba's threads (large batches)."""
-    _check_noise_room(b.noise, b.noise_pos, s.n_sub)
+    _check_noise_room(b.noise, b.ints, s.n_sub)
     for i in prange(b.x.shape[0]):
         _advance_one(i, b, s)
+
+
+@njit(cache=True)
+def advance_chain_batch(b, s):
+    """:func:`advance_batch` for distributed strings."""
+    _check_noise_room(b.noise, b.ints, s.n_sub)
+    for i in range(b.x.shape[0]):
+        _advance_chain_one(i, b, s)
+
+
+@njit(cache=True, parallel=True)
+def advance_chain_batch_parallel(b, s):
+    """:func:`advance_chain_batch` with the strings spread over numba's threads."""
+    _check_noise_room(b.noise, b.ints, s.n_sub)
+    for i in prange(b.x.shape[0]):
+        _advance_chain_one(i, b, s)
 
 
 def fast_entry(dispatcher: Any, *args: Any) -> Callable[..., None]:

@@ -39,6 +39,7 @@ __all__ = [
     "highest_frequency_rad_s",
     "linearize",
     "lumped_equivalent",
+    "probe_nodes",
     "natural_frequencies_hz",
     "pipe_impedance",
     "pipe_travel_time_s",
@@ -371,6 +372,26 @@ def _four_dof(p: DistributedStringParameters, alpha: float) -> DrillStringParame
         xi=p.xi,
         Dw=p.Dw,
     )
+
+
+def probe_nodes(parameters: str | DistributedStringParameters) -> tuple[int, int, int, int]:
+    """The chain nodes that stand for the 4-DOF plant's top drive, pipes, collars and bit: node
+    0, the pipe/BHA junction, the node nearest the middle of the BHA (by length) and the bit;
+    the nodes of :func:`lumped_equivalent`'s rule, used to read a distributed string's state
+    in the 4-DOF coordinates (:func:`drill_env.chain.chain_probe_state`)."""
+    p = resolve_plant(parameters)
+    if not isinstance(p, DistributedStringParameters):
+        raise TypeError(f"parameters must be a DistributedStringParameters, got {type(p).__name__}")
+    if len(p.sections) < 2:
+        raise ValueError(
+            f"sections has {len(p.sections)} section: allowed at least 2 (pipe and BHA)"
+        )
+    depth = discretize(p).node_depth_m
+    junction = int(np.argmin(np.abs(depth - p.pipe.length_m)))
+    middle = int(np.argmin(np.abs(depth - (p.pipe.length_m + 0.5 * p.bha_length_m))))
+    last = depth.shape[0] - 1
+    middle = min(max(middle, junction + 1), last - 1)
+    return (0, junction, middle, last)
 
 
 def lumped_equivalent(parameters: str | DistributedStringParameters) -> DrillStringParameters:

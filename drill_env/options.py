@@ -10,29 +10,53 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Final
+from typing import Any, ClassVar, Final
 
 import numpy as np
 
 from drill_env.control import Controller
+from drill_env.distributed import (
+    DISTRIBUTED_PRESETS,
+    DistributedStringParameters,
+    resolve_distributed_parameters,
+    with_measured_depth,
+)
+from drill_env.layout import OBSERVATION_MODES
 from drill_env.limits import (
     DEFAULT_TORQUE_LIMITS,
     MAX_REFERENCE_RAD_S,
     MAX_TORQUE_ABS_NM,
     TorqueLimits,
 )
-from drill_env.parameters import PLANT_DT_S, DrillStringParameters, resolve_parameters
+from drill_env.parameters import (
+    PLANT_DT_S,
+    PRESETS,
+    DrillStringParameters,
+    resolve_parameters,
+)
 from drill_env.rewards import RewardWeights
 from drill_env.scenarios import (
+    RPM,
+    FieldRandomization,
     Randomization,
     Scenario,
     SpeedProfile,
     UncertaintyReading,
     WobProfile,
 )
-from drill_env.validation import check_bool, check_range, check_unknown
+from drill_env.validation import check_bool, check_choice, check_range, check_unknown, require
 
-__all__ = ["PER_EPISODE_KEYWORDS", "EnvConfig", "episode_config"]
+__all__ = [
+    "FIELD_MAX_TORQUE_NM",
+    "PER_EPISODE_KEYWORDS",
+    "EnvConfig",
+    "FieldEnvConfig",
+    "episode_config",
+    "steps_of",
+]
+
+FIELD_MAX_TORQUE_NM: Final = 50_800.0
+"""Continuous drilling torque of a 500-ton class AC top drive (37,500 ft lbf), N m."""
 
 PER_EPISODE_KEYWORDS: Final = (
     "parameters",
@@ -44,11 +68,23 @@ PER_EPISODE_KEYWORDS: Final = (
     "uncertainty",
     "uncertainty_reading",
     "noise_std_rad_s",
+    "torque_noise_std_nm",
+    "telemetry_noise_std_rad_s",
     "episode_s",
     "randomization",
+    "measured_depth_m",
+    "controller_parameters",
 )
 """Keywords that ``reset(options=...)`` may change for one episode; the others shape the
 spaces or the compiled loop and are fixed at ``make``."""
+
+FIELD_ONLY: Final = ("measured_depth_m", "controller_parameters")
+"""Keywords of ``DrillStringField-v0`` only."""
+LUMPED_ONLY: Final = ("uncertainty", "uncertainty_reading")
+"""Keywords of ``DrillString-v0`` only (the paper's parametric uncertainty of the 4-DOF plant)."""
+
+MAX_DEAD_TIME_S: Final = 2.0
+"""Longest accepted actuator dead time, s."""
 
 
 @dataclass(frozen=True)
@@ -59,7 +95,7 @@ class EnvConfig:
     YAML or JSON), validated like the dataclass.
     """
 
-    parameters: str | DrillStringParameters = "zribi2024"
+    parameters: str | DrillStringParameters | DistributedStringParameters = "zribi2024"
     randomize: bool = True
     wob_n: float = 97_347.0
     wob_step_time_s: float | None = None
@@ -74,12 +110,33 @@ class EnvConfig:
     residual_scale_nm: float = 5_000.0
     min_torque_nm: float = DEFAULT_TORQUE_LIMITS.min_nm
     max_torque_nm: float = DEFAULT_TORQUE_LIMITS.max_nm
-    randomization: Randomization = field(default_factory=Randomization)
+    randomization: Randomization | FieldRandomization = field(default_factory=Randomization)
     reward_weights: RewardWeights = field(default_factory=RewardWeights)
+    observation: str = "state"
+    torque_noise_std_nm: float = 0.0
+    sensor_period_s: float = PLANT_DT_S
+    telemetry_period_s: float | None = None
+    telemetry_delay_s: float = 0.0
+    telemetry_noise_std_rad_s: float = 0.0
+    actuator_dead_time_s: float = 0.0
+    actuator_lag_s: float = 0.0
+    torque_rate_limit_nm_per_s: float | None = None
+    measured_depth_m: float | None = None
+    controller_parameters: str | DistributedStringParameters | None = None
 
     def __post_init__(self) -> None:
+        if self.distributed and not self.is_field:
+            raise ValueError(
+                f"parameters = {self.parameters!r} is a distributed string: use "
+                "DrillStringField-v0; DrillString-v0 takes a 4-DOF preset "
+                f"{sorted(PRESETS)} or a DrillStringParameters"
+            )
         # The dataclass keywords also take plain mappings of their fields (YAML, JSON).
-        for name, kind in (("randomization", Randomization), ("reward_weights", RewardWeights)):
+        randomization_type = FieldRandomization if self.distributed else Randomization
+        for name, kind in (
+            ("randomization", randomization_type),
+            ("reward_weights", RewardWeights),
+        ):
             value = getattr(self, name)
             if isinstance(value, Mapping):
                 check_unknown(value, [f.name for f in dataclasses.fields(kind)], "field", name)
@@ -113,10 +170,32 @@ class EnvConfig:
                 f"min_torque_nm = {self.min_torque_nm!r} must be below "
                 f"max_torque_nm = {self.max_torque_nm!r}"
             )
-        if not isinstance(self.randomization, Randomization):
-            raise TypeError(f"randomization must be a Randomization, got {self.randomization!r}")
+        if not isinstance(self.randomization, randomization_type):
+            raise TypeError(
+                f"randomization must be a {randomization_type.__name__}, got {self.randomization!r}"
+            )
         if not isinstance(self.reward_weights, RewardWeights):
             raise TypeError(f"reward_weights must be a RewardWeights, got {self.reward_weights!r}")
+        check_choice("observation", self.observation, OBSERVATION_MODES, "mode")
+        check_range("torque_noise_std_nm", self.torque_noise_std_nm, 0.0, 1e5)
+        check_range("telemetry_noise_std_rad_s", self.telemetry_noise_std_rad_s, 0.0, 10.0)
+        _check_steps("sensor_period_s", self.sensor_period_s, PLANT_DT_S, 10.0)
+        if self.telemetry_period_s is not None:
+            _check_steps("telemetry_period_s", self.telemetry_period_s, PLANT_DT_S, 600.0)
+        _check_steps("telemetry_delay_s", self.telemetry_delay_s, 0.0, 600.0)
+        _check_steps("actuator_dead_time_s", self.actuator_dead_time_s, 0.0, MAX_DEAD_TIME_S)
+        check_range("actuator_lag_s", self.actuator_lag_s, 0.0, 10.0)
+        if self.torque_rate_limit_nm_per_s is not None:
+            rate = check_range(
+                "torque_rate_limit_nm_per_s", self.torque_rate_limit_nm_per_s, 0.0, 1e9
+            )
+            require("torque_rate_limit_nm_per_s", rate, "> 0 (or None: no limit)", rate > 0)
+        if not self.distributed:
+            for name in FIELD_ONLY:
+                if getattr(self, name) is not None:
+                    raise TypeError(
+                        f"{name} is a keyword of the distributed string (DrillStringField-v0)"
+                    )
 
     # ------------------------------------------------------------------ derived values
     @property
@@ -135,6 +214,25 @@ class EnvConfig:
         return round(self.episode_s / PLANT_DT_S) * PLANT_DT_S
 
     @property
+    def distributed(self) -> bool:
+        """Whether the plant is a distributed string (``DrillStringField-v0``)."""
+        return _is_distributed(self.parameters)
+
+    @property
+    def telemetry(self) -> bool:
+        """Whether downhole telemetry arrives."""
+        return self.telemetry_period_s is not None
+
+    @property
+    def ideal_actuator(self) -> bool:
+        """No dead time, lag or rate limit: the applied torque is the command."""
+        return (
+            self.actuator_dead_time_s == 0.0
+            and self.actuator_lag_s == 0.0
+            and self.torque_rate_limit_nm_per_s is None
+        )
+
+    @property
     def residual(self) -> bool:
         """Whether a base controller runs (residual mode)."""
         return self.base_controller is not None
@@ -149,19 +247,37 @@ class EnvConfig:
         """Scale of torques in the observation, N m."""
         return max(abs(self.min_torque_nm), abs(self.max_torque_nm))
 
+    def string(self) -> DistributedStringParameters:
+        """The distributed string of the keywords (at ``measured_depth_m`` when given)."""
+        string = resolve_distributed_parameters(self.parameters)  # type: ignore[arg-type]
+        if self.measured_depth_m is not None:
+            string = with_measured_depth(string, self.measured_depth_m)
+        return string
+
     def fixed_scenario(self) -> Scenario:
         """The scenario the keywords describe (the one used when ``randomize`` is off)."""
         ref = self.reference_speed_rad_s
         if not isinstance(ref, SpeedProfile):
             check_range("reference_speed_rad_s", ref, 0.0, MAX_REFERENCE_RAD_S)
             ref = SpeedProfile.constant(ref)
+        if self.distributed:
+            model = None
+            if self.controller_parameters is not None:
+                model = resolve_distributed_parameters(self.controller_parameters)
+            return Scenario(
+                wob=WobProfile(self.wob_n, self.wob_step_time_s, self.wob_final_n),
+                reference=ref,
+                noise_std_rad_s=self.noise_std_rad_s,
+                parameters=self.string(),
+                model=model,
+            )
         return Scenario(
             wob=WobProfile(self.wob_n, self.wob_step_time_s, self.wob_final_n),
             reference=ref,
             uncertainty=self.uncertainty,  # type: ignore[arg-type]
             reading=self.uncertainty_reading,  # type: ignore[arg-type]
             noise_std_rad_s=self.noise_std_rad_s,
-            parameters=resolve_parameters(self.parameters),
+            parameters=resolve_parameters(self.parameters),  # type: ignore[arg-type]
         )
 
     @property
@@ -174,10 +290,14 @@ class EnvConfig:
         :meth:`fixed_scenario`."""
         if not self.randomize:
             return self.fixed_scenario()
+        if isinstance(self.randomization, FieldRandomization):
+            return self.randomization.draw(
+                generators, self.episode_s, self.string(), self.noise_std_rad_s
+            )
         return self.randomization.draw(
             generators,
             self.episode_s,
-            resolve_parameters(self.parameters),
+            resolve_parameters(self.parameters),  # type: ignore[arg-type]
             self.reading,
             self.noise_std_rad_s,
         )
@@ -186,7 +306,11 @@ class EnvConfig:
     @classmethod
     def keywords(cls) -> list[str]:
         """The valid keyword names."""
-        return [f.name for f in dataclasses.fields(cls)]
+        excluded = LUMPED_ONLY if cls.is_field else FIELD_ONLY
+        return [f.name for f in dataclasses.fields(cls) if f.name not in excluded]
+
+    is_field: ClassVar[bool] = False
+    """Whether this is the configuration of ``DrillStringField-v0``."""
 
     @classmethod
     def from_kwargs(cls, kwargs: dict[str, Any], base: EnvConfig | None = None) -> EnvConfig:
@@ -203,16 +327,72 @@ def episode_config(base: EnvConfig, options: dict[str, Any] | None) -> EnvConfig
         return base
     if not isinstance(options, dict):
         raise TypeError(f"options must be a dict, got {type(options).__name__}")
-    fixed = sorted(set(options) & (set(EnvConfig.keywords()) - set(PER_EPISODE_KEYWORDS)))
+    keywords = type(base).keywords()
+    per_episode = [k for k in PER_EPISODE_KEYWORDS if k in keywords]
+    fixed = sorted(set(options) & (set(keywords) - set(per_episode)))
     if fixed:
         raise ValueError(
             f"option(s) {', '.join(fixed)} cannot change per episode: set them at make; "
-            f"per-episode options: {', '.join(PER_EPISODE_KEYWORDS)}"
+            f"per-episode options: {', '.join(per_episode)}"
         )
-    unknown = sorted(set(options) - set(EnvConfig.keywords()))
+    unknown = sorted(set(options) - set(keywords))
     if unknown:
         raise ValueError(
-            f"unknown option(s): {', '.join(unknown)}; valid options: "
-            f"{', '.join(PER_EPISODE_KEYWORDS)}"
+            f"unknown option(s): {', '.join(unknown)}; valid options: {', '.join(per_episode)}"
         )
-    return EnvConfig.from_kwargs(options, base)
+    return type(base).from_kwargs(options, base)
+
+
+def _is_distributed(parameters: object) -> bool:
+    if isinstance(parameters, DistributedStringParameters):
+        return True
+    return isinstance(parameters, str) and parameters in DISTRIBUTED_PRESETS
+
+
+def _check_steps(name: str, value: object, low: float, high: float) -> float:
+    """``value`` (s) in ``[low, high]`` and a whole number of plant steps."""
+    v = check_range(name, value, low, high)
+    if abs(v / PLANT_DT_S - round(v / PLANT_DT_S)) > 1e-6:
+        raise ValueError(
+            f"{name} = {value!r} is out of range: allowed a multiple of plant_dt = {PLANT_DT_S} s"
+        )
+    return v
+
+
+def steps_of(seconds: float) -> int:
+    """A duration in whole plant steps."""
+    return round(seconds / PLANT_DT_S)
+
+
+@dataclass(frozen=True)
+class FieldEnvConfig(EnvConfig):
+    """Every keyword of ``DrillStringField-v0`` (the distributed string); the defaults are a
+    rig's, with their sources in docs/specification.md section 17."""
+
+    parameters: str | DrillStringParameters | DistributedStringParameters = "field_2500m"
+    randomization: Randomization | FieldRandomization = field(default_factory=FieldRandomization)
+    reference_speed_rad_s: float | SpeedProfile = 100 * RPM
+    wob_n: float = 100e3
+    noise_std_rad_s: float = 0.05
+    max_torque_nm: float = FIELD_MAX_TORQUE_NM
+    observation: str = "surface"
+    torque_noise_std_nm: float = 250.0
+    sensor_period_s: float = 0.01
+    telemetry_period_s: float | None = 5.0
+    telemetry_delay_s: float = 5.0
+    telemetry_noise_std_rad_s: float = 0.1
+    actuator_dead_time_s: float = 0.02
+    actuator_lag_s: float = 0.02
+    torque_rate_limit_nm_per_s: float | None = 100e3
+    episode_s: float = 100.0
+    control_dt_s: float = 0.05
+
+    is_field: ClassVar[bool] = True
+
+    def __post_init__(self) -> None:
+        if not self.distributed:
+            raise ValueError(
+                f"parameters = {self.parameters!r} is not a distributed string: allowed "
+                f"{sorted(DISTRIBUTED_PRESETS)} or a DistributedStringParameters"
+            )
+        super().__post_init__()

@@ -47,7 +47,7 @@ TERMS = ("tracking", "chattering", "stuck", "torque", "residual")
 """The names of the reward terms, as in ``info["reward_terms"]``."""
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def tracking_error(reference_rad_s: float, bit_speed_rad_s: float) -> float:
     """The tracking integrand of one plant step: ``min(|V_ref - w_bit| / max(V_ref, 1), 1)``."""
     return min(abs(reference_rad_s - bit_speed_rad_s) / max(reference_rad_s, 1.0), 1.0)
@@ -90,10 +90,6 @@ class RewardWeights:
         require("chattering_scale_nm", s, "> 0", isinstance(s, (int, float)) and 0 < s < np.inf)
 
 
-def _column(report: Any, index: int) -> Any:
-    return report[..., index] if isinstance(report, np.ndarray) else report[index]
-
-
 def reward_terms(
     report: Sequence[float] | npt.NDArray[np.float64],
     weights: RewardWeights,
@@ -111,21 +107,28 @@ def reward_terms(
         residual_scale_nm: Scale of the residual term, N m; ``None`` outside residual mode
             (the term is then 0).
     """
-    steps = _column(report, REP_STEPS)
-    steps = np.maximum(steps, 1) if isinstance(steps, np.ndarray) else max(steps, 1)
-    variation = _column(report, REP_VARIATION)
-    chattering = variation / weights.chattering_scale_nm
-    residual = 0.0 * steps
-    if residual_scale_nm is not None:
-        residual = _column(report, REP_RESIDUAL_SQUARED) / steps / max(residual_scale_nm, 1.0) ** 2
+    if isinstance(report, np.ndarray):
+        rows = report.reshape(-1, report.shape[-1])
+        steps = np.maximum(rows[:, REP_STEPS], 1)
+        chattering = np.minimum(rows[:, REP_VARIATION] / weights.chattering_scale_nm, 1.0)
+        tracking, stuck = rows[:, REP_TRACKING_SUM] / steps, rows[:, REP_STUCK_STEPS] / steps
+        torque = rows[:, REP_TORQUE_SQUARED] / steps / torque_scale_nm**2
+        residual = np.zeros_like(steps)
+        if residual_scale_nm is not None:
+            residual = rows[:, REP_RESIDUAL_SQUARED] / steps / max(residual_scale_nm, 1.0) ** 2
+        return {
+            "tracking": tracking, "chattering": chattering, "stuck": stuck, "torque": torque,
+            "residual": residual,
+        }  # fmt: skip
+    n = max(report[REP_STEPS], 1)
     return {
-        "tracking": _column(report, REP_TRACKING_SUM) / steps,
-        "chattering": np.minimum(chattering, 1.0)
-        if isinstance(chattering, np.ndarray)
-        else min(chattering, 1.0),
-        "stuck": _column(report, REP_STUCK_STEPS) / steps,
-        "torque": _column(report, REP_TORQUE_SQUARED) / steps / torque_scale_nm**2,
-        "residual": residual,
+        "tracking": report[REP_TRACKING_SUM] / n,
+        "chattering": min(report[REP_VARIATION] / weights.chattering_scale_nm, 1.0),
+        "stuck": report[REP_STUCK_STEPS] / n,
+        "torque": report[REP_TORQUE_SQUARED] / n / torque_scale_nm**2,
+        "residual": 0.0
+        if residual_scale_nm is None
+        else report[REP_RESIDUAL_SQUARED] / n / max(residual_scale_nm, 1.0) ** 2,
     }
 
 

@@ -13,6 +13,7 @@ many numbers another component used.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -22,12 +23,18 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
+from drill_env.distributed import (
+    DistributedStringParameters,
+    resolve_distributed_parameters,
+    with_measured_depth,
+)
 from drill_env.limits import MAX_REFERENCE_RAD_S, MAX_WOB_N
 from drill_env.parameters import DrillStringParameters, resolve_parameters, scale_uncertain
 from drill_env.validation import check_choice, check_interval, check_range
 
 __all__ = [
     "COMPONENTS",
+    "FieldRandomization",
     "READINGS",
     "UNCERTAINTY_CONDITIONS",
     "Randomization",
@@ -178,6 +185,27 @@ def resolve_uncertainty(value: str | Sequence[float]) -> tuple[float, float, flo
     return (d1, d2, d3)
 
 
+def _draw_wob_and_reference(
+    generators: dict[str, np.random.Generator],
+    episode_s: float,
+    wob_range_n: tuple[float, float],
+    wob_step_probability: float,
+    wob_step_time_fraction: tuple[float, float],
+    reference_range_rad_s: tuple[float, float],
+) -> tuple[WobProfile, SpeedProfile]:
+    """A WOB profile (uniform, with one step change at the given chance) and a constant
+    reference speed, each from its own generator."""
+    g = generators["wob"]
+    wob0 = float(g.uniform(*wob_range_n))
+    step_time: float | None = None
+    wob1: float | None = None
+    if g.random() < wob_step_probability:
+        step_time = float(g.uniform(*wob_step_time_fraction)) * episode_s
+        wob1 = float(g.uniform(*wob_range_n))
+    ref = float(generators["reference"].uniform(*reference_range_rad_s))
+    return WobProfile(wob0, step_time, wob1), SpeedProfile.constant(ref)
+
+
 @dataclass(frozen=True)
 class Randomization:
     """Ranges of the per-episode draws of ``DrillString-v0`` (uniform unless stated).
@@ -214,19 +242,19 @@ class Randomization:
         noise_std_rad_s: float,
     ) -> Scenario:
         """A scenario drawn from these ranges, each component from its own generator."""
-        g = generators["wob"]
-        wob0 = float(g.uniform(*self.wob_range_n))
-        step_time: float | None = None
-        wob1: float | None = None
-        if g.random() < self.wob_step_probability:
-            step_time = float(g.uniform(*self.wob_step_time_fraction)) * episode_s
-            wob1 = float(g.uniform(*self.wob_range_n))
-        ref = float(generators["reference"].uniform(*self.reference_range_rad_s))
+        wob, reference = _draw_wob_and_reference(
+            generators,
+            episode_s,
+            self.wob_range_n,
+            self.wob_step_probability,
+            self.wob_step_time_fraction,
+            self.reference_range_rad_s,
+        )
         lo, hi = self.delta_range
         d = generators["uncertainty"].uniform(lo, hi, size=3)
         return Scenario(
-            wob=WobProfile(wob0, step_time, wob1),
-            reference=SpeedProfile.constant(ref),
+            wob=wob,
+            reference=reference,
             uncertainty=(float(d[0]), float(d[1]), float(d[2])),
             reading=reading,
             noise_std_rad_s=noise_std_rad_s,
@@ -234,12 +262,110 @@ class Randomization:
         )
 
 
+RPM: Final = 2.0 * math.pi / 60.0
+"""One revolution per minute in rad/s."""
+
+
+@dataclass(frozen=True)
+class FieldRandomization:
+    """Ranges of the per-episode draws of ``DrillStringField-v0`` (uniform; the sources and
+    the reasons are in docs/specification.md section 17).
+
+    Attributes:
+        wob_range_n: Range of the WOB, N.
+        wob_step_probability: Chance of one WOB step change (a new rock layer) per episode.
+        wob_step_time_fraction: Range of the step time as a fraction of the episode.
+        reference_range_rad_s: Range of the constant reference bit speed, rad/s (40-160 rpm).
+        measured_depth_range_m: Range of the measured depth, m: the drill pipe is made longer
+            or shorter, the BHA kept (``drill_env.distributed.with_measured_depth``).
+        mu_a_range: Range of the static friction coefficient.
+        mu_0_ratio_range: Range of ``mu_0 / mu_a``, in (0, 1].
+        xi_range: Range of the Stribeck decline rate, s/rad.
+        mud_damping_factor_range: Range of the factor on the mud damping rate.
+    """
+
+    wob_range_n: tuple[float, float] = (50e3, 200e3)
+    wob_step_probability: float = 0.5
+    wob_step_time_fraction: tuple[float, float] = (0.2, 0.8)
+    reference_range_rad_s: tuple[float, float] = (40 * RPM, 160 * RPM)
+    measured_depth_range_m: tuple[float, float] = (1_000.0, 5_000.0)
+    mu_a_range: tuple[float, float] = (0.6, 1.0)
+    mu_0_ratio_range: tuple[float, float] = (0.5, 0.8)
+    xi_range: tuple[float, float] = (0.3, 1.0)
+    mud_damping_factor_range: tuple[float, float] = (0.5, 2.0)
+
+    def __post_init__(self) -> None:
+        check_interval("wob_range_n", self.wob_range_n, 1e-9, MAX_WOB_N)
+        check_range("wob_step_probability", self.wob_step_probability, 0.0, 1.0)
+        check_interval("wob_step_time_fraction", self.wob_step_time_fraction, 0.0, 1.0)
+        check_interval(
+            "reference_range_rad_s", self.reference_range_rad_s, 0.0, MAX_REFERENCE_RAD_S
+        )
+        check_interval("measured_depth_range_m", self.measured_depth_range_m, 1.0, 20_000.0)
+        check_interval("mu_a_range", self.mu_a_range, 1e-3, 10.0)
+        check_interval("mu_0_ratio_range", self.mu_0_ratio_range, 1e-3, 1.0)
+        check_interval("xi_range", self.xi_range, 0.0, 100.0)
+        check_interval("mud_damping_factor_range", self.mud_damping_factor_range, 0.0, 100.0)
+
+    def string(
+        self, parameters: DistributedStringParameters, g: np.random.Generator
+    ) -> tuple[DistributedStringParameters, DistributedStringParameters]:
+        """A drawn string and its nominal twin at the same depth (what the controllers know:
+        the geometry, with the nominal friction and damping)."""
+        depth = float(g.uniform(*self.measured_depth_range_m))
+        mu_a = float(g.uniform(*self.mu_a_range))
+        ratio = float(g.uniform(*self.mu_0_ratio_range))
+        xi = float(g.uniform(*self.xi_range))
+        factor = float(g.uniform(*self.mud_damping_factor_range))
+        nominal = with_measured_depth(parameters, depth)
+        damping = dataclasses.replace(
+            nominal.damping, mud_rate_per_s=nominal.damping.mud_rate_per_s * factor
+        )
+        plant = dataclasses.replace(nominal, mu_a=mu_a, mu_0=ratio * mu_a, xi=xi, damping=damping)
+        return plant, nominal
+
+    def draw(
+        self,
+        generators: dict[str, np.random.Generator],
+        episode_s: float,
+        parameters: DistributedStringParameters,
+        noise_std_rad_s: float,
+    ) -> Scenario:
+        """A scenario drawn from these ranges, each component from its own generator (the
+        string from the ``uncertainty`` one)."""
+        wob, reference = _draw_wob_and_reference(
+            generators,
+            episode_s,
+            self.wob_range_n,
+            self.wob_step_probability,
+            self.wob_step_time_fraction,
+            self.reference_range_rad_s,
+        )
+        plant, nominal = self.string(
+            resolve_distributed_parameters(parameters), generators["uncertainty"]
+        )
+        return Scenario(
+            wob=wob,
+            reference=reference,
+            noise_std_rad_s=noise_std_rad_s,
+            parameters=plant,
+            model=nominal,
+        )
+
+
 def spawn_generators(seed_sequence: np.random.SeedSequence) -> dict[str, np.random.Generator]:
-    """One generator per random component (:data:`COMPONENTS`) from ``seed_sequence``."""
+    """One generator per random component (:data:`COMPONENTS`) from ``seed_sequence``, plus
+    two streams of the measurement channel spawned from the ``noise`` component's sequence:
+    ``sensors`` (surface torque and telemetry noise) and ``nodes`` (a distributed string's
+    node-speed noise), so that adding them changes none of the other draws."""
     children = seed_sequence.spawn(len(COMPONENTS))
-    return {
+    generators = {
         name: np.random.default_rng(child) for name, child in zip(COMPONENTS, children, strict=True)
     }
+    sensors, nodes = children[COMPONENTS.index("noise")].spawn(2)
+    generators["sensors"] = np.random.default_rng(sensors)
+    generators["nodes"] = np.random.default_rng(nodes)
+    return generators
 
 
 @dataclass(frozen=True)
@@ -254,7 +380,10 @@ class Scenario:
         reading: ``"plant"``: the plant carries the uncertainty; ``"controller"``: the
             controllers' model does.
         noise_std_rad_s: Measurement noise on the speeds, rad/s.
-        parameters: Nominal plant parameters.
+        parameters: Nominal plant parameters: a 4-DOF set, or a distributed string (then the
+            true plant itself).
+        model: A distributed string's parameters as the controllers know them (``None``: the
+            plant's); not used with a 4-DOF plant, whose model follows from the uncertainty.
         plant: The true plant's parameters (derived).
         controller_model: The parameters the controllers' model uses (derived).
     """
@@ -264,9 +393,16 @@ class Scenario:
     uncertainty: tuple[float, float, float] = (0.0, 0.0, 0.0)
     reading: UncertaintyReading = "plant"
     noise_std_rad_s: float = 0.0
-    parameters: DrillStringParameters = field(default_factory=DrillStringParameters)
-    plant: DrillStringParameters = field(init=False, repr=False, compare=False)
-    controller_model: DrillStringParameters = field(init=False, repr=False, compare=False)
+    parameters: DrillStringParameters | DistributedStringParameters = field(
+        default_factory=DrillStringParameters
+    )
+    model: DistributedStringParameters | None = None
+    plant: DrillStringParameters | DistributedStringParameters = field(
+        init=False, repr=False, compare=False
+    )
+    controller_model: DrillStringParameters | DistributedStringParameters = field(
+        init=False, repr=False, compare=False
+    )
 
     def __post_init__(self) -> None:
         if not isinstance(self.wob, WobProfile):
@@ -276,6 +412,22 @@ class Scenario:
         object.__setattr__(self, "uncertainty", resolve_uncertainty(self.uncertainty))
         check_choice("uncertainty_reading", self.reading, READINGS, "reading")
         check_range("noise_std_rad_s", self.noise_std_rad_s, 0.0, 10.0)
+        if isinstance(self.parameters, DistributedStringParameters):
+            if any(self.uncertainty):
+                raise ValueError(
+                    f"uncertainty = {self.uncertainty!r} is out of range for a distributed "
+                    "string: allowed (0, 0, 0) (the conditions scale the 4-DOF plant)"
+                )
+            if self.model is not None and not isinstance(self.model, DistributedStringParameters):
+                raise TypeError(
+                    f"model must be a DistributedStringParameters, got {type(self.model).__name__}"
+                )
+            object.__setattr__(self, "plant", self.parameters)
+            object.__setattr__(self, "controller_model", self.model or self.parameters)
+            return
+        if self.model is not None:
+            raise ValueError("model is for a distributed string; a 4-DOF model follows from "
+                             "uncertainty and reading")  # fmt: skip
         object.__setattr__(self, "parameters", resolve_parameters(self.parameters))
         scaled = scale_uncertain(self.parameters, self.uncertainty)
         plant, model = (
@@ -284,21 +436,28 @@ class Scenario:
         object.__setattr__(self, "plant", plant)
         object.__setattr__(self, "controller_model", model)
 
+    @property
+    def distributed(self) -> bool:
+        """Whether the plant is a distributed string."""
+        return isinstance(self.parameters, DistributedStringParameters)
+
     def keywords(self) -> dict[str, Any]:
-        """The ``DrillString-v0`` keywords (and ``reset`` options) that give this scenario."""
+        """The env keywords (and ``reset`` options) that give this scenario: those of
+        ``DrillString-v0``, or of ``DrillStringField-v0`` for a distributed string."""
         ref = self.reference
         constant = len(ref.times_s) == 1
-        return {
+        common = {
             "randomize": False,
             "parameters": self.parameters,
             "wob_n": self.wob.initial_n,
             "wob_step_time_s": self.wob.step_time_s,
             "wob_final_n": self.wob.final_n,
             "reference_speed_rad_s": ref.values_rad_s[0] if constant else ref,
-            "uncertainty": self.uncertainty,
-            "uncertainty_reading": self.reading,
             "noise_std_rad_s": self.noise_std_rad_s,
         }
+        if self.distributed:
+            return {**common, "measured_depth_m": None, "controller_parameters": self.model}
+        return {**common, "uncertainty": self.uncertainty, "uncertainty_reading": self.reading}
 
 
 def knot_arrays(

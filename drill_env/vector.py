@@ -8,7 +8,7 @@ bit. Autoreset follows Gymnasium's next-step mode.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -17,28 +17,19 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from drill_env.batch import StringBatch
-from drill_env.env import validate_actions
+from drill_env.env import report_info, validate_actions
 from drill_env.evaluation import PlantSamples
 from drill_env.layout import (
     OBS_BOUND,
-    REP_BASE_TORQUE,
-    REP_BIT_SPEED,
-    REP_BIT_STUCK,
-    REP_LAW_ERROR,
-    REP_LAW_GAIN,
-    REP_REFERENCE,
     REP_TIME,
-    REP_TOP_DRIVE_SPEED,
-    REP_TORQUE,
-    REP_WOB,
     STATUS_DIVERGED,
     STATUS_OK,
     STATUS_PAUSED,
 )
-from drill_env.options import EnvConfig
+from drill_env.options import EnvConfig, FieldEnvConfig
 from drill_env.rewards import TERMS, reward_terms, total_reward
 
-__all__ = ["DrillStringVectorEnv"]
+__all__ = ["DrillStringFieldVectorEnv", "DrillStringVectorEnv"]
 
 
 class DrillStringVectorEnv(VectorEnv):
@@ -47,12 +38,15 @@ class DrillStringVectorEnv(VectorEnv):
 
     metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.NEXT_STEP}
 
+    config_type: ClassVar[type[EnvConfig]] = EnvConfig
+    """The keywords this env takes."""
+
     def __init__(
         self, num_envs: int = 1, max_episode_steps: int | None = None, **kwargs: Any
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
             raise ValueError(f"num_envs = {num_envs!r} is out of range: allowed an integer >= 1")
-        self.config = EnvConfig.from_kwargs(kwargs)
+        self.config = self.config_type.from_kwargs(kwargs)
         if max_episode_steps is not None and (
             isinstance(max_episode_steps, bool)
             or not isinstance(max_episode_steps, int)
@@ -158,7 +152,7 @@ class DrillStringVectorEnv(VectorEnv):
         rewards = total_reward(terms, weights)
         terminated = b.status == STATUS_DIVERGED
         rewards[terminated] = -1.0
-        end_s = np.array([e.config.duration_s for e in episodes])
+        end_s = np.array([e.duration_s for e in episodes])
         if self.max_episode_steps is not None:
             end_s = np.minimum(end_s, self.max_episode_steps * self.config.control_dt_s)
         truncated = (report[:, REP_TIME] >= end_s - 1e-9) & ~terminated
@@ -175,25 +169,13 @@ class DrillStringVectorEnv(VectorEnv):
 
     def _infos(self, terms: dict[str, npt.NDArray[np.float64]]) -> dict[str, Any]:
         b = self._batch
-        r = b.report
         mask = np.ones(self.num_envs, dtype=bool)
-        values: dict[str, Any] = {
-            "time_s": r[:, REP_TIME].copy(),
-            "bit_speed_rad_s": r[:, REP_BIT_SPEED].copy(),
-            "top_drive_speed_rad_s": r[:, REP_TOP_DRIVE_SPEED].copy(),
-            "reference_speed_rad_s": r[:, REP_REFERENCE].copy(),
-            "top_drive_torque_nm": r[:, REP_TORQUE].copy(),
-            "wob_n": r[:, REP_WOB].copy(),
-            "bit_stuck": r[:, REP_BIT_STUCK] > 0.5,
-            "actions_clipped_total": np.array(
-                [e.actions_clipped for e in b.episodes if e is not None]
-            ),
-        }
+        values = report_info(b.report, b.residual, self.config.telemetry)
+        values["actions_clipped_total"] = np.array(
+            [e.actions_clipped for e in b.episodes if e is not None]
+        )
         if b.residual:
-            values["base_torque_nm"] = r[:, REP_BASE_TORQUE].copy()
             values["residual_torque_nm"] = b.command.copy()
-            values["sliding_variable_rad_s"] = r[:, REP_LAW_ERROR].copy()
-            values["adaptive_gain"] = r[:, REP_LAW_GAIN].copy()
         infos: dict[str, Any] = {}
         for key, value in values.items():
             infos[key] = value
@@ -202,3 +184,10 @@ class DrillStringVectorEnv(VectorEnv):
         infos["reward_terms"].update({"_" + key: mask for key in terms})
         infos["_reward_terms"] = mask
         return infos
+
+
+class DrillStringFieldVectorEnv(DrillStringVectorEnv):
+    """``DrillStringField-v0`` as a native vector env (the keywords of
+    :class:`drill_env.env.DrillStringFieldEnv`)."""
+
+    config_type: ClassVar[type[EnvConfig]] = FieldEnvConfig

@@ -11,6 +11,7 @@ import drill_env  # noqa: F401  (registers the built-in env)
 from drill_env import kernel
 from drill_env.batch import StringBatch
 from drill_env.layout import (
+    I_NOISE_POS,
     OBS_BOUND,
     REC_BASE_TORQUE,
     REC_REFERENCE,
@@ -88,7 +89,7 @@ def test_a_diverging_string_keeps_its_last_good_state() -> None:
 
 def test_the_noise_block_must_hold_the_call() -> None:
     batch = _batch(1, noise_std_rad_s=0.1)
-    batch.arrays.noise_pos[0] = batch.arrays.noise.shape[1] - 10
+    batch.arrays.ints[0, I_NOISE_POS] = batch.arrays.noise.shape[1] - 10
     with pytest.raises(ValueError, match="noise block too short"):
         kernel.advance_batch(batch.arrays, batch.settings)
 
@@ -106,7 +107,7 @@ def test_the_fast_entry_is_the_compiled_kernel() -> None:
     for _ in range(3):
         a.step(np.array([0.1, 0.2, 0.3]))
         b._refill_noise()
-        b.arrays.command[:] = np.array([0.1, 0.2, 0.3]) * b._action_gain + b._action_offset
+        b.command[:] = np.array([0.1, 0.2, 0.3]) * b._action_gain + b._action_offset
         kernel.advance_batch(b.arrays, b.settings)
         np.testing.assert_array_equal(a.records, b.records)
         np.testing.assert_array_equal(a.obs, b.obs)

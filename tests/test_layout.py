@@ -38,17 +38,23 @@ def test_state_names_and_speed_indices() -> None:
 
 @pytest.mark.parametrize(
     ("prefix", "count"),
-    [("REC_", "N_RECORD"), ("REP_", "N_REPORT"), ("SRC_", "N_SOURCES")],
-    ids=["records", "report", "sources"],
+    [
+        ("REC_", "N_RECORD"),
+        ("REP_", "N_REPORT"),
+        ("SRC_", "N_FIXED_SOURCES"),
+        ("M_", "N_MEASUREMENT"),
+    ],
+    ids=["records", "report", "sources", "measurement"],
 )
 def test_columns_are_distinct_and_inside_their_vector(prefix: str, count: str) -> None:
     columns = {n: v for n, v in vars(layout).items() if n.startswith(prefix)}
+    columns.pop("SRC_STATE", None)  # the state block follows the fixed sources
     size = getattr(layout, count)
     assert len(set(columns.values())) == len(columns)
     assert all(0 <= v < size for v in columns.values())
     # Multi-entry columns (the state) occupy 7 slots from their start.
     covered = set(columns.values())
-    for name in ("REC_X0", "SRC_MEASUREMENT"):
+    for name in ("REC_X0", "M_STATE"):
         if name in columns:
             covered |= set(range(columns[name], columns[name] + layout.N_STATE))
     assert covered == set(range(size))

@@ -24,6 +24,7 @@ from baselines import (
     controller_names,
     make_controller,
 )
+from baselines.base import measurement_vector
 from baselines.speed_loop import (
     N_PI_PARAMS,
     N_PI_STATE,
@@ -139,29 +140,29 @@ def speed_law(
 def test_pi_law_proportional_then_forward_euler_integral() -> None:
     lp, ls = speed_law(kp=1000.0, ki=50.0, u_min=-1e6), np.zeros(N_PI_STATE)
     # First call: integral 0, so u = kp (ref - x1) = 1000 * 2.
-    assert speed_loop_torque(lp, ls, M0, 12.0, DT) == pytest.approx(2000.0)
+    assert speed_loop_torque(lp, ls, measurement_vector(M0), 12.0, DT) == pytest.approx(2000.0)
     assert ls[PS_INT] == pytest.approx(2.0 * DT)  # I += (ref - x1) dt
     assert ls[PS_ERROR] == pytest.approx(-2.0)  # x1 - w_set
     # Second call, top drive now above the reference: u = kp (-1) + ki * 2 dt.
     m1 = (13.0, *M0[1:])
-    u = speed_loop_torque(lp, ls, m1, 12.0, DT)
+    u = speed_loop_torque(lp, ls, measurement_vector(m1), 12.0, DT)
     assert u == pytest.approx(-1000.0 + 50.0 * 2.0 * DT)
     assert ls[PS_INT] == pytest.approx(2.0 * DT - 1.0 * DT)
 
 
 def test_pi_law_sign_follows_the_speed_error() -> None:
     lp = speed_law(kp=500.0, ki=0.0)
-    slow: float = speed_loop_torque(lp, np.zeros(N_PI_STATE), M0, 12.0, DT)
-    fast: float = speed_loop_torque(lp, np.zeros(N_PI_STATE), M0, 8.0, DT)
+    slow: float = speed_loop_torque(lp, np.zeros(N_PI_STATE), measurement_vector(M0), 12.0, DT)
+    fast: float = speed_loop_torque(lp, np.zeros(N_PI_STATE), measurement_vector(M0), 8.0, DT)
     assert slow > 0 > fast
 
 
 def test_set_point_feed_forward_uses_the_reference_change() -> None:
     lp, ls = speed_law(kp=1000.0, ki=0.0, j_ff=930.0), np.zeros(N_PI_STATE)
     # No feed-forward at the first call (no previous set-point), whatever the reference.
-    assert speed_loop_torque(lp, ls, M0, 12.0, DT) == pytest.approx(2000.0)
+    assert speed_loop_torque(lp, ls, measurement_vector(M0), 12.0, DT) == pytest.approx(2000.0)
     # The reference rises by 0.01 rad/s in one step: + J (0.01 / dt).
-    u = speed_loop_torque(lp, ls, M0, 12.01, DT)
+    u = speed_loop_torque(lp, ls, measurement_vector(M0), 12.01, DT)
     assert u == pytest.approx(1000.0 * 2.01 + 930.0 * 0.01 / DT)
 
 
@@ -169,11 +170,11 @@ def test_torque_feedback_lowers_the_set_point_when_the_string_torque_rises() -> 
     lp, ls = speed_law(kp=1000.0, ki=0.0, z=1400.0, tau=10.0), np.zeros(N_PI_STATE)
     t0 = 700.0 * M0[1] + 200.0 * (M0[0] - M0[2])  # k_pi x2 + c_pi (x1 - x3)
     # First call: the mean starts at the torque itself, so w_set = ref.
-    assert speed_loop_torque(lp, ls, M0, 12.0, DT) == pytest.approx(2000.0)
+    assert speed_loop_torque(lp, ls, measurement_vector(M0), 12.0, DT) == pytest.approx(2000.0)
     assert ls[PS_T_MEAN] == pytest.approx(t0)  # the mean stays put when the torque does
     # The twist grows by 1 rad: T rises by 700 N m above its mean, w_set falls by 700 / z.
     m1 = (M0[0], M0[1] + 1.0, *M0[2:])
-    u = speed_loop_torque(lp, ls, m1, 12.0, DT)
+    u = speed_loop_torque(lp, ls, measurement_vector(m1), 12.0, DT)
     w_set = 12.0 - 700.0 / 1400.0
     assert u == pytest.approx(1000.0 * (w_set - M0[0]))
     assert ls[PS_ERROR] == pytest.approx(M0[0] - w_set)
@@ -182,16 +183,16 @@ def test_torque_feedback_lowers_the_set_point_when_the_string_torque_rises() -> 
 
 def test_integral_stops_while_the_output_is_saturated() -> None:
     lp, ls = speed_law(kp=1e5, ki=10.0, u_max=50_000.0), np.zeros(N_PI_STATE)
-    u = speed_loop_torque(lp, ls, M0, 12.0, DT)
+    u = speed_loop_torque(lp, ls, measurement_vector(M0), 12.0, DT)
     assert u == pytest.approx(2e5)  # returned unclipped: the env clips
     assert ls[PS_INT] == 0.0
     # Back inside the limits the integral advances again.
-    speed_loop_torque(lp, ls, (11.9, *M0[1:]), 12.0, DT)
+    speed_loop_torque(lp, ls, measurement_vector((11.9, *M0[1:])), 12.0, DT)
     assert ls[PS_INT] == pytest.approx(0.1 * DT)
     # Below the lower limit with a negative error it holds too.
     lp[PI_KP] = 1e3
     before = ls[PS_INT]
-    assert speed_loop_torque(lp, ls, (13.0, *M0[1:]), 12.0, DT) < 0.0
+    assert speed_loop_torque(lp, ls, measurement_vector((13.0, *M0[1:])), 12.0, DT) < 0.0
     assert ls[PS_INT] == before
 
 
@@ -205,7 +206,7 @@ def test_python_torque_matches_the_compiled_law(name: str) -> None:
     for _ in range(50):
         m = rng.normal(5.0, 3.0, 7)
         ref = float(rng.uniform(1.0, 15.0))
-        compiled = law.torque(ls, m, ref, DT)
+        compiled = law.torque(ls, measurement_vector(m), ref, DT)
         assert controller.torque(m, ref, DT) == compiled
     assert controller.speed_error == ls[PS_ERROR]  # type: ignore[attr-defined]
     controller.reset()
