@@ -24,7 +24,7 @@ Examples::
 
     drill-gym evaluate                              # the shipped models in agents/models/
     drill-gym evaluate runs/residual_ppo__1/model   # a model of your own
-    drill-gym evaluate --controllers proposed --no-figures
+    drill-gym evaluate --controllers proposed --no-plots
 """
 
 from __future__ import annotations

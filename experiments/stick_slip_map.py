@@ -29,6 +29,7 @@ controllers also ``stick_slip_maps.png`` with all of them side by side.
 
 from __future__ import annotations
 
+import argparse
 import math
 import time
 from collections.abc import Sequence
@@ -326,19 +327,24 @@ def _parser() -> ArgumentParser:
     controllers = names_type(controller_names, "controller")
     parser.add_argument(
         "--controllers",
-        "--controller",
-        dest="controllers",
         nargs="+",
         default=["stiff_pi"],
         type=controllers,
         metavar="NAME",
         help=f"controllers to map, by registered name: {', '.join(controller_names())}",
     )
+    parser.add_argument(  # the earlier name, still accepted
+        "--controller", dest="controllers", nargs="+", type=controllers, help=argparse.SUPPRESS
+    )
     wob = number_type(0.0, MAX_WOB_N, open_low=True, unit="N")
     speed = number_type(0.0, MAX_REFERENCE_RAD_S, open_low=True, unit="rad/s")
     count = number_type(1, 10_000, integer=True)
-    parser.add_argument("--wob-min", type=wob, default=40e3, metavar="N", help="lowest WOB, N")
-    parser.add_argument("--wob-max", type=wob, default=200e3, metavar="N", help="highest WOB, N")
+    parser.add_argument(
+        "--wob-min", type=wob, default=40e3, metavar="NEWTONS", help="lowest WOB, N"
+    )
+    parser.add_argument(
+        "--wob-max", type=wob, default=200e3, metavar="NEWTONS", help="highest WOB, N"
+    )
     parser.add_argument(
         "--wob-n", type=count, default=20, metavar="COUNT", help="number of WOB values"
     )

@@ -160,6 +160,7 @@ def test_aliases_mean_the_same() -> None:
     assert "--no-figures" not in evaluate.format_help()  # hidden, still accepted
     stick_slip = parser_of("map")
     assert stick_slip.parse_args(["--controller", "csmc"]).controllers == ["csmc"]
+    assert "--controller " not in stick_slip.format_help()  # hidden: --controllers is documented
     assert stick_slip.parse_args(["--controllers", "csmc", "asmc"]).controllers == ["csmc", "asmc"]
     train = parser_of("train")
     assert train.parse_args(["--out", "somewhere"]).run_dir == "somewhere"
@@ -200,3 +201,31 @@ def test_conditions_are_explained(capsys: pytest.CaptureFixture[str]) -> None:
         "raised by up to 75 %)" in flat
     )
     assert "40/30/30 %, 60/50/40 % and 75/75/75 %" in flat
+
+
+def test_convert_an_old_model(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``drill-gym convert OLD NEW --trust-pickle`` writes the portable files, which load
+    without the opt-in and act as the old model did."""
+    pytest.importorskip("stable_baselines3")
+    import numpy as np
+
+    from agents.policy import load_policy
+    from test_agents import _old_sb3_model_folder, tiny_config
+
+    _, venv = _old_sb3_model_folder(tiny_config(tmp_path), tmp_path / "old")
+    venv.close()
+    code, out, err = run(
+        ["convert", str(tmp_path / "old"), str(tmp_path / "new"), "--trust-pickle"], capsys
+    )
+    assert code == 0, err
+    assert out == f"converted old from {tmp_path / 'old'} to {tmp_path / 'new'}\n"
+    assert {p.name for p in (tmp_path / "new").iterdir()} == {
+        "config.json",
+        "policy.npz",
+        "obs_norm.npz",
+    }
+    obs = np.random.default_rng(5).normal(size=(16, 11)).astype(np.float32)
+    old = load_policy(tmp_path / "old", trust_pickle=True)
+    np.testing.assert_array_equal(
+        load_policy(tmp_path / "new").predict(obs)[0], old.predict(obs)[0]
+    )

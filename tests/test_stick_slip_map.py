@@ -140,7 +140,7 @@ def test_map_is_deterministic_without_noise_and_seeded_with_noise() -> None:
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["--controller", "pid"], r"argument --controllers/--controller: unknown controller 'pid': allowed csmc, .*z_torque"),
+        (["--controller", "pid"], r"argument --controller: unknown controller 'pid': allowed csmc, .*z_torque"),
         (["--wob-min", "-1"], r"argument --wob-min: -1 is out of range: allowed \(0, 1e\+06\] N"),
         (["--wob-min", "0"], r"argument --wob-min: 0 is out of range"),
         (["--wob-min", "2e5", "--wob-max", "1e5"], r"--wob-min = 200000.0 and --wob-max = 100000.0: the range is inverted"),
