@@ -20,7 +20,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["TrainConfig", "field_docs", "parse_config", "plain_text"]
+__all__ = [
+    "TrainConfig",
+    "config_from_namespace",
+    "config_parser",
+    "field_docs",
+    "parse_config",
+    "plain_text",
+]
 
 
 @dataclass
@@ -291,8 +298,9 @@ def _parse_bool(text: str) -> bool:
 
 
 def plain_text(text: str, fields: Sequence[str] = ()) -> str:
-    """``text`` without Sphinx markup: roles such as ``:class:`x``` become ``x``, double
-    backticks are dropped, and the names in ``fields`` become their ``--options``."""
+    """``text`` without Sphinx/reST markup, for ``--help``: roles such as ``:class:`x``` become
+    ``x``, double and single backticks are dropped, ``::`` before a literal block becomes
+    ``:``, and the names in ``fields`` become their ``--options``."""
     text = re.sub(r":[a-z]+:`~?([^`]+)`", r"\1", text)
     known = set(fields)
 
@@ -301,7 +309,9 @@ def plain_text(text: str, fields: Sequence[str] = ()) -> str:
         return _option(inner) if inner in known else inner
 
     text = re.sub(r"``([^`]+)``", literal, text)
-    return text.replace("::\n", ":\n")
+    text = re.sub(r"`([^`]+)`", literal, text)
+    text = text.replace("`", "'")
+    return re.sub(r"::(\s*\n)", r":\1", text)
 
 
 def _show_default(value: Any) -> str:
@@ -314,19 +324,26 @@ def _show_default(value: Any) -> str:
     return str(value)
 
 
-def parse_config(
-    argv: Sequence[str] | None, prog: str = "drill-gym train", description: str = ""
-) -> TrainConfig:
-    """A :class:`TrainConfig` from command-line arguments ``--field value`` (``--flag`` alone
-    sets a boolean to true, ``--no-flag`` to false; ``--net-arch 64 64`` for lists).
+def config_parser(
+    prog: str = "drill-gym train",
+    description: str = "",
+    parser_class: type[argparse.ArgumentParser] = argparse.ArgumentParser,
+) -> argparse.ArgumentParser:
+    """The command-line parser of :class:`TrainConfig`: one ``--field value`` per field
+    (``--flag`` alone sets a boolean to true, ``--no-flag`` to false; ``--net-arch 64 64`` for
+    lists), its help the field's docstring in plain text with its default.
 
-    Raises:
-        ValueError: A value out of range (one line naming the option and the allowed range;
-            ``drill-gym`` prints it and exits with status 2). Unparsable values (``--seed x``)
-            end the program as argparse does.
+    Args:
+        prog: The command as typed, for the usage line and messages.
+        description: Text above the options (markup is removed, see :func:`plain_text`).
+        parser_class: The ``argparse.ArgumentParser`` (sub)class to build; it may take
+            ``formatter_class``.
+
+    Returns:
+        The parser; :func:`config_from_namespace` turns its result into a config.
     """
     names = [f.name for f in dataclasses.fields(TrainConfig)]
-    parser = argparse.ArgumentParser(
+    parser = parser_class(
         prog=prog,
         description=plain_text(description, names),
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -371,5 +388,28 @@ def parse_config(
             parser.add_argument(
                 flag, dest=f.name, type=hint, default=default, metavar=metavar, help=help_text
             )
-    args = parser.parse_args(list(argv) if argv is not None else None)
-    return TrainConfig(**vars(args))
+    return parser
+
+
+def config_from_namespace(args: argparse.Namespace) -> TrainConfig:
+    """The :class:`TrainConfig` of parsed arguments (other attributes are ignored).
+
+    Raises:
+        ValueError: A value out of range (one line naming the option and the allowed range).
+    """
+    names = {f.name for f in dataclasses.fields(TrainConfig)}
+    return TrainConfig(**{k: v for k, v in vars(args).items() if k in names})
+
+
+def parse_config(
+    argv: Sequence[str] | None, prog: str = "drill-gym train", description: str = ""
+) -> TrainConfig:
+    """A :class:`TrainConfig` from command-line arguments (see :func:`config_parser`).
+
+    Raises:
+        ValueError: A value out of range (one line naming the option and the allowed range;
+            ``drill-gym`` prints it and exits with status 2). Unparsable values (``--seed x``)
+            end the program as argparse does.
+    """
+    parser = config_parser(prog, description)
+    return config_from_namespace(parser.parse_args(list(argv) if argv is not None else None))

@@ -1,4 +1,5 @@
-"""``drill-gym train``: PPO learns a residual torque on top of the proposed adaptive SMC.
+"""Training of the residual PPO agent: PPO learns a residual torque on top of the proposed
+adaptive SMC (the ``drill-gym train`` command line is :mod:`experiments.train`).
 
 One readable script in the CleanRL manner: the configuration (:class:`agents.config.TrainConfig`,
 every field documented, every field a ``--flag``), one seeding block, the whole environment
@@ -34,7 +35,6 @@ import os
 import shutil
 import sys
 import time
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -43,7 +43,7 @@ import numpy as np
 
 import drill_env  # noqa: F401  (registers DrillString-v0)
 from agents.checkpoints import CHECKPOINT_DIR, PREFIX, Checkpoint, find_last_checkpoint
-from agents.config import TrainConfig, parse_config
+from agents.config import TrainConfig
 from agents.policy import ResidualPolicy, is_model_folder, load_policy, policy_from_sb3
 from drill_env import RewardWeights
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout
@@ -53,7 +53,6 @@ __all__ = [
     "VALIDATION_SEED",
     "env_kwargs",
     "find_last_checkpoint",
-    "main",
     "make_model",
     "make_training_env",
     "planned_timesteps",
@@ -323,8 +322,13 @@ def _save_checkpoint(model: Any, venv: Any, config: TrainConfig, run_dir: Path) 
     return save_checkpoint(model, venv, folder, policy=policy)
 
 
-def train(config: TrainConfig) -> Path:
+def train(config: TrainConfig, progress: bool = True) -> Path:
     """Run one training (see the module docstring); returns the final model's folder.
+
+    Args:
+        config: The settings of the run.
+        progress: Print one line per rollout and per validation (and SB3's progress bar with
+            ``config.progress_bar``); ``False`` prints only the start line.
 
     Raises:
         ValueError: A setting the run cannot use (an unregistered base controller, an
@@ -387,14 +391,16 @@ def train(config: TrainConfig) -> Path:
     model.set_logger(Logger(str(run_dir), outputs))
 
     # ---- callbacks: checkpoints at rollout boundaries, validation, one line per rollout
-    validation = _Validation(config, run_dir) if config.validate_every else None
-    callback = _run_callback(BaseCallback, config, run_dir, total, start_steps, validation)
+    validation = _Validation(config, run_dir, progress) if config.validate_every else None
+    callback = _run_callback(
+        BaseCallback, config, run_dir, total, start_steps, validation, progress
+    )
 
     t0 = time.perf_counter()
     model.learn(
         total_timesteps=max(total - start_steps, 0),
         callback=callback,
-        progress_bar=config.progress_bar,
+        progress_bar=config.progress_bar and progress,
         reset_num_timesteps=last is None,
     )
     wall_s = time.perf_counter() - t0
@@ -431,11 +437,12 @@ def _run_callback(
     total: int,
     start_steps: int,
     validation: _Validation | None,
+    progress: bool = True,
 ) -> Any:
     """The SB3 callback of a run: a checkpoint at the first rollout boundary after every
     ``checkpoint_every`` decisions (after the update, so that resuming continues from a
     whole rollout), the validation every ``validate_every`` decisions, and one printed line
-    per rollout."""
+    per rollout (unless ``progress`` is off or SB3's progress bar shows it)."""
     every = config.checkpoint_every
 
     class _RunCallback(base):
@@ -467,7 +474,7 @@ def _run_callback(
             return True
 
         def _on_rollout_end(self) -> None:
-            if config.progress_bar:
+            if config.progress_bar or not progress:
                 return
             from stable_baselines3.common.utils import safe_mean
 
@@ -491,10 +498,11 @@ class _Validation:
     (validation.csv, TensorBoard, one printed line) and keep the best model in ``run_dir/best``
     (lowest mean IAE ratio plus a penalty on a mean RMSD ratio above ``RMSD_TARGET``)."""
 
-    def __init__(self, config: TrainConfig, run_dir: Path) -> None:
+    def __init__(self, config: TrainConfig, run_dir: Path, progress: bool = True) -> None:
         from agents.model_format import read_json
 
         self.config = config
+        self.progress = progress
         self.best_dir = run_dir / "best"
         self.csv = run_dir / "validation.csv"
         kwargs = {
@@ -556,6 +564,8 @@ class _Validation:
             (self.best_dir / "score.json").write_text(
                 json.dumps({"score": score, "timesteps": steps})
             )
+        if not self.progress:
+            return score
         print(
             f"validation at {steps:,} decisions: IAE ratio {iae:.3f}, RMSD ratio {rmsd:.3f}, "
             f"severity ratio {sev:.3f}, score {score:.3f}"
@@ -563,15 +573,3 @@ class _Validation:
             flush=True,
         )
         return score
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``drill-gym train [--field value ...]``; ``--help`` lists every field."""
-    config = parse_config(argv, prog="drill-gym train", description=__doc__ or "")
-    out = train(config)
-    record = json.loads((out / "config.json").read_text())
-    print(
-        f"model saved to {out}: {record.get('selected')}, at {record.get('timesteps')} of "
-        f"{record.get('run_timesteps')} decisions; {record.get('wall_time_s')} s of training"
-    )
-    return 0

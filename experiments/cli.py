@@ -1,51 +1,92 @@
 """``drill-gym``: the command line of drill-string-gym.
 
-Subcommands (each imported only when used, so the core needs no torch):
-
-* ``compare``: the paper's controllers on the paper's scenarios (the main job);
-* ``map``: a stick-slip map over WOB and reference speed for one controller;
-* ``train`` / ``evaluate``: the residual PPO agent (needs the ``[rl]`` extra).
+Subcommands, each a module with ``main(argv)`` imported only when used (so the core needs no
+torch): ``compare``, ``map``, ``train``, ``evaluate``, ``convert``. Every user error ends with
+one line on standard error and exit code 2 (:mod:`experiments.arguments`); ``DRILL_GYM_DEBUG=1``
+shows the traceback instead.
 """
 
 from __future__ import annotations
 
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 
-__all__ = ["main"]
+from experiments.arguments import USAGE_ERROR, run_command
+
+__all__ = ["DEBUG_VARIABLE", "SUBCOMMANDS", "main"]
 
 SUBCOMMANDS = {
-    "compare": ("experiments.compare", "Compare the controllers on the paper's scenarios."),
-    "map": ("experiments.stick_slip_map", "Stick-slip map over WOB x reference speed."),
-    "train": ("agents.train", "Train the residual PPO agent."),
-    "evaluate": ("experiments.evaluate", "Evaluate a trained agent against the baselines."),
+    "compare": (
+        "experiments.compare",
+        "compare the controllers on the paper's scenario (table, CSV, JSON, figures)",
+    ),
+    "map": (
+        "experiments.stick_slip_map",
+        "stick-slip map of controllers over weight on bit x reference speed",
+    ),
+    "train": ("experiments.train", "train the residual PPO agent (needs the rl extra)"),
+    "evaluate": (
+        "experiments.evaluate",
+        "score trained agents and every controller on the held-out scenarios",
+    ),
+    "convert": (
+        "experiments.convert",
+        "convert an old Stable-Baselines3 model.zip to the portable model format",
+    ),
 }
+"""Subcommand name -> (module with ``main(argv)``, one line of help)."""
+
+DEBUG_VARIABLE = "DRILL_GYM_DEBUG"
+"""Environment variable: ``1`` shows the traceback of a user error instead of one line."""
 
 
 def _usage() -> str:
-    lines = ["usage: drill-gym {" + ",".join(SUBCOMMANDS) + "} [options]", "", "subcommands:"]
+    lines = [
+        "usage: drill-gym COMMAND [options]",
+        "",
+        "Reference environment for torsional stick-slip control of drill strings.",
+        "",
+        "commands:",
+    ]
     lines += [f"  {name:<9} {text}" for name, (_, text) in SUBCOMMANDS.items()]
-    lines.append("\nRun 'drill-gym SUBCOMMAND --help' for its options.")
+    lines += [
+        "",
+        "Run 'drill-gym COMMAND --help' for the options of a command.",
+        "",
+        "A user error (a bad option or value, a missing file) prints one line and exits with",
+        f"code 2; set {DEBUG_VARIABLE}=1 to see the full traceback instead.",
+    ]
     return "\n".join(lines)
 
 
+def _debug() -> bool:
+    return os.environ.get(DEBUG_VARIABLE, "").strip().lower() not in ("", "0", "false", "no")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point: dispatch to the subcommand module's ``main(argv)``."""
+    """Entry point: dispatch to the subcommand module's ``main(argv)``; returns the exit code."""
     args = list(sys.argv[1:] if argv is None else argv)
     if not args or args[0] in ("-h", "--help"):
         print(_usage())
         return 0
     name, rest = args[0], args[1:]
     if name not in SUBCOMMANDS:
-        print(f"drill-gym: unknown subcommand {name!r}\n\n{_usage()}", file=sys.stderr)
-        return 2
-    module = importlib.import_module(SUBCOMMANDS[name][0])
-    try:
+        kind = "option" if name.startswith("-") else "command"
+        print(
+            f"drill-gym: error: unknown {kind} {name!r}: allowed commands "
+            f"{', '.join(SUBCOMMANDS)} (see drill-gym --help)",
+            file=sys.stderr,
+        )
+        return USAGE_ERROR
+    prog = f"drill-gym {name}"
+
+    def run() -> int:
+        module = importlib.import_module(SUBCOMMANDS[name][0])
         return int(module.main(rest) or 0)
-    except (ValueError, FileNotFoundError) as err:  # user errors: one line, no traceback
-        print(f"drill-gym {name}: error: {' '.join(str(err).split())}", file=sys.stderr)
-        return 2
+
+    return run_command(prog, run, debug=_debug())
 
 
 if __name__ == "__main__":  # pragma: no cover

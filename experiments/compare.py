@@ -29,14 +29,13 @@ Example::
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import math
 import sys
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Final, NamedTuple
+from typing import TYPE_CHECKING, Any, Final, NamedTuple
 
 import numpy as np
 from tqdm import tqdm
@@ -47,8 +46,14 @@ from drill_env.evaluation import Trace, ZeroAction, episode_metrics, run_episode
 from drill_env.metrics import METRIC_KEYS
 from drill_env.parameters import PLANT_DT_S, resolve_parameters
 from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, WobProfile
+from experiments.arguments import ArgumentParser, names_type, number_type
 from experiments.tables import Column, write_csv, write_json
 from experiments.tables import markdown_table as _markdown
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.figure import Figure
+
+    from experiments.plots import Envelope
 
 __all__ = [
     "CONDITIONS",
@@ -56,11 +61,14 @@ __all__ = [
     "PAPER_CONTROLLERS",
     "RESCALED_GAINS",
     "ROW_KEYS",
+    "RunTraces",
     "SCENARIO",
+    "comparison_figures",
     "default_controllers",
     "main",
     "markdown_table",
     "run_comparison",
+    "write_figures",
 ]
 
 PAPER_CONTROLLERS: Final = ("csmc", "msmc", "asmc", "proposed")
@@ -137,6 +145,10 @@ TAIL_S: Final = 0.2
 """Length of the full-rate end of each run kept for the zoomed torque figure, s."""
 
 
+BAND_S: Final = 0.1
+"""Bin of the torque envelope of the whole-run figures, s (mean line, min-max band)."""
+
+
 class RunTraces(NamedTuple):
     """What the figures need of one run."""
 
@@ -144,6 +156,8 @@ class RunTraces(NamedTuple):
     """The whole run, downsampled (:data:`PLOT_EVERY`)."""
     tail: Trace
     """The last :data:`TAIL_S` seconds at full rate."""
+    torque: Envelope
+    """The top-drive torque of the whole run per :data:`BAND_S` bin: minimum, mean, maximum."""
 
 
 _DECISION_PERIODS_S: Final = (1.0, 0.5, 0.25, 0.2, 0.1, 0.05, 0.02, 0.01, 0.005, 0.002, 0.001)
@@ -274,11 +288,12 @@ def run_comparison(
         metrics = {**episode_metrics(trace), "static_error_rad_s": static_error(trace)}
         rows.append(_row(label, cond, noise, metrics, gain_label, reading, seed, duration_s))
         if keep_traces:
-            from experiments.plots import downsample, time_window
+            from experiments.plots import downsample, envelope, time_window
 
             traces[(label, cond, noise)] = RunTraces(
                 downsample(trace, PLOT_EVERY),
                 time_window(trace, max(trace.duration_s - TAIL_S, 0.0)),
+                envelope(trace, BAND_S),
             )
     return rows, traces
 
@@ -314,116 +329,165 @@ def markdown_table(rows: Sequence[Mapping[str, Any]]) -> str:
     return _markdown(rows, TABLE_COLUMNS, _diverged_cell)
 
 
-def write_figures(
+INDUSTRY_CONTROLLERS: Final = ("stiff_pi", "soft_speed", "z_torque")
+"""The industry top-drive speed loops, drawn together in the noise figure."""
+
+
+def _families(rows: Sequence[Mapping[str, Any]]) -> dict[str, list[str]]:
+    """The controllers of ``rows`` by family, for the noise figure's columns."""
+    families: dict[str, list[str]] = {}
+    for label in dict.fromkeys(r["controller"] for r in rows):
+        agent = any(r["controller"] == label and r["gains"] == "agent" for r in rows)
+        if agent:
+            family = "learned agent"
+        elif label in PAPER_CONTROLLERS:
+            family = "the paper's sliding-mode controllers"
+        elif label in INDUSTRY_CONTROLLERS:
+            family = "industry speed loops"
+        else:
+            family = "other controllers"
+        families.setdefault(family, []).append(label)
+    order = (
+        "the paper's sliding-mode controllers",
+        "industry speed loops",
+        "other controllers",
+        "learned agent",
+    )
+    return {f: families[f] for f in order if f in families}
+
+
+def comparison_figures(
     rows: Sequence[Mapping[str, Any]],
     runs: Mapping[tuple[str, str, float], RunTraces],
-    folder: Path,
-) -> list[Path]:
-    """The comparison's figures in ``folder``, in the spirit of the paper's Figs 3-12.
+) -> Iterator[tuple[str, Figure]]:
+    """The comparison's figures as (file name, figure), in the spirit of the paper's Figs 3-12.
 
-    * ``speed_torque_<controller>.png``: bit speed and torque under each condition, noise off
-      (Figs 6-9);
-    * ``noise_speed_torque.png``: every controller with noise on (Figs 3-4a);
-      ``noise_torque_zoom.png``: the torque of each controller over the last 0.2 s at full rate,
-      without and with noise (Fig 4b);
+    * ``speed_torque_<controller>.png``: bit speed and torque under each uncertainty condition,
+      noise off (Figs 6-9);
+    * ``noise_speed_torque.png``: every controller with noise on, one column per family
+      (Figs 3-4a); ``noise_torque_zoom.png``: the torque of each controller over the last
+      0.2 s at full rate, without and with noise (Fig 4b);
     * ``bars_rmse.png``, ``bars_ise_iae.png`` (noise off, by condition), ``bars_rmsd.png`` and
       ``bars_chattering.png`` (first condition, with and without noise) (Figs 5, 10-12);
-    * ``adaptive_gains.png``: the adaptive gains against time (noise off).
+    * ``adaptive_gains.png``: the adaptive gain k of the adaptive laws against time (noise off).
     """
     from experiments.plots import (
-        plot_adaptive_gains,
-        plot_metric_bars,
-        plot_panels,
-        plot_speed_and_torque,
+        adaptive_gains_figure,
+        metric_bars_figure,
+        panels_figure,
+        speed_torque_figure,
+        value_label,
     )
 
-    folder.mkdir(parents=True, exist_ok=True)
-    traces = {key: run.overview for key, run in runs.items()}
     labels = list(dict.fromkeys(r["controller"] for r in rows))
     conditions = list(dict.fromkeys(r["condition"] for r in rows))
     noises = sorted({float(r["noise_std_rad_s"]) for r in rows})
     quiet, loud = noises[0], noises[-1]
+    quiet_text = value_label("noise_std_rad_s", quiet)
+    loud_text = value_label("noise_std_rad_s", loud)
     first = conditions[0]
-    out: list[Path] = []
+    band = f"torque: mean per {BAND_S:g} s, light band from minimum to maximum"
     for label in labels:
-        by_condition = {
-            c: traces[(label, c, quiet)] for c in conditions if (label, c, quiet) in traces
-        }
-        out.append(
-            plot_speed_and_torque(
-                by_condition,
-                folder / f"speed_torque_{label}.png",
-                f"{label}: Table 3 conditions, noise {quiet:g} rad/s",
+        by_condition = {c: runs[(label, c, quiet)] for c in conditions if (label, c, quiet) in runs}
+        if by_condition:
+            yield (
+                f"speed_torque_{label}.png",
+                speed_torque_figure(
+                    {"uncertainty condition": {c: r.overview for c, r in by_condition.items()}},
+                    f"{label}, {quiet_text}; {band}",
+                    envelopes={c: r.torque for c, r in by_condition.items()},
+                ),
             )
-        )
-    noisy = {lab: traces[(lab, first, loud)] for lab in labels if (lab, first, loud) in traces}
+    noisy = {lab: runs[(lab, first, loud)] for lab in labels if (lab, first, loud) in runs}
     if noisy:
-        out.append(
-            plot_speed_and_torque(
-                noisy, folder / "noise_speed_torque.png", f"{first}, noise {loud:g} rad/s"
-            )
+        columns = {
+            family: {lab: noisy[lab].overview for lab in members if lab in noisy}
+            for family, members in _families(rows).items()
+        }
+        yield (
+            "noise_speed_torque.png",
+            speed_torque_figure(
+                {k: v for k, v in columns.items() if v},
+                f"{first}, {loud_text}; {band}",
+                envelopes={lab: run.torque for lab, run in noisy.items()},
+            ),
         )
         panels = {
             lab: {
-                f"noise {n:g} rad/s": runs[(lab, first, n)].tail
+                value_label("noise_std_rad_s", n): runs[(lab, first, n)].tail
                 for n in (quiet, loud)
                 if (lab, first, n) in runs
             }
             for lab in labels
         }
-        out.append(
-            plot_panels(
-                panels,
-                folder / "noise_torque_zoom.png",
+        yield (
+            "noise_torque_zoom.png",
+            panels_figure(
+                {k: v for k, v in panels.items() if v},
                 f"top-drive torque at 1 kHz, {first}, last {TAIL_S:g} s",
-            )
+                ncols=2,
+            ),
         )
     quiet_rows = [r for r in rows if float(r["noise_std_rad_s"]) == quiet]
     first_rows = [r for r in rows if r["condition"] == first]
-    out.append(
-        plot_metric_bars(
-            quiet_rows, "rmse", folder / "bars_rmse.png", title=f"RMSE, noise {quiet:g} rad/s"
-        )
+    yield (
+        "bars_rmse.png",
+        metric_bars_figure(quiet_rows, "rmse", title=f"RMSE of the bit speed, {quiet_text}"),
     )
-    out.append(
-        plot_metric_bars(
-            quiet_rows,
-            ("ise", "iae"),
-            folder / "bars_ise_iae.png",
-            title=f"ISE and IAE, noise {quiet:g} rad/s",
-        )
+    yield (
+        "bars_ise_iae.png",
+        metric_bars_figure(quiet_rows, ("ise", "iae"), title=f"ISE and IAE, {quiet_text}"),
     )
-    out.append(
-        plot_metric_bars(
+    yield (
+        "bars_rmsd.png",
+        metric_bars_figure(
             first_rows,
             "rmsd_nm",
-            folder / "bars_rmsd.png",
             hue="noise_std_rad_s",
-            title=f"RMSD with and without noise ({first})",
-        )
+            title=f"RMSD of the top-drive torque with and without noise ({first}); "
+            "change with noise beside each controller",
+            zoom=True,
+        ),
     )
-    out.append(
-        plot_metric_bars(
+    yield (
+        "bars_chattering.png",
+        metric_bars_figure(
             first_rows,
             "chattering_nm_per_s",
-            folder / "bars_chattering.png",
             hue="noise_std_rad_s",
-            title=f"chattering with and without noise ({first})",
+            title=f"chattering (total variation of the torque per second), {first}",
             log=True,
-        )
+        ),
     )
+    agents = {r["controller"] for r in rows if r["gains"] == "agent"}
     gains = {
-        f"{lab} {c}": traces[(lab, c, quiet)]
+        (f"{lab} (its base controller)" if lab in agents else lab, c): runs[
+            (lab, c, quiet)
+        ].overview
         for lab in labels
         for c in conditions
-        if (lab, c, quiet) in traces and np.any(traces[(lab, c, quiet)].adaptive_gain != 0.0)
+        if (lab, c, quiet) in runs and np.any(runs[(lab, c, quiet)].overview.adaptive_gain != 0.0)
     }
-    out.append(
-        plot_adaptive_gains(
-            gains, folder / "adaptive_gains.png", f"adaptive gains, noise {quiet:g} rad/s"
-        )
+    adaptive = ", ".join(dict.fromkeys(lab.split(" ")[0] for lab, _ in gains)) or "none"
+    yield (
+        "adaptive_gains.png",
+        adaptive_gains_figure(
+            gains,
+            f"adaptive switching gain k of the adaptive SMCs ({adaptive}), {quiet_text}",
+        ),
     )
-    return out
+
+
+def write_figures(
+    rows: Sequence[Mapping[str, Any]],
+    runs: Mapping[tuple[str, str, float], RunTraces],
+    folder: Path,
+) -> list[Path]:
+    """Write :func:`comparison_figures` as PNG files into ``folder``; returns their paths."""
+    from experiments.plots import save_figure
+
+    folder.mkdir(parents=True, exist_ok=True)
+    return [save_figure(fig, folder / name) for name, fig in comparison_figures(rows, runs)]
 
 
 # ---------------------------------------------------------------------------- the agent
@@ -450,62 +514,86 @@ def load_agent(loader: Callable[[], Any] | None = None) -> Any:
 
 
 # -------------------------------------------------------------------------------- CLI
-def _non_negative(text: str) -> float:
-    value = float(text)
-    if not (math.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"noise must be a finite number >= 0, got {text!r}")
-    return value
+CONDITIONS_HELP: Final = (
+    "the paper's parametric-uncertainty conditions (nominal, condition1-3: c_pi, k_pi, c_dt "
+    "raised by up to 75 %%)"
+)
+"""How ``--help`` explains the conditions (argparse help text: ``%%`` is a percent sign)."""
+
+DESCRIPTION: Final = """\
+Run each controller on the paper's scenario (WOB 97,347 N, reference bit speed 12 rad/s,
+150 s from rest) under each uncertainty condition and measurement-noise level, score every run
+on the paper's metrics (ISE, IAE, RMSE, RMSD, overshoot, settling time, chattering, stick-slip
+severity), print a table and write compare.csv, compare.json and figures/ into --out.
+
+Uncertainty conditions: the paper's parametric-uncertainty conditions. nominal is the plant as
+specified; condition1, condition2 and condition3 raise the pipe damping c_pi, the pipe
+stiffness k_pi and the top-drive damping c_dt by 40/30/30 %, 60/50/40 % and 75/75/75 %.
+
+examples:
+  drill-gym compare                                    # the default comparison
+  drill-gym compare --gains rescaled                   # Table 1 gains x J_dt
+  drill-gym compare --controllers csmc proposed --conditions nominal --noise 0 --duration 20
+"""
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="drill-gym compare",
-        description=(
-            "Compare the controllers on the paper's scenarios (docs/specification.md section 2): each controller "
-            "x uncertainty condition x noise level, scored by rollout + episode_metrics."
-        ),
-    )
+def _parser() -> ArgumentParser:
+    p = ArgumentParser(prog="drill-gym compare", description=DESCRIPTION)
     p.add_argument(
         "--controllers",
         nargs="+",
         metavar="NAME",
-        help="registered controller names (default: all, the paper's four first)",
+        type=names_type(controller_names, "controller"),
+        help="controllers to compare, by registered name: "
+        + ", ".join(controller_names())
+        + " (default: all, the paper's four first)",
     )
     p.add_argument(
         "--conditions",
         nargs="+",
         choices=CONDITIONS,
         default=list(CONDITIONS),
-        help="Table 3 uncertainty conditions (default: all four)",
+        metavar="NAME",
+        help=CONDITIONS_HELP + "; allowed " + ", ".join(CONDITIONS) + " (default: all four)",
     )
     p.add_argument(
         "--noise",
         nargs="+",
-        type=_non_negative,
+        type=number_type(0.0, 10.0, unit="rad/s"),
         default=list(DEFAULT_NOISE_RAD_S),
         metavar="STD",
-        help="measurement noise levels, rad/s (default: 0 0.1)",
+        help="standard deviations of the measurement noise on the speeds, rad/s",
     )
     p.add_argument(
-        "--duration", type=float, default=DEFAULT_DURATION_S, help="run length, s (default 150)"
+        "--duration",
+        type=number_type(0.0, 1e5, open_low=True, unit="s"),
+        default=DEFAULT_DURATION_S,
+        metavar="S",
+        help="length of every run, s (a multiple of the 1 ms plant step)",
     )
-    p.add_argument("--seed", type=int, default=0, help="reset seed of every run (default 0)")
     p.add_argument(
-        "--out", type=Path, default=Path("results"), help="output folder (default results/)"
+        "--seed",
+        type=number_type(0, 2**32 - 1, integer=True),
+        default=0,
+        metavar="N",
+        help="reset seed of every run (it drives the measurement noise)",
     )
+    p.add_argument("--out", type=Path, default=Path("results"), metavar="DIR", help="output folder")
     p.add_argument(
         "--reading",
         choices=("plant", "controller"),
         default="plant",
-        help="uncertainty reading: scale the true plant (default) or the controllers' model",
+        help="where the uncertainty acts: plant scales the true plant, controller scales the "
+        "controllers' model of it",
     )
     p.add_argument(
         "--gains",
         choices=tuple(GAIN_PRESETS),
         default="paper",
-        help="gain preset: Table 1 (paper, default) or Table 1 x J_dt (rescaled)",
+        help="gain preset: paper (the paper's Table 1) or rescaled (Table 1 x the top-drive "
+        "inertia J_dt)",
     )
-    p.add_argument("--no-plots", action="store_true", help="skip the figures")
+    p.add_argument("--no-plots", action="store_true", help="write no figures")
     p.add_argument("--no-agent", action="store_true", help="leave out the shipped residual agent")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
@@ -518,17 +606,13 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
     """
     parser = _parser()
     args = parser.parse_args(argv)
-    registered = controller_names()
     controllers = list(args.controllers) if args.controllers else default_controllers()
-    unknown = [c for c in controllers if c not in registered]
-    if unknown:
-        parser.error(
-            f"unknown controller(s) {', '.join(unknown)}: valid names are {', '.join(registered)}"
-        )
     try:
         decision_period(args.duration)
-    except ValueError as exc:
-        parser.error(str(exc))
+    except ValueError:
+        parser.fail(
+            "--duration", f"{args.duration:g} is not a multiple of the {PLANT_DT_S:g} s plant step"
+        )
     agent = None if args.no_agent else load_agent(agent_loader)
     start = time.perf_counter()
     rows, traces = run_comparison(

@@ -19,7 +19,7 @@ maxima, minima and sums over the window are kept
 
 Command line (see ``drill-gym map --help``)::
 
-    drill-gym map --controller stiff_pi soft_speed z_torque proposed --out results/
+    drill-gym map --controllers stiff_pi soft_speed z_torque proposed --out results/
 
 writes per controller ``stick_slip_map_<name>.csv`` (columns ``wob_n``,
 ``reference_speed_rad_s``, ``stick_slip_severity``, ``stuck_fraction``) and
@@ -48,7 +48,8 @@ from drill_env.evaluation import reset_each
 from drill_env.limits import MAX_REFERENCE_RAD_S, MAX_WOB_N
 from drill_env.metrics import WindowStatistics
 from drill_env.parameters import PLANT_DT_S, PRESETS
-from experiments.plots import plot_map, plot_maps
+from experiments.arguments import ArgumentParser, names_type, number_type
+from experiments.plots import map_figure, maps_figure, save_figure
 from experiments.tables import write_csv
 
 __all__ = [
@@ -303,76 +304,114 @@ def write_map_csv(result: StickSlipMap, path: str | Path) -> Path:
 
 
 # ---------------------------------------------------------------------------- command line
-def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="drill-gym map",
-        description=(
-            "Stick-slip map of a controller: for each (WOB, reference bit speed) cell, run "
-            "from rest and report the stick-slip severity and the stuck fraction after the "
-            "start-up transient. Writes a CSV and a heatmap PNG per controller."
-        ),
-    )
+DESCRIPTION: Final = """\
+Stick-slip map of each controller over weight on bit (WOB) x reference bit speed: every cell
+is one run from rest with a constant WOB and reference; over the last --window seconds the map
+keeps the stick-slip severity (max - min) / (2 mean) of the bit speed (about 1 or more:
+stick-slip, near 0: steady rotation) and the share of time the bit is stuck. A cell is in
+stick-slip when its bit sticks in the window or its severity exceeds 0.5; the white line of the
+figures is the boundary of that region.
+
+Writes, per controller, stick_slip_map_NAME.csv and stick_slip_map_NAME.png into --out, and
+stick_slip_maps.png with every controller side by side when there are several.
+
+examples:
+  drill-gym map                                         # stiff_pi on the default grid
+  drill-gym map --controllers stiff_pi soft_speed z_torque proposed --out results/maps
+  drill-gym map --wob-n 5 --speed-n 4 --duration 40 --window 20   # a quick coarse map
+"""
+
+
+def _parser() -> ArgumentParser:
+    parser = ArgumentParser(prog="drill-gym map", description=DESCRIPTION)
+    controllers = names_type(controller_names, "controller")
     parser.add_argument(
-        "--controller",
+        "--controllers",
         nargs="+",
         default=["stiff_pi"],
+        type=controllers,
         metavar="NAME",
-        help=f"controller name(s): {', '.join(controller_names())} (default: stiff_pi)",
+        help=f"controllers to map, by registered name: {', '.join(controller_names())}",
     )
-    parser.add_argument("--wob-min", type=float, default=40e3, help="lowest WOB, N (default 40000)")
-    parser.add_argument(
-        "--wob-max", type=float, default=200e3, help="highest WOB, N (default 200000)"
+    parser.add_argument(  # the earlier name, still accepted
+        "--controller", dest="controllers", nargs="+", type=controllers, help=argparse.SUPPRESS
     )
-    parser.add_argument("--wob-n", type=int, default=20, help="number of WOB values (default 20)")
+    wob = number_type(0.0, MAX_WOB_N, open_low=True, unit="N")
+    speed = number_type(0.0, MAX_REFERENCE_RAD_S, open_low=True, unit="rad/s")
+    count = number_type(1, 10_000, integer=True)
     parser.add_argument(
-        "--speed-min", type=float, default=1.0, help="lowest reference bit speed, rad/s (default 1)"
+        "--wob-min", type=wob, default=40e3, metavar="NEWTONS", help="lowest WOB, N"
+    )
+    parser.add_argument(
+        "--wob-max", type=wob, default=200e3, metavar="NEWTONS", help="highest WOB, N"
+    )
+    parser.add_argument(
+        "--wob-n", type=count, default=20, metavar="COUNT", help="number of WOB values"
+    )
+    parser.add_argument(
+        "--speed-min",
+        type=speed,
+        default=1.0,
+        metavar="RAD_S",
+        help="lowest reference bit speed, rad/s",
     )
     parser.add_argument(
         "--speed-max",
-        type=float,
+        type=speed,
         default=16.0,
-        help="highest reference bit speed, rad/s (default 16)",
+        metavar="RAD_S",
+        help="highest reference bit speed, rad/s",
     )
-    parser.add_argument("--speed-n", type=int, default=16, help="number of speeds (default 16)")
     parser.add_argument(
-        "--duration", type=float, default=100.0, help="length of each run, s (default 100)"
+        "--speed-n", type=count, default=16, metavar="COUNT", help="number of reference speeds"
+    )
+    parser.add_argument(
+        "--duration",
+        type=number_type(0.0, 1e4, open_low=True, unit="s"),
+        default=100.0,
+        metavar="S",
+        help="length of each run from rest, s (a multiple of 0.1 s)",
     )
     parser.add_argument(
         "--window",
-        type=float,
+        type=number_type(0.0, 1e4, open_low=True, unit="s"),
         default=DEFAULT_WINDOW_S,
-        help=f"analysis window at the end of each run, s (default {DEFAULT_WINDOW_S:g})",
+        metavar="S",
+        help="analysis window at the end of each run, s (at most --duration)",
     )
     parser.add_argument(
         "--noise",
-        type=float,
+        type=number_type(0.0, 10.0, unit="rad/s"),
         default=0.0,
         metavar="STD",
-        help="measurement noise on the speeds, rad/s (default 0: deterministic)",
+        help="standard deviation of the measurement noise on the speeds, rad/s (0: the map is "
+        "deterministic)",
     )
     parser.add_argument(
-        "--parameters", default="zribi2024", choices=sorted(PRESETS), help="plant preset"
+        "--parameters", default="zribi2024", choices=sorted(PRESETS), help="plant parameter preset"
     )
-    parser.add_argument("--out", type=Path, default=Path("results"), help="output folder")
-    parser.add_argument("--seed", type=int, default=0, help="seed of cell 0 (default 0)")
-    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    parser.add_argument(
+        "--out", type=Path, default=Path("results"), metavar="DIR", help="output folder"
+    )
+    parser.add_argument(
+        "--seed",
+        type=number_type(0, 2**31 - 1, integer=True),
+        default=0,
+        metavar="N",
+        help="reset seed of the first cell (cell i uses seed + i; it drives the noise)",
+    )
+    parser.add_argument("--no-plots", action="store_true", help="write the CSV files only")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``drill-gym map``: compute, write and plot the maps; returns the exit code.
 
-    Bad arguments end with an argparse error (exit code 2) naming the argument.
+    Bad arguments end with one line on standard error naming the argument (exit code 2).
     """
     parser = _parser()
     args = parser.parse_args(argv)
-    names = controller_names()
-    unknown = [c for c in args.controller if c not in names]
-    if unknown:
-        parser.error(
-            f"argument --controller: unknown controller(s) {', '.join(map(repr, unknown))}: "
-            f"valid names are {', '.join(names)}"
-        )
     try:
         wobs = grid_values("wob", args.wob_min, args.wob_max, args.wob_n, MAX_WOB_N)
         speeds = grid_values(
@@ -380,17 +419,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     except ValueError as err:
         parser.error(f"argument {err}")
-    for flag, value, ok, allowed in (
-        ("--duration", args.duration, 0 < args.duration <= 1e4, "(0, 10000] s"),
-        ("--window", args.window, 0 < args.window <= args.duration, "(0, --duration]"),
-        ("--noise", args.noise, 0 <= args.noise <= 10, "[0, 10] rad/s"),
-    ):
-        if not (math.isfinite(value) and ok):
-            parser.error(f"argument {flag}: {value!r} is out of range: allowed {allowed}")
+    if args.window > args.duration:
+        parser.fail(
+            "--window",
+            f"{args.window:g} is out of range: allowed (0, --duration = {args.duration:g}] s",
+        )
     if abs(round(args.duration * 10) - args.duration * 10) > 1e-6:
-        parser.error(f"argument --duration: {args.duration!r} must be a multiple of 0.1 s")
+        parser.fail("--duration", f"{args.duration:g} is not a multiple of 0.1 s")
     results = []
-    for name in dict.fromkeys(args.controller):
+    for name in dict.fromkeys(args.controllers):
         result = compute_map(
             name,
             wobs,
@@ -402,18 +439,19 @@ def main(argv: Sequence[str] | None = None) -> int:
             parameters=args.parameters,
             progress=not args.no_progress,
         )
-        csv_path = write_map_csv(result, args.out / f"stick_slip_map_{name}.csv")
-        png_path = plot_map(result, args.out / f"stick_slip_map_{name}.png")
+        written = [write_map_csv(result, args.out / f"stick_slip_map_{name}.csv")]
+        if not args.no_plots:
+            written.append(save_figure(map_figure(result), args.out / f"stick_slip_map_{name}.png"))
         simulated = result.cells * result.duration_s
         print(
             f"{name}: {result.cells} cells x {result.duration_s:g} s in "
             f"{result.wall_time_s:.1f} s ({simulated / result.wall_time_s:,.0f} simulated s per "
-            f"wall s); {int(result.unstable().sum())} cells in stick-slip; wrote {csv_path} and "
-            f"{png_path}"
+            f"wall s); {int(result.unstable().sum())} cells in stick-slip; wrote "
+            + " and ".join(str(p) for p in written)
         )
         results.append(result)
-    if len(results) > 1:
-        print(f"wrote {plot_maps(results, args.out / 'stick_slip_maps.png')}")
+    if len(results) > 1 and not args.no_plots:
+        print(f"wrote {save_figure(maps_figure(results), args.out / 'stick_slip_maps.png')}")
     return 0
 
 

@@ -178,30 +178,28 @@ class TestArguments:
         assert names[:4] == ["csmc", "msmc", "asmc", "proposed"]
         assert len(names) == len(set(names))
 
-    def test_unknown_controller(self, capsys: pytest.CaptureFixture[str]) -> None:
+    @pytest.mark.parametrize(
+        ("argv", "message"),
+        [
+            (["--controllers", "pid"], "argument --controllers: unknown controller 'pid': allowed csmc, msmc, asmc, proposed"),
+            (["--conditions", "condition4"], "argument --conditions: invalid choice: 'condition4'"),
+            (["--noise", "-0.1"], "argument --noise: -0.1 is out of range: allowed [0, 10] rad/s"),
+            (["--noise", "nan"], "argument --noise: nan is out of range"),
+            (["--duration", "0"], "argument --duration: 0 is out of range: allowed (0, 100000] s"),
+            (["--duration", "-5"], "argument --duration: -5 is out of range"),
+            (["--duration", "0.0005"], "argument --duration: 0.0005 is not a multiple of the 0.001 s plant step"),
+            (["--seed", "-1"], "argument --seed: -1 is out of range: allowed [0, 4294967295]"),
+        ],
+    )  # fmt: skip
+    def test_bad_arguments(
+        self, argv: list[str], message: str, capsys: pytest.CaptureFixture[str]
+    ) -> None:
         with pytest.raises(SystemExit) as exc:
-            main(["--controllers", "pid", "--no-agent"])
+            main([*argv, "--no-agent"])
         assert exc.value.code == 2
-        assert "unknown controller(s) pid: valid names are csmc, msmc, asmc, proposed" in (
-            capsys.readouterr().err
-        )
-
-    def test_unknown_condition(self, capsys: pytest.CaptureFixture[str]) -> None:
-        with pytest.raises(SystemExit):
-            main(["--conditions", "condition4"])
-        assert "invalid choice: 'condition4'" in capsys.readouterr().err
-
-    @pytest.mark.parametrize("noise", ["-0.1", "nan"])
-    def test_bad_noise(self, noise: str, capsys: pytest.CaptureFixture[str]) -> None:
-        with pytest.raises(SystemExit):
-            main(["--noise", noise])
-        assert "noise must be a finite number >= 0" in capsys.readouterr().err
-
-    @pytest.mark.parametrize("duration", ["0", "-5", "0.0005"])
-    def test_bad_duration(self, duration: str, capsys: pytest.CaptureFixture[str]) -> None:
-        with pytest.raises(SystemExit):
-            main(["--duration", duration, "--no-agent"])
-        assert "duration = " in capsys.readouterr().err
+        err = capsys.readouterr().err
+        assert err.startswith(f"drill-gym compare: error: {message}"), err
+        assert err.count("\n") == 1 and err.endswith(" (see drill-gym compare --help)\n")
 
     @pytest.mark.parametrize(
         ("duration", "period"), [(150.0, 1.0), (2.5, 0.5), (0.3, 0.1), (1.234, 0.002)]

@@ -140,21 +140,22 @@ def test_map_is_deterministic_without_noise_and_seeded_with_noise() -> None:
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["--controller", "pid"], r"argument --controller: unknown controller\(s\) 'pid'"),
-        (["--wob-min", "-1"], r"argument --wob-min = -1.0 is out of range"),
-        (["--wob-min", "0"], r"argument --wob-min = 0.0 is out of range"),
+        (["--controller", "pid"], r"argument --controller: unknown controller 'pid': allowed csmc, .*z_torque"),
+        (["--wob-min", "-1"], r"argument --wob-min: -1 is out of range: allowed \(0, 1e\+06\] N"),
+        (["--wob-min", "0"], r"argument --wob-min: 0 is out of range"),
         (["--wob-min", "2e5", "--wob-max", "1e5"], r"--wob-min = 200000.0 and --wob-max = 100000.0: the range is inverted"),
         (["--wob-min", "5e4", "--wob-max", "5e4"], r"the range is empty"),
-        (["--wob-n", "0"], r"argument --wob-n = 0 is out of range"),
-        (["--speed-min", "0"], r"argument --speed-min = 0.0 is out of range"),
-        (["--speed-max", "-3"], r"argument --speed-max = -3.0 is out of range"),
+        (["--wob-n", "0"], r"argument --wob-n: 0 is out of range: allowed \[1, 10000\]"),
+        (["--speed-min", "0"], r"argument --speed-min: 0 is out of range: allowed \(0, 100\] rad/s"),
+        (["--speed-max", "-3"], r"argument --speed-max: -3 is out of range"),
         (["--speed-min", "9", "--speed-max", "2"], r"--speed-min = 9.0 and --speed-max = 2.0: the range is inverted"),
-        (["--speed-n", "-2"], r"argument --speed-n = -2 is out of range"),
-        (["--duration", "0"], r"argument --duration: 0.0 is out of range"),
-        (["--duration", "10", "--window", "20"], r"argument --window: 20.0 is out of range"),
-        (["--duration", "10.05", "--window", "5"], r"argument --duration: 10.05 must be a multiple of 0.1 s"),
-        (["--noise", "-1"], r"argument --noise: -1.0 is out of range"),
-        (["--wob-n", "two"], r"argument --wob-n: invalid int value: 'two'"),
+        (["--speed-n", "-2"], r"argument --speed-n: -2 is out of range"),
+        (["--duration", "0"], r"argument --duration: 0 is out of range: allowed \(0, 10000\] s"),
+        (["--duration", "10", "--window", "20"], r"argument --window: 20 is out of range: allowed \(0, --duration = 10\] s"),
+        (["--duration", "10.05", "--window", "5"], r"argument --duration: 10.05 is not a multiple of 0.1 s"),
+        (["--noise", "-1"], r"argument --noise: -1 is out of range: allowed \[0, 10\] rad/s"),
+        (["--wob-n", "two"], r"argument --wob-n: 'two' is not an integer"),
+        (["--parameters", "nope"], r"argument --parameters: invalid choice: 'nope'"),
     ],
 )  # fmt: skip
 def test_cli_bad_input_names_the_argument(
@@ -164,7 +165,8 @@ def test_cli_bad_input_names_the_argument(
         main(argv)
     assert exc.value.code == 2
     err = capsys.readouterr().err
-    assert "usage: drill-gym map" in err
+    assert err.startswith("drill-gym map: error: ") and err.count("\n") == 1, err
+    assert err.endswith(" (see drill-gym map --help)\n") and "usage:" not in err
     assert re.search(message, err), err
 
 
@@ -173,7 +175,7 @@ def test_cli_smoke_run_writes_csv_and_png(
 ) -> None:
     argv = [
         "map",
-        "--controller", "stiff_pi", "z_torque",
+        "--controllers", "stiff_pi", "z_torque",
         "--wob-min", "60000", "--wob-max", "180000", "--wob-n", "2",
         "--speed-min", "3", "--speed-max", "12", "--speed-n", "2",
         "--duration", "2", "--window", "1",
@@ -201,3 +203,15 @@ def test_cli_single_cell_grid(tmp_path: Path) -> None:
     assert main(argv) == 0
     assert (tmp_path / "stick_slip_map_stiff_pi.png").exists()
     assert not (tmp_path / "stick_slip_maps.png").exists()
+
+
+def test_cli_no_plots_writes_only_csv(tmp_path: Path) -> None:
+    argv = [
+        "--controller", "soft_speed", "csmc", "--wob-n", "2", "--speed-n", "2",
+        "--duration", "1", "--window", "0.5", "--out", str(tmp_path), "--no-progress", "--no-plots",
+    ]  # fmt: skip
+    assert main(argv) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "stick_slip_map_csmc.csv",
+        "stick_slip_map_soft_speed.csv",
+    ]

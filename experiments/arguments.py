@@ -1,0 +1,185 @@
+"""The one argument parser of every ``drill-gym`` subcommand, and its value checks.
+
+Every user error of the command line ends the same way: ONE line on standard error,
+``drill-gym SUB: error: MESSAGE (see drill-gym SUB --help)``, and exit code 2, whether argparse
+found it (an unknown option, a value that does not parse) or the subcommand did (a value out of
+range, an unknown controller name). The help of every option shows its default.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any, NoReturn
+
+__all__ = [
+    "ArgumentParser",
+    "HelpFormatter",
+    "error_line",
+    "names_type",
+    "number_type",
+    "one_line",
+    "run_command",
+]
+
+USAGE_ERROR: int = 2
+"""Exit code of a user error (the argparse convention)."""
+
+
+def one_line(text: str) -> str:
+    """``text`` with every run of white space (newlines included) replaced by one space."""
+    return " ".join(str(text).split())
+
+
+def error_line(prog: str, message: str) -> str:
+    """The one line that reports a user error of the command ``prog``."""
+    return f"{prog}: error: {one_line(message)} (see {prog} --help)"
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Keeps the description's paragraphs as written and appends ``(default: X)`` to every
+    option whose help does not state its default (switches that are off by default and options
+    without a default say nothing)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        default = action.default
+        if (
+            "(default" in text
+            or default is None
+            or default is argparse.SUPPRESS
+            or isinstance(default, bool)
+            or action.nargs == 0
+            or not action.option_strings
+        ):
+            return text
+        if isinstance(default, (list, tuple)):
+            shown = " ".join(f"{v:g}" if isinstance(v, float) else str(v) for v in default)
+        elif isinstance(default, float):
+            shown = f"{default:g}"
+        else:
+            shown = str(default)
+        return f"{text} (default: {shown.replace('%', '%%')})"
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """``argparse.ArgumentParser`` that reports a user error on one line and exits with 2.
+
+    ``prog`` is the command as the user types it (``drill-gym compare``); the formatter is
+    :class:`HelpFormatter` unless another is given.
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str) -> NoReturn:
+        """Print ``drill-gym SUB: error: MESSAGE (see drill-gym SUB --help)``; exit 2."""
+        self.exit(USAGE_ERROR, error_line(self.prog, message) + "\n")
+
+    def fail(self, option: str, message: str) -> NoReturn:
+        """A user error of ``option`` (``--duration``): ``argument --duration: MESSAGE``."""
+        self.error(f"argument {option}: {message}")
+
+
+def number_type(
+    low: float | None = None,
+    high: float | None = None,
+    *,
+    open_low: bool = False,
+    integer: bool = False,
+    unit: str = "",
+) -> Callable[[str], Any]:
+    """An argparse ``type`` that parses a finite number and checks ``low <= value <= high``
+    (``low < value`` with ``open_low``); its error names the value and the allowed range.
+
+    Args:
+        low, high: Range ends (``None``: unbounded).
+        open_low: Exclude ``low`` itself.
+        integer: Parse an integer instead of a float.
+        unit: Unit shown in the message (``"s"``, ``"N"``, ``"rad/s"``).
+    """
+    unit_text = f" {unit}" if unit else ""
+
+    def show(value: float) -> str:
+        return str(int(value)) if integer else f"{value:g}"
+
+    if low is not None and high is not None:
+        allowed = f"{'(' if open_low else '['}{show(low)}, {show(high)}]{unit_text}"
+    elif low is not None:
+        allowed = f"{'>' if open_low else '>='} {show(low)}{unit_text}"
+    elif high is not None:
+        allowed = f"<= {show(high)}{unit_text}"
+    else:
+        allowed = "a finite number"
+    kind = "an integer" if integer else "a number"
+
+    def parse(text: str) -> Any:
+        try:
+            value: float = int(text) if integer else float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {kind}") from None
+        ok = math.isfinite(value)
+        if ok and low is not None:
+            ok = value > low if open_low else value >= low
+        if ok and high is not None:
+            ok = value <= high
+        if not ok:
+            raise argparse.ArgumentTypeError(f"{text} is out of range: allowed {allowed}")
+        return value
+
+    parse.__name__ = "integer" if integer else "number"
+    return parse
+
+
+def names_type(valid: Callable[[], Sequence[str]], what: str) -> Callable[[str], str]:
+    """An argparse ``type`` that accepts one of the names ``valid()`` returns (read when the
+    option is parsed, so plugins registered at import time count); the error lists them."""
+
+    def parse(text: str) -> str:
+        names = list(valid())
+        if text not in names:
+            raise argparse.ArgumentTypeError(f"unknown {what} {text!r}: allowed {', '.join(names)}")
+        return text
+
+    parse.__name__ = what
+    return parse
+
+
+def run_command(prog: str, main: Callable[[], int], debug: bool) -> int:
+    """Run ``main()`` and turn a user error into one line on standard error and exit code 2.
+
+    User errors are ``ValueError`` and ``OSError`` (a bad value, a missing or unreadable file)
+    and a missing optional package (``ModuleNotFoundError``); with ``debug`` they are raised
+    again with their traceback. ``SystemExit`` (from a parser:
+    ``--help``, a usage error) becomes its exit code; Ctrl-C exits with 130.
+    """
+    try:
+        return int(main() or 0)
+    except SystemExit as exc:
+        code = exc.code
+        if code is None:
+            return 0
+        if isinstance(code, int):
+            return code
+        print(code, file=sys.stderr)
+        return 1
+    except ModuleNotFoundError as exc:
+        if debug:
+            raise
+        print(
+            f"{prog}: error: needs the package {exc.name!r}, which is not installed "
+            "(the rl extra has torch and stable-baselines3: pip install -e '.[rl]')",
+            file=sys.stderr,
+        )
+        return USAGE_ERROR
+    except (ValueError, OSError) as exc:
+        if debug:
+            raise
+        print(error_line(prog, str(exc)), file=sys.stderr)
+        return USAGE_ERROR
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted", file=sys.stderr)
+        return 130
