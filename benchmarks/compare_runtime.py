@@ -38,7 +38,7 @@ def _children_cpu_s() -> float:
 def run_once(args: list[str], out: Path) -> tuple[float, int, float, float, float]:
     """Wall time (s), runs, the simulation and total times the command reports (s), and the
     CPU time of the process (s)."""
-    cmd = [sys.executable, "-m", "drill_env.cli", "compare", *args, "--no-progress"]
+    cmd = [sys.executable, "-m", "experiments.cli", "compare", *args, "--no-progress"]
     env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
     cpu0 = _children_cpu_s()
     start = time.perf_counter()

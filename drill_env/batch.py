@@ -159,7 +159,6 @@ class StringBatch:
         node_cols = self.max_nodes if self.chain else 1
         self.arrays = kernel.BatchArrays(
             x=np.zeros((n, state_size)),
-            x_backup=np.zeros((n, state_size if self.chain else 1)),
             ints=np.zeros((n, N_INTS), dtype=np.int64),
             scalars=np.zeros((n, N_SCALARS)),
             plant=np.zeros(

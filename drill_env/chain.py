@@ -74,7 +74,6 @@ __all__ = [
     "CP_XI",
     "PlantLike",
     "chain_derivative",
-    "chain_in_bounds",
     "chain_probe_state",
     "chain_surface_torque",
     "chain_integrate_constant_torque",
@@ -82,6 +81,7 @@ __all__ = [
     "chain_parameter_vector",
     "chain_state_derivative",
     "chain_step",
+    "chain_step_checked",
     "chain_work",
     "stack_chain_parameters",
     "steady_drilling_state",
@@ -353,24 +353,9 @@ def _slip_step(p, n, work, mode, u, t_a, t_0, h) -> int:
     return new_mode
 
 
-@njit(cache=True)
-def chain_step(x, mode: int, u: float, p, t_a: float, t_0: float, h: float, work) -> int:
-    """Advance the chain by one step of ``h`` seconds under constant top-drive torque ``u``.
-
-    Args:
-        x: State (layout in the module docstring), updated IN PLACE; entries beyond
-            ``2 n - 1`` are not touched.
-        mode: Bit slip mode at the start of the step: 0 (``STUCK``) or +1/-1 (slipping).
-        u: Top-drive torque held over the step, N m.
-        p: Parameter vector (:func:`chain_parameter_vector`); ``n = int(p[0])``.
-        t_a: Maximum static bit torque ``mu_a WOB R``, N m.
-        t_0: Sliding bit torque ``mu_0 WOB R``, N m.
-        h: Step, s.
-        work: Scratch float64 array, shape ``(CHAIN_WORK_ROWS, >= n)`` (:func:`chain_work`).
-
-    Returns:
-        The slip mode at the end of the step. A stuck bit's speed is exactly 0.
-    """
+@njit(cache=True, inline="always")
+def _advance_work(x, mode: int, u: float, p, t_a: float, t_0: float, h: float, work) -> int:
+    """One step from ``x`` into the OUT rows of ``work``; returns the new slip mode."""
     n = int(p[0])
     m = n - 1
     for i in range(m):
@@ -402,6 +387,29 @@ def chain_step(x, mode: int, u: float, p, t_a: float, t_0: float, h: float, work
                 new_mode = direction
             else:
                 new_mode = _slip_step(p, n, work, direction, u, t_a, t_0, rest)
+    return new_mode
+
+
+@njit(cache=True)
+def chain_step(x, mode: int, u: float, p, t_a: float, t_0: float, h: float, work) -> int:
+    """Advance the chain by one step of ``h`` seconds under constant top-drive torque ``u``.
+
+    Args:
+        x: State (layout in the module docstring), updated IN PLACE; entries beyond
+            ``2 n - 1`` are not touched.
+        mode: Bit slip mode at the start of the step: 0 (``STUCK``) or +1/-1 (slipping).
+        u: Top-drive torque held over the step, N m.
+        p: Parameter vector (:func:`chain_parameter_vector`); ``n = int(p[0])``.
+        t_a: Maximum static bit torque ``mu_a WOB R``, N m.
+        t_0: Sliding bit torque ``mu_0 WOB R``, N m.
+        h: Step, s.
+        work: Scratch float64 array, shape ``(CHAIN_WORK_ROWS, >= n)`` (:func:`chain_work`).
+
+    Returns:
+        The slip mode at the end of the step. A stuck bit's speed is exactly 0.
+    """
+    new_mode = _advance_work(x, mode, u, p, t_a, t_0, h, work)
+    m = int(p[0]) - 1
     for i in range(m):
         x[2 * i] = work[_OUT_W, i]
         x[2 * i + 1] = work[_OUT_T, i]
@@ -410,21 +418,58 @@ def chain_step(x, mode: int, u: float, p, t_a: float, t_0: float, h: float, work
 
 
 @njit(cache=True)
+def chain_step_checked(
+    x, mode: int, u: float, p, t_a: float, t_0: float, h: float, work, max_speed: float,
+    max_twist: float,
+):  # fmt: skip
+    """:func:`chain_step` that keeps ``x`` unchanged when the new state is not finite or
+    beyond the bounds (rad/s for speeds, rad for twists). Returns ``(mode, accepted)``."""
+    n = int(p[0])
+    m = n - 1
+    new_mode = _advance_work(x, mode, u, p, t_a, t_0, h, work)
+    for i in range(m):
+        w = work[_OUT_W, i]
+        t = work[_OUT_T, i]
+        if not (abs(w) <= max_speed and abs(t) <= max_twist):  # also false for NaN
+            return mode, False
+    if not abs(work[_OUT_W, m]) <= max_speed:
+        return mode, False
+    for i in range(m):
+        x[2 * i] = work[_OUT_W, i]
+        x[2 * i + 1] = work[_OUT_T, i]
+    x[2 * m] = work[_OUT_W, m]
+    return new_mode, True
+
+
+@njit(cache=True)
 def chain_probe_state(x, probes):
     """The 4-DOF coordinates of the chain state ``x`` at the probe nodes ``probes`` (4 node
     indices, top to bottom: top drive, pipe, collars, bit; :func:`drill_env.modes.probe_nodes`):
     ``(w_a, phi_a - phi_b, w_b, phi_b - phi_c, w_c, phi_c - phi_d, w_d)``, rad/s and rad, each
     twist the sum of the element twists between two probes."""
-    twists = [0.0, 0.0, 0.0]
-    for k in range(3):
-        total = 0.0
-        for e in range(probes[k], probes[k + 1]):
-            total += x[2 * e + 1]
-        twists[k] = total
+    a, b, c, d = probes[0], probes[1], probes[2], probes[3]
     return (
-        x[2 * probes[0]], twists[0], x[2 * probes[1]], twists[1], x[2 * probes[2]],
-        twists[2], x[2 * probes[3]],
+        x[2 * a], _twist_sum(x, a, b), x[2 * b], _twist_sum(x, b, c), x[2 * c],
+        _twist_sum(x, c, d), x[2 * d],
     )  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def _twist_sum(x, first: int, last: int) -> float:
+    """Sum of the element twists ``first .. last - 1`` (four running sums: a long string's
+    sum is then not one chain of dependent additions)."""
+    s0 = s1 = s2 = s3 = 0.0
+    e = first
+    while e + 4 <= last:
+        s0 += x[2 * e + 1]
+        s1 += x[2 * e + 3]
+        s2 += x[2 * e + 5]
+        s3 += x[2 * e + 7]
+        e += 4
+    while e < last:
+        s0 += x[2 * e + 1]
+        e += 1
+    return (s0 + s1) + (s2 + s3)
 
 
 @njit(cache=True)
@@ -432,18 +477,6 @@ def chain_surface_torque(x, p) -> float:
     """Torque at the top of the string, N m: the top element's ``k theta + c (w_0 - w_1)``."""
     n = int(p[CP_N])
     return p[CHAIN_HEADER + 2 * n] * x[1] + p[CHAIN_HEADER + 3 * n - 1] * (x[0] - x[2])
-
-
-@njit(cache=True)
-def chain_in_bounds(x, n: int, max_speed: float, max_twist: float) -> bool:
-    """Whether every entry of the chain state is finite and within the bounds."""
-    for k in range(2 * n - 1):
-        v = x[k]
-        if not math.isfinite(v):
-            return False
-        if abs(v) > (max_speed if k % 2 == 0 else max_twist):
-            return False
-    return True
 
 
 @njit(cache=True)

@@ -49,9 +49,8 @@ from drill_env.chain import (
     CP_MU_A,
     CP_N,
     CP_R,
-    chain_in_bounds,
     chain_probe_state,
-    chain_step,
+    chain_step_checked,
     chain_surface_torque,
 )
 from drill_env.control import call_law
@@ -172,7 +171,6 @@ class BatchArrays(NamedTuple):
     Attributes:
         x: States, (N, NX) float64, rad/s and rad: the 4-DOF state (NX = 7) or a distributed
             string's node speeds and element twists (NX = 2 n_max - 1, zero-padded).
-        x_backup: Scratch, (N, NX): a distributed string's state before the step.
         ints: Counters, (N, N_INTS) int64 (``I_*``: slip mode, plant steps taken, status,
             noise row, profile knot counts); strings not OK at the start are not advanced
             (records NaN, reward sums 0).
@@ -204,7 +202,6 @@ class BatchArrays(NamedTuple):
     """
 
     x: npt.NDArray[np.float64]
-    x_backup: npt.NDArray[np.float64]
     ints: npt.NDArray[np.int64]
     scalars: npt.NDArray[np.float64]
     plant: npt.NDArray[np.float64]
@@ -506,7 +503,6 @@ def _advance_chain_one(i, b, s):
     """One distributed string (its state an array advanced in place)."""
     p = b.plant[i]
     xs = b.x[i]
-    backup = b.x_backup[i]
     work = b.work[i]
     probes = b.probes[i]
     n = int(p[CP_N])
@@ -576,15 +572,15 @@ def _advance_chain_one(i, b, s):
         if mi == STUCK:
             stuck += 1.0
         n_done += 1
-        for c in range(size):
-            backup[c] = xs[c]
-        mn = chain_step(xs, mi, u, p, mu_a_r * wob, mu_0_r * wob, s.dt, work)
-        if chain_in_bounds(xs, n, MAX_SPEED_RAD_S, MAX_TWIST_RAD) and math.isfinite(u):
-            mi = mn
+        accepted = False
+        if math.isfinite(u):
+            mi, accepted = chain_step_checked(
+                xs, mi, u, p, mu_a_r * wob, mu_0_r * wob, s.dt, work, MAX_SPEED_RAD_S,
+                MAX_TWIST_RAD,
+            )  # fmt: skip
+        if accepted:
             k += 1
         else:
-            for c in range(size):
-                xs[c] = backup[c]
             ok = False
             ints[I_STATUS] = STATUS_DIVERGED
     _sums(rep, tracking, variation, stuck, n_done, torque_squared, residual_squared)
