@@ -9,7 +9,16 @@ length is chosen so that the count is exact), this prints the throughput of
     mode, no events), the textbook implementation,
 
 their ratio, the cost per element and step, and a straight-line fit of the cost per step against
-the element count (a fixed part per step plus a part per element).
+the element count (a fixed part per step plus a part per element); then, for 25, 100 and 400
+elements, the whole environment:
+
+(c) one ``DrillStringField-v0`` through ``gym.make`` with its field defaults (surface
+    signals, telemetry, actuator), stepped with a constant action: the full observation,
+    reward and info path, and
+(d) the batched kernel under the native vector env, 64 strings, serial and on numba's threads
+    (aggregate simulated seconds of all strings per wall second),
+
+each beside (b) in the same run.
 All numbers are warm (compiled code cached, one untimed warm-up run). The machine is shared, so
 only the ratios measured in the same run are meaningful.
 
@@ -22,9 +31,12 @@ import argparse
 import dataclasses
 import time
 
+import gymnasium as gym
 import numpy as np
 from numba import njit
 
+import drill_env  # noqa: F401  (registers DrillStringField-v0)
+from drill_env import kernel
 from drill_env.chain import chain_derivative, chain_parameter_vector, chain_step, chain_work
 from drill_env.distributed import (
     DISTRIBUTED_PRESETS,
@@ -123,6 +135,41 @@ def measure(count: int, seconds: float) -> tuple[int, float, float, int]:
     return n - 1, event_rate, plain_rate, state[1]
 
 
+def env_rate(params: DistributedStringParameters, seconds: float) -> float:
+    """(c) Simulated s per wall s of one ``gym.make`` env with the field defaults."""
+    env = gym.make("DrillStringField-v0", parameters=params, randomize=False, episode_s=1e5)
+    env.reset(seed=0)
+    action = np.zeros(1, dtype=np.float32)
+    for _ in range(20):
+        env.step(action)
+    steps = 0
+    start = time.perf_counter()
+    while time.perf_counter() - start < seconds:
+        env.step(action)
+        steps += 1
+    return steps * 0.05 / (time.perf_counter() - start)
+
+
+def batch_rate(params: DistributedStringParameters, seconds: float, parallel: bool) -> float:
+    """(d) Aggregate simulated s per wall s of 64 strings in the batched kernel."""
+    venv = gym.make_vec(
+        "DrillStringField-v0", num_envs=64, parameters=params, randomize=False,
+        episode_s=1e5, control_dt_s=0.5,
+    )  # fmt: skip
+    venv.reset(seed=0)
+    batch = venv.unwrapped.batch  # type: ignore[attr-defined]
+    dispatcher = kernel.advance_chain_batch_parallel if parallel else kernel.advance_chain_batch
+    batch._advance = kernel.fast_entry(dispatcher, batch.arrays, batch.settings)
+    actions = np.zeros(64)
+    batch.step(actions)
+    steps = 0
+    start = time.perf_counter()
+    while time.perf_counter() - start < seconds:
+        batch.step(actions)
+        steps += 1
+    return steps * 0.5 * 64 / (time.perf_counter() - start)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=3.0, help="wall time per measurement")
@@ -148,6 +195,21 @@ def main() -> None:
         f"chain_step cost per step = {intercept:.0f} ns + {slope:.2f} ns x elements "
         f"(least-squares line over the sizes, worst deviation {worst:.0%})"
     )
+    print()
+    print(
+        f"{'elements':>8} {'gym.make env':>13} {'batch serial':>13} {'batch threads':>14} "
+        f"{'plain RK4':>10}  (sim-s/s; env / RK4)"
+    )
+    for count in (25, 100, 400):
+        params = string_with_elements(count)
+        elements, _, plain_rate, _ = measure(count, args.seconds / 2)
+        single = env_rate(params, args.seconds)
+        serial = batch_rate(params, args.seconds, parallel=False)
+        threads = batch_rate(params, args.seconds, parallel=True)
+        print(
+            f"{elements:>8} {single:>13,.0f} {serial:>13,.0f} {threads:>14,.0f} "
+            f"{plain_rate:>10,.0f}  ({single / plain_rate:.2f})"
+        )
 
 
 if __name__ == "__main__":

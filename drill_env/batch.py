@@ -396,8 +396,8 @@ class StringBatch:
         else:
             scalars[:, F_COMMAND] = actions * self._action_gain + self._action_offset
         self._refill_noise()
-        if self._node_noise:
-            for i in range(self.num):
+        if self._node_noise:  # for the strings that move (not those being reset)
+            for i in np.flatnonzero(self.status == STATUS_OK).tolist():
                 self._draw_node_noise(i)
         if self.compiled or not self.controllers:
             self._advance(self.arrays, self.settings)

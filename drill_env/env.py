@@ -26,6 +26,7 @@ from drill_env.layout import (
     REP_SURFACE_TORQUE,
     REP_TELEMETRY_AGE,
     REP_TELEMETRY_BIT_SPEED,
+    REP_TELEMETRY_RECEIVED,
     REP_TIME,
     REP_TOP_DRIVE_SPEED,
     REP_TORQUE,
@@ -47,7 +48,8 @@ def report_info(report: Any, residual: bool, telemetry: bool) -> dict[str, Any]:
     ``surface_torque_nm`` (the measured torque at the top of the string), ``wob_n``,
     ``bit_stuck``; in residual mode also ``base_torque_nm``, ``sliding_variable_rad_s`` (the
     base controller's error signal) and ``adaptive_gain``; with telemetry also
-    ``telemetry_bit_speed_rad_s`` and ``telemetry_age_s`` (NaN before the first value).
+    ``telemetry_bit_speed_rad_s``, ``telemetry_age_s`` and ``telemetry_received`` (before the
+    first value arrives: 0 rad/s, the time since the start, and False).
     """
     if isinstance(report, np.ndarray):
         r = report
@@ -67,6 +69,7 @@ def report_info(report: Any, residual: bool, telemetry: bool) -> dict[str, Any]:
     if telemetry:
         for key, index in _TELEMETRY_COLUMNS:
             info[key] = report[index]
+        info["telemetry_received"] = report[REP_TELEMETRY_RECEIVED] > 0.5
     return info
 
 

@@ -116,6 +116,7 @@ from drill_env.layout import (
     REP_SURFACE_TORQUE,
     REP_TELEMETRY_AGE,
     REP_TELEMETRY_BIT_SPEED,
+    REP_TELEMETRY_RECEIVED,
     REP_TIME,
     REP_TOP_DRIVE_SPEED,
     REP_TORQUE,
@@ -385,9 +386,11 @@ def _finish(i, b, s, x, mi, k, wob, u_base_last, command_last) -> None:
     src[SRC_LAW_ERROR] = error
     src[SRC_TOP_DRIVE_SPEED] = meas[M_TOP_DRIVE_SPEED]
     src[SRC_SURFACE_TORQUE] = meas[M_SURFACE_TORQUE]
-    value, age = meas[M_TELEMETRY_BIT_SPEED], meas[M_TELEMETRY_AGE]
-    src[SRC_TELEMETRY_BIT_SPEED] = 0.0 if math.isnan(value) else value
-    src[SRC_TELEMETRY_AGE] = k * s.dt if math.isnan(age) else age
+    received = not math.isnan(meas[M_TELEMETRY_BIT_SPEED])
+    value = meas[M_TELEMETRY_BIT_SPEED] if received else 0.0
+    age = meas[M_TELEMETRY_AGE] if received else k * s.dt
+    src[SRC_TELEMETRY_BIT_SPEED] = value
+    src[SRC_TELEMETRY_AGE] = age
     src[SRC_LAST_COMMAND] = command_last
     write_observation(b.obs[i], src, s.obs_source, s.obs_scale)
     rep = b.report[i]
@@ -399,6 +402,7 @@ def _finish(i, b, s, x, mi, k, wob, u_base_last, command_last) -> None:
     rep[REP_SURFACE_TORQUE] = meas[M_SURFACE_TORQUE]
     rep[REP_TELEMETRY_BIT_SPEED] = value
     rep[REP_TELEMETRY_AGE] = age
+    rep[REP_TELEMETRY_RECEIVED] = 1.0 if received else 0.0
 
 
 @njit(cache=True)

@@ -110,9 +110,10 @@ REP_LAW_GAIN: Final = 15  # the law's adaptive gain
 REP_STATUS: Final = 16  # STATUS_* as a float
 REP_COMMAND: Final = 17  # last torque command, N m
 REP_SURFACE_TORQUE: Final = 18  # measured surface torque at the end, N m
-REP_TELEMETRY_BIT_SPEED: Final = 19  # last bit speed received by telemetry, rad/s (NaN: none)
-REP_TELEMETRY_AGE: Final = 20  # its age, s (NaN: none)
-N_REPORT: Final = 21
+REP_TELEMETRY_BIT_SPEED: Final = 19  # last bit speed received by telemetry, rad/s (0: none yet)
+REP_TELEMETRY_AGE: Final = 20  # its age, s (the time since the start before the first value)
+REP_TELEMETRY_RECEIVED: Final = 21  # 1.0 once a telemetry value has arrived
+N_REPORT: Final = 22
 
 # ---------------------------------------------------------------- per-string engine state
 # The engine keeps each string's counters, scalars, profiles and measurement-channel state in

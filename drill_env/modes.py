@@ -35,6 +35,7 @@ __all__ = [
     "BIT_ENDS",
     "TOP_ENDS",
     "Linearization",
+    "check_step_bound",
     "damped_modes",
     "highest_frequency_rad_s",
     "linearize",
@@ -131,6 +132,40 @@ def highest_frequency_rad_s(parameters: PlantLike) -> float:
     scale = 1.0 / np.sqrt(m)
     w2 = np.linalg.eigvalsh(k * scale[:, None] * scale[None, :])
     return float(math.sqrt(max(float(w2[-1]), 0.0)))
+
+
+MAX_STEP_FREQUENCY: Final = 2.0
+"""Largest ``h * highest_frequency_rad_s`` accepted for the plant step ``h`` (RK4 is stable up
+to about 2.8 on the imaginary axis)."""
+
+
+def check_step_bound(parameters: PlantLike, step_s: float) -> None:
+    """Raise ``ValueError`` when the plant step is too long for the chain's highest mode.
+
+    A cheap upper bound (Gershgorin's discs of the mass-normalised stiffness) decides most
+    strings; the eigenvalues are computed only when the bound is not conclusive.
+    """
+    chain = chain_from_parameters(resolve_plant(parameters))
+    inertia, k = chain.node_inertia_kg_m2, chain.element_stiffness_nm_rad
+    left = np.concatenate(([0.0], k))
+    right = np.concatenate((k, [0.0]))
+    scale = 1.0 / np.sqrt(inertia)
+    coupling = np.zeros_like(inertia)
+    coupling[1:] += k * scale[1:] * scale[:-1]
+    coupling[:-1] += k * scale[1:] * scale[:-1]
+    bound = math.sqrt(float(np.max((left + right) / inertia + coupling)))
+    if bound * step_s <= MAX_STEP_FREQUENCY:
+        return
+    highest = highest_frequency_rad_s(chain)
+    if highest * step_s > MAX_STEP_FREQUENCY:
+        shortest = float(np.min(chain.node_depth_m[1:] - chain.node_depth_m[:-1]))
+        plant = resolve_plant(parameters)
+        length = getattr(plant, "element_length_m", shortest)
+        raise ValueError(
+            f"element_length_m = {length!r} is out of range for the plant step of {step_s} s: "
+            f"its shortest element ({shortest:.3g} m) makes the highest mode {highest:.4g} "
+            f"rad/s, allowed h * omega <= {MAX_STEP_FREQUENCY} (use longer elements)"
+        )
 
 
 def damped_modes(

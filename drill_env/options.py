@@ -28,6 +28,7 @@ from drill_env.limits import (
     MAX_TORQUE_ABS_NM,
     TorqueLimits,
 )
+from drill_env.modes import check_step_bound
 from drill_env.parameters import (
     PLANT_DT_S,
     PRESETS,
@@ -396,3 +397,4 @@ class FieldEnvConfig(EnvConfig):
                 f"{sorted(DISTRIBUTED_PRESETS)} or a DistributedStringParameters"
             )
         super().__post_init__()
+        check_step_bound(self.string(), PLANT_DT_S)
