@@ -287,6 +287,11 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         """The engine (a batch of one)."""
         return self._batch
 
+    @property
+    def observation_names(self) -> tuple[str, ...]:
+        """The name of each observation entry, in order (``drill_env.layout.observation_fields``)."""
+        return tuple(f.name for f in self._batch.fields)
+
     def plant_samples(self) -> PlantSamples:
         """The last step's samples at every plant step (views, valid until the next step)."""
         return PlantSamples.from_records(self._batch.records[0])

@@ -368,7 +368,7 @@ def steps_of(seconds: float) -> int:
 @dataclass(frozen=True)
 class FieldEnvConfig(EnvConfig):
     """Every keyword of ``DrillStringField-v0`` (the distributed string); the defaults are a
-    rig's, with their sources in docs/specification.md section 17."""
+    rig's, with their sources in docs/specification.md section 18."""
 
     parameters: str | DrillStringParameters | DistributedStringParameters = "field_2500m"
     randomization: Randomization | FieldRandomization = field(default_factory=FieldRandomization)

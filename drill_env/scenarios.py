@@ -269,7 +269,7 @@ RPM: Final = 2.0 * math.pi / 60.0
 @dataclass(frozen=True)
 class FieldRandomization:
     """Ranges of the per-episode draws of ``DrillStringField-v0`` (uniform; the sources and
-    the reasons are in docs/specification.md section 17).
+    the reasons are in docs/specification.md section 18).
 
     Attributes:
         wob_range_n: Range of the WOB, N.

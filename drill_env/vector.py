@@ -73,6 +73,11 @@ class DrillStringVectorEnv(VectorEnv):
         """The engine."""
         return self._batch
 
+    @property
+    def observation_names(self) -> tuple[str, ...]:
+        """The name of each observation entry, in order (``drill_env.layout.observation_fields``)."""
+        return tuple(f.name for f in self._batch.fields)
+
     def plant_samples(self) -> PlantSamples:
         """The last step's samples of every string at every plant step, arrays
         ``(num_envs, n, ...)`` (views, valid until the next step; NaN where a string did not

@@ -86,3 +86,44 @@ def test_unscale_measurement_inverts_the_observation_scales() -> None:
     state, reference = layout.unscale_measurement(obs)
     np.testing.assert_allclose(state, physical[:7])
     assert reference == pytest.approx(12.0)
+
+
+@pytest.mark.parametrize(
+    ("env_id", "kwargs"),
+    [
+        ("DrillString-v0", {}),
+        ("DrillString-v0", {"base_controller": "z_torque", "observation": "surface"}),
+        ("DrillString-v0", {"telemetry_period_s": 1.0, "telemetry_delay_s": 0.5}),
+        ("DrillStringField-v0", {"base_controller": "soft_speed"}),
+        ("DrillStringField-v0", {"observation": "state", "randomize": False}),
+    ],
+)
+def test_observation_names_describe_the_observation(env_id: str, kwargs: dict) -> None:
+    """Each named entry of a running env holds the value its name says, scaled."""
+    import gymnasium as gym
+
+    import drill_env  # noqa: F401
+
+    env = gym.make(env_id, **kwargs)
+    names = env.unwrapped.observation_names
+    assert len(names) == env.observation_space.shape[0] == len(set(names))
+    env.reset(seed=3)
+    for _ in range(40):
+        obs, _, _, _, info = env.step(np.zeros(1, dtype=np.float32))
+    index = {name: i for i, name in enumerate(names)}
+    scale = {"speed": layout.SPEED_SCALE_RAD_S, "time": layout.TIME_SCALE_S}
+    expected = {
+        "reference_speed_rad_s": (info["reference_speed_rad_s"], scale["speed"]),
+        "last_torque_nm": (info["top_drive_torque_nm"], env.unwrapped.config.torque_scale_nm),
+        "measured_surface_torque_nm": (
+            info["surface_torque_nm"],
+            env.unwrapped.config.torque_scale_nm,
+        ),
+        "telemetry_bit_speed_rad_s": (info.get("telemetry_bit_speed_rad_s"), scale["speed"]),
+        "telemetry_age_s": (info.get("telemetry_age_s"), scale["time"]),
+        "base_torque_nm": (info.get("base_torque_nm"), env.unwrapped.config.torque_scale_nm),
+    }
+    for name, (value, unit) in expected.items():
+        if name in index:
+            assert obs[index[name]] == pytest.approx(value / unit, rel=1e-6, abs=1e-6), name
+    env.close()
