@@ -293,6 +293,14 @@ def _wrap(text: str, width_in: float, fontsize: float = 12.0) -> str:
     return "\n".join(textwrap.wrap(text, chars, break_on_hyphens=False)) if text else text
 
 
+def _legend_columns(fig: Figure, labels: Sequence[str], fontsize: float, most: int = 6) -> int:
+    """Columns of a legend under the axes: at most ``most``, and few enough that a row of the
+    longest label fits the figure's width."""
+    char_in = 0.55 * fontsize / 72.0
+    entry_in = char_in * max((len(str(t)) for t in labels), default=1) + 0.7
+    return max(1, min(len(labels), most, int(fig.get_figwidth() / entry_in)))
+
+
 def _suptitle(fig: Figure, text: str) -> None:
     """The figure title, wrapped to the figure's width."""
     if text:
@@ -927,7 +935,7 @@ def metric_bars_figure(
             handles=handles,
             title=key_label(hue),
             loc="outside lower center",
-            ncol=min(len(handles), 6),
+            ncol=_legend_columns(fig, [value_label(hue, h) for h in hues], 10.0),
             fontsize=10,
             title_fontsize=10,
         )
@@ -1068,7 +1076,7 @@ def map_figure(result: StickSlipMap) -> Figure:
         (axes[0], "severity", f"severity, capped at {SEVERITY_LIMIT:g}"),
         (axes[1], "stuck", "stuck fraction"),
     ):
-        mesh = _heatmap(ax, result, quantity, f"{result.controller}: {label}")
+        mesh = _heatmap(ax, result, quantity, f"{result.label}: {label}")
         fig.colorbar(
             mesh,
             ax=ax,
@@ -1094,8 +1102,8 @@ def maps_figure(results: Sequence[StickSlipMap]) -> Figure:
     severity: list[Any] = []
     stuck: list[Any] = []
     for col, result in enumerate(results):
-        severity.append(_heatmap(axes[0, col], result, "severity", result.controller))
-        stuck.append(_heatmap(axes[1, col], result, "stuck", result.controller))
+        severity.append(_heatmap(axes[0, col], result, "severity", result.label))
+        stuck.append(_heatmap(axes[1, col], result, "stuck", result.label))
         if col:
             axes[0, col].set_ylabel("")
             axes[1, col].set_ylabel("")
@@ -1112,8 +1120,11 @@ def maps_figure(results: Sequence[StickSlipMap]) -> Figure:
 
 def _caption(result: StickSlipMap) -> str:
     noise = "no noise" if result.noise_std_rad_s == 0 else f"noise {result.noise_std_rad_s:g} rad/s"
+    plant = f"plant {result.parameters}"
+    if result.measured_depth_m is not None:
+        plant += f" at {result.measured_depth_m:,.0f} m"
     return (
-        f"plant {result.parameters}, runs of {result.duration_s:g} s from rest, last "
+        f"{plant}, runs of {result.duration_s:g} s from rest, last "
         f"{result.window_s:g} s analysed, {noise}"
     )
 
