@@ -90,11 +90,11 @@ def is_field(env_id: str) -> bool:
 
 
 def observations_of(controller: str, allowed: Sequence[str] = OBSERVATIONS) -> tuple[str, ...]:
-    """The observation modes ``controller`` runs with on the field string, among ``allowed``:
-    ``state`` only for the paper's SMCs (:data:`STATE_ONLY`), every allowed mode for the
-    others."""
+    """The observation modes ``controller`` runs with on the field string: ``state`` for the
+    paper's SMCs (:data:`STATE_ONLY`, whatever ``allowed`` says: they need the whole state),
+    every mode of ``allowed`` for the others."""
     if controller in STATE_ONLY:
-        return tuple(m for m in allowed if m == "state")
+        return ("state",)
     return tuple(m for m in OBSERVATIONS if m in allowed)
 
 

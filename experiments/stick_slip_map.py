@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -217,7 +216,7 @@ def compute_map(
     window_s: float = DEFAULT_WINDOW_S,
     noise_std_rad_s: float = 0.0,
     seed: int = 0,
-    parameters: str = "zribi2024",
+    parameters: str | None = None,
     progress: bool = True,
     *,
     env_id: str = PAPER_ENV,
@@ -234,8 +233,9 @@ def compute_map(
         window_s: Analysis window at the end of each run, s (in (0, duration_s]).
         noise_std_rad_s: Measurement noise on the speeds, rad/s (0 for a deterministic map).
         seed: Seed of cell 0; cell ``i`` (WOB-major) is reset with ``seed + i``.
-        parameters: Plant preset name: a 4-DOF one on ``DrillString-v0``, a distributed one
-            on ``DrillStringField-v0``.
+        parameters: Plant preset name: a 4-DOF one on ``DrillString-v0`` (default
+            ``zribi2024``), a distributed one on ``DrillStringField-v0`` (default
+            ``field_2500m``).
         progress: Show a tqdm progress bar (on stderr).
         env_id: The env of the runs (:data:`experiments.field.ENV_IDS`).
         observation: On the field string, the observation mode of the controller (``state`` or
@@ -254,6 +254,8 @@ def compute_map(
         raise ValueError(f"unknown controller {controller!r}: valid names are {', '.join(names)}")
     field = is_field(env_id)
     presets = DISTRIBUTED_PRESETS if field else PRESETS
+    if parameters is None:
+        parameters = DEFAULTS[env_id].parameters
     if parameters not in presets:
         raise ValueError(
             f"parameters = {parameters!r} is not a known preset of {env_id}: {sorted(presets)}"
@@ -388,7 +390,7 @@ stick_slip_maps.png with every controller side by side when there are several.
 
 With --env DrillStringField-v0 the cells run on the distributed field string (--parameters
 field_2500m or deep_5000m) at each of --depths, each controller with each of --observations
-it can use (the paper's sliding-mode controllers: state only); the files are named
+(the paper's sliding-mode controllers always with state: they need the whole state); the files are named
 stick_slip_map_NAME_OBSERVATION_DEPTHm and stick_slip_maps_DEPTHm.png. Its defaults: WOB
 50-200 kN, 40-160 rpm (4.19-16.76 rad/s), 100 s runs with the last 50 s analysed (the field
 string's stick-slip cycles last 4-11 s, so the window holds at least four of the longest).
@@ -581,10 +583,6 @@ def main(argv: Sequence[str] | None = None) -> int:
                 )
         for name in dict.fromkeys(args.controllers):
             modes = observations_of(name, args.observations)
-            if not modes:
-                print(
-                    f"map: {name} runs with the state observation only: left out", file=sys.stderr
-                )
             runs += [(name, obs, depth) for depth in depths for obs in modes]
     else:
         runs = [(name, None, None) for name in dict.fromkeys(args.controllers)]
