@@ -372,6 +372,8 @@ def markdown_table(summary: Mapping[str, Any]) -> str:
         g = goal.get(label, {})
         iae_r = f"{(g['iae_ratio'] - 1) * 100:+.1f} %" if g else ""
         rmsd_r = f"{(g['rmsd_ratio'] - 1) * 100:+.1f} %" if g else ""
+        if "runs" in m:  # some scenarios could not be run for it
+            label = f"{label} ({int(m['runs'])} runs)"
         lines.append(
             f"| {label} | {m['iae']:.1f} | {iae_r} | {m['rmsd_nm'] / 1e3:.2f} | {rmsd_r} | "
             f"{m['severity_prone']:.3f} | {m['stick_slip_severity']:.3f} | "

@@ -92,6 +92,8 @@ WINDOW_S: Final = 50.0
 """Analysis window at the end of each run, s (as ``drill-gym map`` on the field string)."""
 SPACE_TIME_S: Final = 12.0
 """Length of the space-time figures, s (two stick-slip cycles at 2,500 m)."""
+STEADY_SEVERITY: Final = 0.1
+"""Below this severity a run turns steadily and table 4 gives no cycle period."""
 RESPONSE_S: Final = 30.0
 """Length of the response figure, s."""
 ACTUATOR: Final = {
@@ -163,8 +165,10 @@ class RunRecord:
     Attributes:
         label: Controller and observation mode (``soft_speed (surface)``).
         history: The node states at every decision.
-        metrics: ``stick_slip_severity``, ``stuck_fraction``, ``rmse`` (over the window) and
-            ``cycle_period_s``, ``diverged``.
+        metrics: Over the window: ``stick_slip_severity``, ``stuck_fraction``, ``rmse``,
+            ``mean_bit_speed_rad_s``, the cycle periods of the bit and the top drive, the top
+            drive's lowest and highest speed, the fastest speed of any node and its depth; and
+            ``diverged``.
     """
 
     label: str
@@ -306,6 +310,10 @@ def record_run(
         "mean_bit_speed_rad_s": float(w.mean()),
         "cycle_period_s": cycle_period_s(late.bit_speed_rad_s, RECORD_DT_S),
         "top_drive_period_s": cycle_period_s(late.top_drive_speed_rad_s, RECORD_DT_S),
+        "top_drive_min_rad_s": float(late.top_drive_speed_rad_s.min()),
+        "top_drive_max_rad_s": float(late.top_drive_speed_rad_s.max()),
+        "fastest_node_rad_s": float(late.speed_rad_s.max()),
+        "fastest_node_depth_m": float(depth[int(np.argmax(late.speed_rad_s.max(axis=0)))]),
         "diverged": diverged,
     }
     return RunRecord(
@@ -415,7 +423,8 @@ def equivalent_table(
     """Each controller on the 4-DOF equivalent of each case's string and on the string itself,
     with the full state measured, the same noise on the speeds, the field env's top drive
     (dead time, lag, rate limit, torque limit) and no torque or telemetry noise in both: the
-    stick-slip severity and stuck fraction over the last ``window_s`` seconds.
+    stick-slip severity, stuck fraction and cycle period (none below a severity of
+    :data:`STEADY_SEVERITY`) over the last ``window_s`` seconds.
 
     On the 4-DOF plant the controller's model is the equivalent too, so the laws are the same
     functions of the same numbers: only the plant differs. (The speed loops are tuned from their
@@ -467,9 +476,12 @@ def equivalent_table(
                     env.close()
                 late = trace.time_s >= duration_s - window_s
                 w = trace.bit_speed_rad_s[late]
-                out[f"{key}_severity"] = float((w.max() - w.min()) / (2 * max(w.mean(), 1e-9)))
+                severity = float((w.max() - w.min()) / (2 * max(w.mean(), 1e-9)))
+                out[f"{key}_severity"] = severity
                 out[f"{key}_stuck_fraction"] = float(trace.bit_stuck[late].mean())
-                out[f"{key}_period_s"] = cycle_period_s(w[::20], 0.02)
+                # the cycle of a run that turns steadily is that of its ripples: left out
+                steady = severity < STEADY_SEVERITY
+                out[f"{key}_period_s"] = None if steady else cycle_period_s(w[::20], 0.02)
             rows.append(out)
     return rows
 
@@ -495,6 +507,10 @@ RUN_COLUMNS: Final = (
     Column("mean_bit_speed_rad_s", "mean bit speed (rad/s)", "{:.2f}"),
     Column("cycle_period_s", "bit cycle (s)", "{:.2f}"),
     Column("top_drive_period_s", "top-drive cycle (s)", "{:.2f}"),
+    Column("top_drive_min_rad_s", "top drive, min (rad/s)", "{:.2f}"),
+    Column("top_drive_max_rad_s", "top drive, max (rad/s)", "{:.2f}"),
+    Column("fastest_node_rad_s", "fastest node (rad/s)", "{:.1f}"),
+    Column("fastest_node_depth_m", "at depth (m)", "{:,.0f}"),
 )
 REFLECTION_COLUMNS: Final = (
     Column("controller", "controller", align="left"),
@@ -531,8 +547,9 @@ them. Prints four tables and writes waves.json and figures/ into --out:
      and reflection coefficient |r| (1: a wave goes back down whole; 0: absorbed);
   3. every controller, with each observation mode it can use (the paper's sliding-mode
      controllers: the whole state), at --depth, --wob, --rpm and --condition: stick-slip
-     severity, stuck fraction, RMSE and mean bit speed over the last --window seconds, and the
-     cycle periods of the bit and of the top drive;
+     severity, stuck fraction, RMSE and mean bit speed over the last --window seconds, the
+     cycle periods of the bit and of the top drive, the top drive's range of speed and the
+     fastest node with its depth;
   4. the paper's controllers on their own 4-DOF equivalent against the string it stands for,
      at the two operating points of drill-gym compare and each depth (same model, gains,
      actuator and noise: only the plant differs).
