@@ -37,6 +37,9 @@ __all__ = [
     "ACTIVATIONS",
     "CONFIG_FILE",
     "FORMAT_VERSION",
+    "DEFAULT_ENV_ID",
+    "ENV_IDS",
+    "FIELD_ENV_KEYWORDS",
     "NOISE_TYPES",
     "NORM_FILE",
     "POLICY_ENV_KEYWORDS",
@@ -48,6 +51,7 @@ __all__ = [
     "read_json",
     "read_npz",
     "read_model_files",
+    "split_env_id",
     "validate_config",
     "write_model_files",
 ]
@@ -72,6 +76,15 @@ POLICY_ENV_KEYWORDS: Final = (
     "max_torque_nm",
 )
 """The ``DrillString-v0`` keywords a model folder records (``env_kwargs`` in config.json)."""
+
+ENV_IDS: Final = ("DrillString-v0", "DrillStringField-v0")
+"""The envs a model can be for (``env_kwargs.env_id`` in config.json)."""
+DEFAULT_ENV_ID: Final = "DrillString-v0"
+"""The env of a model whose ``env_kwargs`` name none (every model of format 2 before the field
+string)."""
+FIELD_ENV_KEYWORDS: Final = ("observation",)
+"""Optional ``env_kwargs`` of a model for ``DrillStringField-v0``: the keywords that shape its
+observation besides the base controller (default: the env's)."""
 
 MAX_JSON_BYTES: Final = 1_000_000
 MAX_OBSERVATION_SIZE: Final = 1024
@@ -405,23 +418,34 @@ class ModelConfig:
 
     Attributes:
         name: The agent's name.
-        env_kwargs: The ``DrillString-v0`` keywords (:data:`POLICY_ENV_KEYWORDS`).
+        env_kwargs: The env keywords (:data:`POLICY_ENV_KEYWORDS`, and for
+            ``DrillStringField-v0`` those of :data:`FIELD_ENV_KEYWORDS` it gives), without
+            ``env_id``.
         spec: The architecture.
         record: The rest of the file (``format``, ``observation_size``, ``policy`` and the
             training record: ``train_config``, ``timesteps``, ...).
+        env_id: The env the model is for (``env_kwargs.env_id`` in the file; absent:
+            :data:`DEFAULT_ENV_ID`).
     """
 
     name: str
     env_kwargs: dict[str, Any]
     spec: PolicySpec
     record: dict[str, Any] = field(default_factory=dict)
+    env_id: str = DEFAULT_ENV_ID
+
+
+def split_env_id(env_kwargs: Mapping[str, Any]) -> tuple[str, dict[str, Any]]:
+    """``(env id, the env keywords without it)`` of validated ``env_kwargs``."""
+    keywords = dict(env_kwargs)
+    return str(keywords.pop("env_id", DEFAULT_ENV_ID)), keywords
 
 
 def validate_env_kwargs(data: Any, where: str) -> dict[str, Any]:
     """The ``env_kwargs`` field: exactly the keywords of :data:`POLICY_ENV_KEYWORDS`, typed
     and in range (whether the base controller is registered is checked by the loader)."""
     f = _Fields(where, data, "env_kwargs.")
-    f.known(POLICY_ENV_KEYWORDS)
+    f.known(POLICY_ENV_KEYWORDS, ("env_id", *FIELD_ENV_KEYWORDS))
     base = f.data["base_controller"]
     if base is not None:
         f.text("base_controller", 100)
@@ -435,6 +459,16 @@ def validate_env_kwargs(data: Any, where: str) -> dict[str, Any]:
             "env_kwargs.min_torque_nm",
             f"= {out['min_torque_nm']!r} must be below max_torque_nm = {out['max_torque_nm']!r}",
         )
+    if "env_id" in f.data:
+        out["env_id"] = f.choice("env_id", ENV_IDS)
+    field_only = [k for k in FIELD_ENV_KEYWORDS if k in f.data]
+    if field_only and out.get("env_id") != "DrillStringField-v0":
+        f.fail(
+            f"env_kwargs.{field_only[0]}",
+            "is a keyword of DrillStringField-v0: set env_kwargs.env_id to it",
+        )
+    if "observation" in f.data:
+        out["observation"] = f.choice("observation", ("state", "surface"))
     return out
 
 
@@ -462,7 +496,7 @@ def validate_config(data: Any, where: str) -> ModelConfig:
     f.known(_REQUIRED_FIELDS, RECORD_FIELDS)
     f.choice("format", (FORMAT_VERSION,))
     name = f.text("name", 100)
-    env_kwargs = validate_env_kwargs(f.data["env_kwargs"], where)
+    env_id, env_kwargs = split_env_id(validate_env_kwargs(f.data["env_kwargs"], where))
     observation_size = f.integer("observation_size", 1, MAX_OBSERVATION_SIZE)
     spec = validate_policy_spec(f.data["policy"], where, observation_size)
     for key in ("timesteps", "run_timesteps", "resumed_from"):
@@ -484,7 +518,7 @@ def validate_config(data: Any, where: str) -> ModelConfig:
             _check_key(inner, k)
             _check_json_value(inner, k, v, 1)
     record = {k: v for k, v in f.data.items() if k not in ("name", "env_kwargs")}
-    return ModelConfig(name=name, env_kwargs=env_kwargs, spec=spec, record=record)
+    return ModelConfig(name=name, env_kwargs=env_kwargs, spec=spec, record=record, env_id=env_id)
 
 
 # ------------------------------------------------------------------------------ .npz reading

@@ -4,8 +4,9 @@ A model folder holds three files that can be read without running any code
 (:mod:`agents.model_format`, ``docs/model-files.md``):
 
 * ``config.json``: ``name``, ``env_kwargs`` (the ``DrillString-v0`` keywords the policy needs:
-  base controller, decision period, residual scale, torque limits), ``observation_size``, the
-  architecture (``policy``) and the training record;
+  base controller, decision period, residual scale, torque limits; optionally ``env_id``,
+  ``DrillStringField-v0`` for a model of the field string, with its ``observation``),
+  ``observation_size``, the architecture (``policy``) and the training record;
 * ``policy.npz``: the actor's weights, biases and log standard deviation;
 * ``obs_norm.npz``: the observation normalisation (``mean``, ``var``, ``clip_obs``,
   ``epsilon``: VecNormalize's statistics at the end of training).
@@ -28,6 +29,7 @@ import numpy.typing as npt
 
 from agents.model_format import (
     CONFIG_FILE,
+    DEFAULT_ENV_ID,
     NORM_FILE,
     RECORD_FIELDS,
     WEIGHTS_FILE,
@@ -37,6 +39,7 @@ from agents.model_format import (
     PolicySpec,
     read_json,
     read_npz,
+    split_env_id,
     validate_config,
     validate_env_kwargs,
     write_model_files,
@@ -99,6 +102,7 @@ class ResidualPolicy:
         name: The agent's name.
         metadata: The training record (``train_config``, ``timesteps``, ...).
         rng: Generator of the stochastic actions (default: a fresh unseeded one).
+        env_id: The env the agent is for (``DrillString-v0`` or ``DrillStringField-v0``).
 
     Attributes:
         name: The agent's name (``residual_ppo``, ``direct_ppo``, ...).
@@ -107,6 +111,9 @@ class ResidualPolicy:
             ``residual_scale_nm``, ``min_torque_nm``, ``max_torque_nm``.
         metadata: The rest of ``config.json`` (``format``, ``observation_size``, ``policy``,
             the training configuration, wall time, ...).
+        env_id: The env the agent is for: ``gym.make(policy.env_id, **scenario,
+            **policy.env_kwargs)`` (``env_kwargs.env_id`` in config.json; ``DrillString-v0``
+            when the file names none).
         spec: The architecture.
         obs_norm: The observation normalisation.
     """
@@ -120,6 +127,7 @@ class ResidualPolicy:
         name: str,
         metadata: Mapping[str, Any] | None = None,
         rng: np.random.Generator | None = None,
+        env_id: str = DEFAULT_ENV_ID,
     ) -> None:
         if obs_norm.mean.shape != (spec.observation_size,):
             raise ValueError(
@@ -129,6 +137,7 @@ class ResidualPolicy:
         self.network = GaussianMlp(spec, weights)
         self.obs_norm = obs_norm
         self.name = name
+        self.env_id = env_id
         self.env_kwargs = dict(env_kwargs)
         self.metadata: dict[str, Any] = {
             **dict(metadata or {}),
@@ -196,10 +205,13 @@ class ResidualPolicy:
 
     def save(self, folder: str | Path) -> Path:
         """Write the model folder (``config.json``, ``policy.npz``, ``obs_norm.npz``)."""
+        env_kwargs = dict(self.env_kwargs)
+        if self.env_id != DEFAULT_ENV_ID:
+            env_kwargs["env_id"] = self.env_id
         return write_model_files(
             Path(folder),
             name=self.name,
-            env_kwargs=self.env_kwargs,
+            env_kwargs=env_kwargs,
             spec=self.spec,
             weights={k: v.astype(np.float32) for k, v in self.weights.items()},
             obs_norm=self.obs_norm,
@@ -207,6 +219,11 @@ class ResidualPolicy:
         )
 
     def __repr__(self) -> str:
+        if self.env_id != DEFAULT_ENV_ID:
+            return (
+                f"ResidualPolicy(name={self.name!r}, env_id={self.env_id!r}, "
+                f"env_kwargs={self.env_kwargs!r})"
+            )
         return f"ResidualPolicy(name={self.name!r}, env_kwargs={self.env_kwargs!r})"
 
 
@@ -366,18 +383,36 @@ def _check_environment(config: ModelConfig, where: str, path: Path, base_control
             f"{str(path)!r}: wrong base controller: expected a model trained on "
             f"{base_controller!r}, found one trained on {found!r}"
         )
-    expected = observation_size(found is not None)
+    if config.env_id == DEFAULT_ENV_ID:
+        expected = observation_size(found is not None)
+        env = f"DrillString-v0 with base_controller={found!r}"
+    else:
+        expected = _observation_size(config.env_id, config.env_kwargs)
+        shown = ", ".join(f"{k}={v!r}" for k, v in config.env_kwargs.items())
+        env = f"{config.env_id} with {shown}"
     if config.spec.observation_size != expected:
         raise ValueError(
             f"{where!r}: field observation_size: wrong observation size: expected {expected} "
-            f"(DrillString-v0 with base_controller={found!r}), found "
-            f"{config.spec.observation_size}"
+            f"({env}), found {config.spec.observation_size}"
         )
     if config.spec.action_size != 1:
         raise ValueError(
-            f"{where!r}: field policy.action_size = {config.spec.action_size}: DrillString-v0 "
-            "takes one action"
+            f"{where!r}: field policy.action_size = {config.spec.action_size}: "
+            f"{config.env_id} takes one action"
         )
+
+
+def _observation_size(env_id: str, env_kwargs: Mapping[str, Any]) -> int:
+    """Length of the observation of ``env_id`` made with ``env_kwargs`` (an env is made)."""
+    import gymnasium as gym
+
+    import drill_env  # noqa: F401  (registers the envs)
+
+    env = gym.make(env_id, **env_kwargs)
+    try:
+        return int(env.observation_space.shape[0])  # type: ignore[index]
+    finally:
+        env.close()
 
 
 def load_policy(
@@ -431,7 +466,15 @@ def load_policy(
     config = validate_config(read_json(config_file), str(config_file))
     _check_environment(config, str(config_file), path, base_controller)
     norm, weights = _read_arrays(folder, config.spec)
-    return ResidualPolicy(config.spec, weights, norm, config.env_kwargs, config.name, config.record)
+    return ResidualPolicy(
+        config.spec,
+        weights,
+        norm,
+        config.env_kwargs,
+        config.name,
+        config.record,
+        env_id=config.env_id,
+    )
 
 
 def _read_arrays(
@@ -461,7 +504,14 @@ def _load_sb3(zip_file: Path, base_controller: Any) -> ResidualPolicy:
                 f"{CONFIG_FILE} and {NORM_FILE} beside it; missing {needed.name}"
             )
     record = read_json(config_file)
-    env_kwargs = validate_env_kwargs(record.get("env_kwargs"), str(config_file))
+    env_id, env_kwargs = split_env_id(
+        validate_env_kwargs(record.get("env_kwargs"), str(config_file))
+    )
+    if env_id != DEFAULT_ENV_ID:
+        raise ValueError(
+            f"{str(config_file)!r}: field env_kwargs.env_id = {env_id!r}: a Stable-Baselines3 "
+            f"model.zip is always for {DEFAULT_ENV_ID}"
+        )
     name = record.get("name", folder.name)
     if not isinstance(name, str) or not name:
         raise ValueError(f"{str(config_file)!r}: field name = {name!r}: expected a string")

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, ClassVar, Final, SupportsFloat
+from typing import Any, ClassVar, Final, NamedTuple, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
@@ -12,6 +12,7 @@ from gymnasium.envs.registration import EnvSpec
 
 from drill_env import render
 from drill_env.batch import StringBatch
+from drill_env.distributed import Chain, discretize
 from drill_env.evaluation import PlantSamples
 from drill_env.layout import (
     OBS_BOUND,
@@ -36,7 +37,13 @@ from drill_env.layout import (
 from drill_env.options import EnvConfig, FieldEnvConfig
 from drill_env.rewards import TERMS, reward_terms, total_reward
 
-__all__ = ["DrillStringEnv", "DrillStringFieldEnv", "report_info", "validate_actions"]
+__all__ = [
+    "DrillStringEnv",
+    "DrillStringFieldEnv",
+    "StringState",
+    "report_info",
+    "validate_actions",
+]
 
 
 def report_info(report: Any, residual: bool, telemetry: bool) -> dict[str, Any]:
@@ -123,6 +130,25 @@ def validate_actions(
         raise ValueError(f"action must be finite, got {action!r}")
     clipped = (a < -1.0) | (a > 1.0)
     return np.clip(a, -1.0, 1.0), clipped
+
+
+class StringState(NamedTuple):
+    """The true state of a distributed string at one instant (``DrillStringFieldEnv.
+    string_state()``), ``n`` nodes from the top drive (node 0) down to the bit (node ``n - 1``).
+
+    Attributes:
+        node_depth_m: Depth of each node along the hole, (n,), m.
+        speed_rad_s: Speed of each node, (n,), rad/s.
+        twist_rad: Twist ``phi_e - phi_{e+1}`` of each element, (n - 1,), rad.
+        torque_nm: Torque each element carries, ``k_e theta_e + c_e (w_e - w_{e+1})``,
+            (n - 1,), N m; element 0's is the torque at the top of the string (the surface
+            torque, before any sensor).
+    """
+
+    node_depth_m: npt.NDArray[np.float64]
+    speed_rad_s: npt.NDArray[np.float64]
+    twist_rad: npt.NDArray[np.float64]
+    torque_nm: npt.NDArray[np.float64]
 
 
 class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
@@ -452,7 +478,9 @@ class DrillStringFieldEnv(DrillStringEnv):
     ## Info
     That of ``DrillString-v0``; ``bit_speed_rad_s`` and ``top_drive_speed_rad_s`` are the true
     speeds of the bit and top-drive nodes, plus ``telemetry_bit_speed_rad_s`` and
-    ``telemetry_age_s`` when telemetry is on.
+    ``telemetry_age_s`` when telemetry is on. ``env.unwrapped.string_state()`` gives the true
+    state of every node now (:class:`StringState`: depths, speeds, element twists and torques),
+    in either observation mode, for studies of the torsional waves along the string.
 
     ## Version History
     * v0: initial version.
@@ -465,3 +493,28 @@ class DrillStringFieldEnv(DrillStringEnv):
     """
 
     config_type: ClassVar[type[EnvConfig]] = FieldEnvConfig
+
+    _chain: tuple[object, Chain] | None = None  # the episode's plant and its chain
+
+    def string_state(self) -> StringState:
+        """The true state of the episode's string now, every node from the top drive (node 0)
+        down to the bit (node ``n - 1``): depths, speeds, element twists and torques (copies).
+
+        Raises:
+            RuntimeError: before the first ``reset()``.
+        """
+        episode = self.batch.episodes[0]
+        if episode is None:
+            raise RuntimeError("call reset() before string_state()")
+        plant = episode.scenario.plant
+        if self._chain is None or self._chain[0] is not plant:
+            self._chain = (plant, discretize(plant))  # type: ignore[arg-type]
+        chain = self._chain[1]
+        n = chain.n_nodes
+        x = self.batch.x[0, : 2 * n - 1]
+        speed = x[0::2].copy()
+        twist = x[1::2].copy()
+        torque = chain.element_stiffness_nm_rad * twist + chain.element_damping_nm_s_rad * (
+            speed[:-1] - speed[1:]
+        )
+        return StringState(chain.node_depth_m.copy(), speed, twist, torque)

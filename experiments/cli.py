@@ -1,7 +1,7 @@
 """``drill-gym``: the command line of drill-string-gym.
 
 Subcommands, each a module with ``main(argv)`` imported only when used (so the core needs no
-torch): ``compare``, ``map``, ``train``, ``evaluate``, ``convert``. Every user error ends with
+torch): ``compare``, ``map``, ``train``, ``evaluate``, ``convert``, ``waves``. Every user error ends with
 one line on standard error and exit code 2 (:mod:`experiments.arguments`); ``DRILL_GYM_DEBUG=1``
 shows the traceback instead.
 """
@@ -34,6 +34,10 @@ SUBCOMMANDS = {
     "convert": (
         "experiments.convert",
         "convert an old Stable-Baselines3 model.zip to the portable model format",
+    ),
+    "waves": (
+        "experiments.waves",
+        "torsional waves of the field string: its numbers, each controller, space-time figures",
     ),
 }
 """Subcommand name -> (module with ``main(argv)``, one line of help)."""

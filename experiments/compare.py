@@ -42,11 +42,29 @@ from tqdm import tqdm
 
 import baselines  # noqa: F401  (registers the built-in controllers, in their order)
 from drill_env.control import controller_names, make_controller
-from drill_env.evaluation import Trace, ZeroAction, episode_metrics, run_episode
+from drill_env.evaluation import Trace, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
 from drill_env.parameters import PLANT_DT_S, resolve_parameters
 from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, WobProfile
 from experiments.arguments import ArgumentParser, names_type, number_type
+from experiments.field import (
+    COMPARE_CONDITIONS,
+    COMPARE_DEPTHS_M,
+    COMPARE_POINTS,
+    CONTROLLER_MODELS,
+    ENV_IDS,
+    FIELD_CONDITIONS,
+    OBSERVATIONS,
+    PAPER_ENV,
+    FieldCase,
+    compare_cases,
+    figure_cases,
+    file_label,
+    is_field,
+    observations_of,
+    run_label,
+    run_on,
+)
 from experiments.tables import Column, write_csv, write_json
 from experiments.tables import markdown_table as _markdown
 
@@ -57,12 +75,15 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "CONDITIONS",
+    "FIELD_ROW_KEYS",
     "GAIN_PRESETS",
     "PAPER_CONTROLLERS",
     "RESCALED_GAINS",
     "ROW_KEYS",
+    "Case",
     "RunTraces",
     "SCENARIO",
+    "comparison_cases",
     "comparison_figures",
     "default_controllers",
     "main",
@@ -137,6 +158,35 @@ ROW_KEYS: Final = (
 metrics, plus ``static_error_rad_s`` (mean of ``V_ref - w_bit`` over the last
 :data:`STATIC_WINDOW_S`, the paper's "static error") and the run's settings."""
 
+FIELD_ROW_KEYS: Final = (
+    "controller",
+    "observation",
+    "scenario",
+    "parameters",
+    "measured_depth_m",
+    "reference_speed_rad_s",
+    "wob_n",
+    "wob_step_time_s",
+    "wob_final_n",
+    "condition",
+    "mu_a",
+    "mu_0",
+    "xi",
+    "mud_damping_factor",
+    "noise_std_rad_s",
+    *METRIC_KEYS,
+    "static_error_rad_s",
+    "diverged",
+    "gains",
+    "controller_model",
+    "seed",
+    "duration_s",
+)
+"""The columns of a comparison on ``DrillStringField-v0``: the controller and the observation
+mode it ran with, the field scenario (:class:`experiments.field.FieldCase`: string, depth,
+operating point, friction and damping), the metrics and the run's settings
+(``controller_model``: ``nominal`` or ``exact``, what the controllers knew of the string)."""
+
 PLOT_EVERY: Final = 10
 """Plant-rate samples kept for the whole-run figures: one bin of this many (100 Hz; torques
 keep each bin's extreme, see :func:`drill_env.plots.downsample`)."""
@@ -201,6 +251,73 @@ def scenario_kwargs(
     return {**scenario.keywords(), "episode_s": float(duration_s)}
 
 
+QUIET_SENSORS: Final = {"torque_noise_std_nm": 0.0, "telemetry_noise_std_rad_s": 0.0}
+"""The field env's keywords of a run without noise: with the speeds noiseless
+(``noise_std_rad_s = 0``) the surface torque and the telemetry are noiseless too."""
+
+
+class Case(NamedTuple):
+    """One scenario of a comparison, as data: its name and how to make its env keywords and
+    its row columns. The paper's cases are its uncertainty conditions; the field string's are
+    :class:`experiments.field.FieldCase` scenarios."""
+
+    name: str
+    """The case's name (the row's ``condition`` on the paper's string, ``scenario`` on the
+    field string)."""
+    head: dict[str, Any]
+    """Row columns after the controller's (and before the noise)."""
+    tail: dict[str, Any]
+    """Row columns after ``gains`` (the reading or the controllers' model)."""
+    field: FieldCase | None = None
+    """The field scenario (``None``: the paper's scenario under condition ``name``)."""
+
+    def keywords(self, noise_std_rad_s: float, duration_s: float, reading: str) -> dict[str, Any]:
+        """The env keywords of a run of this case (no controller keywords)."""
+        if self.field is None:
+            return scenario_kwargs(self.name, noise_std_rad_s, duration_s, reading)
+        model = str(self.tail["controller_model"])
+        scenario = self.field.scenario(noise_std_rad_s, model)
+        return {
+            **scenario.keywords(),
+            **(QUIET_SENSORS if noise_std_rad_s == 0.0 else {}),
+            "episode_s": float(duration_s),
+        }
+
+
+def comparison_cases(
+    env_id: str,
+    conditions: Sequence[str],
+    *,
+    reading: str = "plant",
+    depths_m: Sequence[float] = COMPARE_DEPTHS_M,
+    controller_model: str = "nominal",
+) -> list[Case]:
+    """The cases of a comparison on ``env_id``: the paper's scenario under each Table 3
+    condition, or on the field string :func:`experiments.field.compare_cases` of ``depths_m``
+    and the field ``conditions``.
+
+    Raises:
+        ValueError: for an unknown env, condition or controller model.
+    """
+    if not is_field(env_id):
+        for c in conditions:
+            if c not in UNCERTAINTY_CONDITIONS:
+                raise ValueError(
+                    f"condition = {c!r} is not an uncertainty condition of {env_id}: allowed "
+                    f"{', '.join(CONDITIONS)}"
+                )
+        return [Case(c, {"condition": c}, {"uncertainty_reading": reading}) for c in conditions]
+    if controller_model not in CONTROLLER_MODELS:
+        raise ValueError(
+            f"controller_model = {controller_model!r} is not valid: allowed "
+            f"{', '.join(CONTROLLER_MODELS)}"
+        )
+    return [
+        Case(c.id, {"scenario": c.id, **c.columns()}, {"controller_model": controller_model}, c)
+        for c in compare_cases(depths_m, conditions)
+    ]
+
+
 def static_error(trace: Trace, window_s: float = STATIC_WINDOW_S) -> float:
     """Mean tracking error ``V_ref - w_bit`` over the last ``window_s`` of ``trace``, rad/s."""
     n = max(1, round(window_s / trace.plant_dt_s))
@@ -209,24 +326,24 @@ def static_error(trace: Trace, window_s: float = STATIC_WINDOW_S) -> float:
 
 def _row(
     controller: str,
-    condition: str,
+    observation: str | None,
+    case: Case,
     noise: float,
     metrics: Mapping[str, Any],
     gains: str,
-    reading: str,
     seed: int,
     duration_s: float,
 ) -> dict[str, Any]:
-    row: dict[str, Any] = {
-        "controller": controller,
-        "condition": condition,
-        "noise_std_rad_s": float(noise),
-    }
+    row: dict[str, Any] = {"controller": controller}
+    if observation is not None:
+        row["observation"] = observation
+    row.update(case.head)
+    row["noise_std_rad_s"] = float(noise)
     for key in (*METRIC_KEYS, "static_error_rad_s"):
         row[key] = metrics[key]
     row["diverged"] = bool(metrics["diverged"])
     row["gains"] = gains
-    row["uncertainty_reading"] = reading
+    row.update(case.tail)
     row["seed"] = seed
     row["duration_s"] = duration_s
     return row
@@ -244,53 +361,76 @@ def run_comparison(
     agent: Any = None,
     keep_traces: bool = True,
     progress: bool = True,
+    env_id: str = PAPER_ENV,
+    cases: Sequence[Case] | None = None,
+    observations: Sequence[str] = OBSERVATIONS,
 ) -> tuple[list[dict[str, Any]], dict[tuple[str, str, float], RunTraces]]:
-    """Run every controller (and ``agent``) on every condition and noise level.
+    """Run every controller (and ``agent``) on every case and noise level.
 
     Args:
         controllers: Registered controller names.
-        conditions: Table 3 condition names.
-        noises: Measurement noise levels, rad/s.
+        conditions: Table 3 condition names (the cases on ``DrillString-v0``); not used when
+            ``cases`` is given.
+        noises: Measurement noise levels on the speeds, rad/s.
         duration_s: Run length, s.
         seed: Reset seed of every run (it drives the noise).
-        reading: Uncertainty reading, ``plant`` or ``controller``.
+        reading: Uncertainty reading, ``plant`` or ``controller`` (``DrillString-v0``).
         gains: Gain preset name (:data:`GAIN_PRESETS`).
-        agent: ``None``, or a policy with ``predict``, ``env_kwargs`` and ``name``.
+        agent: ``None``, or a policy with ``predict``, ``env_kwargs`` and ``name`` (and
+            ``env_id``, ``DrillString-v0`` when it has none); it runs only on its own env.
         keep_traces: Keep light copies of the traces (:class:`RunTraces`) for figures.
         progress: Show a progress bar on standard error.
+        env_id: The env of every run (:data:`experiments.field.ENV_IDS`).
+        cases: The cases (:func:`comparison_cases`); default the paper's ``conditions``.
+        observations: On the field string, the observation modes to run the controllers with
+            (each with those it can use, :func:`experiments.field.observations_of`).
 
     Returns:
-        The rows (see :data:`ROW_KEYS`) and the traces by ``(controller, condition, noise)``.
+        The rows (see :data:`ROW_KEYS`, :data:`FIELD_ROW_KEYS`) and the traces by
+        ``(run label, case name, noise)``.
     """
+    field = is_field(env_id)
+    if cases is None:
+        cases = comparison_cases(env_id, conditions, reading=reading)
     preset = GAIN_PRESETS[gains]
     dt = decision_period(duration_s)
-    labels = [(c, False) for c in controllers]
-    if agent is not None:
-        labels.append((str(agent.name), True))
-    jobs = [(c, a, cond, float(n)) for c, a in labels for cond in conditions for n in noises]
+    labels: list[tuple[str, str | None, bool]] = []
+    for c in controllers:
+        labels += (
+            [(c, o, False) for o in observations_of(c, observations)]
+            if field
+            else [(c, None, False)]
+        )
+    if agent is not None and getattr(agent, "env_id", PAPER_ENV) == env_id:
+        own_observation = dict(agent.env_kwargs).get("observation", "surface") if field else None
+        labels.append((str(agent.name), own_observation, True))
+    jobs = [(c, o, a, case, float(n)) for c, o, a in labels for case in cases for n in noises]
     rows: list[dict[str, Any]] = []
     traces: dict[tuple[str, str, float], RunTraces] = {}
     bar = tqdm(jobs, desc="compare", unit="run", file=sys.stderr, disable=not progress)
-    for label, is_agent, cond, noise in bar:
-        bar.set_postfix_str(f"{label} {cond} noise={noise:g}", refresh=False)
-        scenario = scenario_kwargs(cond, noise, duration_s, reading)
+    for label, observation, is_agent, case, noise in bar:
+        name = label if observation is None else f"{label} ({observation})"
+        bar.set_postfix_str(f"{name} {case.name} noise={noise:g}", refresh=False)
+        scenario = case.keywords(noise, duration_s, reading)
         if is_agent:
             own = {k: v for k, v in dict(agent.env_kwargs).items() if k != "max_episode_steps"}
             kwargs = {**own, **scenario}
-            trace = run_episode(kwargs, agent, seed)
+            trace = run_on(env_id, kwargs, agent, seed)
             gain_label = "agent"
         else:
             overrides = preset.get(label)
             controller = make_controller(label, **(overrides or {}))
             kwargs = {**scenario, "base_controller": controller, "control_dt_s": dt}
-            trace = run_episode(kwargs, ZeroAction(), seed)
+            if observation is not None:
+                kwargs["observation"] = observation
+            trace = run_on(env_id, kwargs, ZeroAction(), seed)
             gain_label = gains if overrides is not None else "default"
         metrics = {**episode_metrics(trace), "static_error_rad_s": static_error(trace)}
-        rows.append(_row(label, cond, noise, metrics, gain_label, reading, seed, duration_s))
+        rows.append(_row(label, observation, case, noise, metrics, gain_label, seed, duration_s))
         if keep_traces:
             from experiments.plots import downsample, envelope, time_window
 
-            traces[(label, cond, noise)] = RunTraces(
+            traces[(name, case.name, noise)] = RunTraces(
                 downsample(trace, PLOT_EVERY),
                 time_window(trace, max(trace.duration_s - TAIL_S, 0.0)),
                 envelope(trace, BAND_S),
@@ -316,6 +456,14 @@ TABLE_COLUMNS: Final = (
 )
 """The columns of the comparison's markdown table."""
 
+FIELD_TABLE_COLUMNS: Final = (
+    Column("controller", "controller", align="left"),
+    Column("observation", "observation", align="left"),
+    Column("scenario", "scenario", align="left"),
+    *TABLE_COLUMNS[2:],
+)
+"""The columns of the markdown table of a comparison on the field string."""
+
 
 def _diverged_cell(row: Mapping[str, Any], column: Column) -> str | None:
     if column.key == "settling_time_s" and row.get("diverged"):
@@ -325,8 +473,10 @@ def _diverged_cell(row: Mapping[str, Any], column: Column) -> str | None:
 
 def markdown_table(rows: Sequence[Mapping[str, Any]]) -> str:
     """The rows as a markdown table (settling ``never``: the run ends outside the 5 % band;
-    static error: mean of ``V_ref - w_bit`` over the last 20 s)."""
-    return _markdown(rows, TABLE_COLUMNS, _diverged_cell)
+    static error: mean of ``V_ref - w_bit`` over the last 20 s); the field string's rows
+    (with a ``scenario``) also show the observation mode and the scenario."""
+    field = bool(rows) and "scenario" in rows[0]
+    return _markdown(rows, FIELD_TABLE_COLUMNS if field else TABLE_COLUMNS, _diverged_cell)
 
 
 INDUSTRY_CONTROLLERS: Final = ("stiff_pi", "soft_speed", "z_torque")
@@ -338,11 +488,12 @@ def _families(rows: Sequence[Mapping[str, Any]]) -> dict[str, list[str]]:
     families: dict[str, list[str]] = {}
     for label in dict.fromkeys(r["controller"] for r in rows):
         agent = any(r["controller"] == label and r["gains"] == "agent" for r in rows)
+        name = label.split(" (")[0]  # a field run's label: controller (observation)
         if agent:
             family = "learned agent"
-        elif label in PAPER_CONTROLLERS:
+        elif name in PAPER_CONTROLLERS:
             family = "the paper's sliding-mode controllers"
-        elif label in INDUSTRY_CONTROLLERS:
+        elif name in INDUSTRY_CONTROLLERS:
             family = "industry speed loops"
         else:
             family = "other controllers"
@@ -359,17 +510,30 @@ def _families(rows: Sequence[Mapping[str, Any]]) -> dict[str, list[str]]:
 def comparison_figures(
     rows: Sequence[Mapping[str, Any]],
     runs: Mapping[tuple[str, str, float], RunTraces],
+    cases: Sequence[str] | None = None,
+    focus: str | None = None,
 ) -> Iterator[tuple[str, Figure]]:
     """The comparison's figures as (file name, figure), in the spirit of the paper's Figs 3-12.
 
-    * ``speed_torque_<controller>.png``: bit speed and torque under each uncertainty condition,
-      noise off (Figs 6-9);
+    * ``speed_torque_<controller>.png``: bit speed and torque under each uncertainty condition
+      (on the field string: in each of ``cases``), noise off (Figs 6-9);
     * ``noise_speed_torque.png``: every controller with noise on, one column per family
       (Figs 3-4a); ``noise_torque_zoom.png``: the torque of each controller over the last
       0.2 s at full rate, without and with noise (Fig 4b);
     * ``bars_rmse.png``, ``bars_ise_iae.png`` (noise off, by condition), ``bars_rmsd.png`` and
       ``bars_chattering.png`` (first condition, with and without noise) (Figs 5, 10-12);
     * ``adaptive_gains.png``: the adaptive gain k of the adaptive laws against time (noise off).
+
+    Args:
+        rows: The comparison's rows.
+        runs: Its traces by (run label, case name, noise).
+        cases: The cases of the per-controller figures and the bars (default: all of them).
+        focus: The case of the figures of one case (noise, zoom, RMSD, chattering; default the
+            first of ``cases``).
+
+    On the field string a run's label is its controller and observation mode
+    (:func:`experiments.field.run_label`) and its figure names use
+    :func:`experiments.field.file_label`.
     """
     from experiments.plots import (
         adaptive_gains_figure,
@@ -379,21 +543,27 @@ def comparison_figures(
         value_label,
     )
 
+    field = bool(rows) and "scenario" in rows[0]
+    case_key, case_title = (
+        ("scenario", "scenario") if field else ("condition", "uncertainty condition")
+    )
+    if field:  # figures see one label per run and the case under "case"
+        rows = [{**r, "controller": run_label(r), "case": r["scenario"]} for r in rows]
     labels = list(dict.fromkeys(r["controller"] for r in rows))
-    conditions = list(dict.fromkeys(r["condition"] for r in rows))
+    conditions = list(cases) if cases else list(dict.fromkeys(r[case_key] for r in rows))
     noises = sorted({float(r["noise_std_rad_s"]) for r in rows})
     quiet, loud = noises[0], noises[-1]
     quiet_text = value_label("noise_std_rad_s", quiet)
     loud_text = value_label("noise_std_rad_s", loud)
-    first = conditions[0]
+    first = focus or conditions[0]
     band = f"torque: mean per {BAND_S:g} s, light band from minimum to maximum"
     for label in labels:
         by_condition = {c: runs[(label, c, quiet)] for c in conditions if (label, c, quiet) in runs}
         if by_condition:
             yield (
-                f"speed_torque_{label}.png",
+                f"speed_torque_{file_label(label) if field else label}.png",
                 speed_torque_figure(
-                    {"uncertainty condition": {c: r.overview for c, r in by_condition.items()}},
+                    {case_title: {c: r.overview for c, r in by_condition.items()}},
                     f"{label}, {quiet_text}; {band}",
                     envelopes={c: r.torque for c, r in by_condition.items()},
                 ),
@@ -428,15 +598,20 @@ def comparison_figures(
                 ncols=2,
             ),
         )
-    quiet_rows = [r for r in rows if float(r["noise_std_rad_s"]) == quiet]
-    first_rows = [r for r in rows if r["condition"] == first]
+    hue = "case" if field else "condition"
+    quiet_rows = [
+        r for r in rows if float(r["noise_std_rad_s"]) == quiet and r[case_key] in conditions
+    ]
+    first_rows = [r for r in rows if r[case_key] == first]
     yield (
         "bars_rmse.png",
-        metric_bars_figure(quiet_rows, "rmse", title=f"RMSE of the bit speed, {quiet_text}"),
+        metric_bars_figure(
+            quiet_rows, "rmse", hue=hue, title=f"RMSE of the bit speed, {quiet_text}"
+        ),
     )
     yield (
         "bars_ise_iae.png",
-        metric_bars_figure(quiet_rows, ("ise", "iae"), title=f"ISE and IAE, {quiet_text}"),
+        metric_bars_figure(quiet_rows, ("ise", "iae"), hue=hue, title=f"ISE and IAE, {quiet_text}"),
     )
     yield (
         "bars_rmsd.png",
@@ -482,12 +657,17 @@ def write_figures(
     rows: Sequence[Mapping[str, Any]],
     runs: Mapping[tuple[str, str, float], RunTraces],
     folder: Path,
+    cases: Sequence[str] | None = None,
+    focus: str | None = None,
 ) -> list[Path]:
     """Write :func:`comparison_figures` as PNG files into ``folder``; returns their paths."""
     from experiments.plots import save_figure
 
     folder.mkdir(parents=True, exist_ok=True)
-    return [save_figure(fig, folder / name) for name, fig in comparison_figures(rows, runs)]
+    return [
+        save_figure(fig, folder / name)
+        for name, fig in comparison_figures(rows, runs, cases, focus)
+    ]
 
 
 # ---------------------------------------------------------------------------- the agent
@@ -530,15 +710,58 @@ Uncertainty conditions: the paper's parametric-uncertainty conditions. nominal i
 specified; condition1, condition2 and condition3 raise the pipe damping c_pi, the pipe
 stiffness k_pi and the top-drive damping c_dt by 40/30/30 %, 60/50/40 % and 75/75/75 %.
 
+With --env DrillStringField-v0 the runs are on the distributed field string field_2500m at
+each of --depths, at two operating points (150 kN at 60 rpm, prone to stick-slip, and 100 kN
+at 120 rpm) and under each field condition of the bit-rock friction and the mud damping
+(nominal: the preset's; severe: mu_a 1.0, mu_0/mu_a 0.5, xi 1.0 s/rad, half the mud damping;
+mild: mu_a 0.6, mu_0/mu_a 0.8, xi 0.3 s/rad, twice the mud damping). The controllers know
+the nominal string (--controller-model exact: the true one). The paper's sliding-mode
+controllers run with the whole state measured (observation state), the speed loops with each
+of --observations. --noise sets the noise of the measured speeds; with a level above 0 the
+surface torque (250 N m) and the telemetry (0.1 rad/s) are noisy too, with 0 nothing is.
+
 examples:
   drill-gym compare                                    # the default comparison
   drill-gym compare --gains rescaled                   # Table 1 gains x J_dt
   drill-gym compare --controllers csmc proposed --conditions nominal --noise 0 --duration 20
+  drill-gym compare --env DrillStringField-v0 --out results/field-compare
 """
+
+FIELD_NOISE_RAD_S: Final = (0.0, 0.05)
+"""Noise levels of the measured speeds in the field comparison, rad/s (0.05: the env's)."""
 
 
 def _parser() -> ArgumentParser:
     p = ArgumentParser(prog="drill-gym compare", description=DESCRIPTION)
+    p.add_argument(
+        "--env",
+        choices=ENV_IDS,
+        default=PAPER_ENV,
+        help="the env of every run: the paper's 4-DOF string or the distributed field string",
+    )
+    p.add_argument(
+        "--depths",
+        nargs="+",
+        type=number_type(300.0, 10_000.0, unit="m"),
+        default=list(COMPARE_DEPTHS_M),
+        metavar="M",
+        help="measured depths of the field string, m (DrillStringField-v0)",
+    )
+    p.add_argument(
+        "--observations",
+        nargs="+",
+        choices=OBSERVATIONS,
+        default=list(OBSERVATIONS),
+        help="observation modes of the speed loops on the field string (the paper's "
+        "controllers always run with state)",
+    )
+    p.add_argument(
+        "--controller-model",
+        choices=CONTROLLER_MODELS,
+        default="nominal",
+        help="what the controllers know of the field string: its nominal friction and damping, "
+        "or the exact string",
+    )
     p.add_argument(
         "--controllers",
         nargs="+",
@@ -551,18 +774,29 @@ def _parser() -> ArgumentParser:
     p.add_argument(
         "--conditions",
         nargs="+",
-        choices=CONDITIONS,
-        default=list(CONDITIONS),
+        choices=(*CONDITIONS, *(c for c in FIELD_CONDITIONS if c not in CONDITIONS)),
+        default=None,
         metavar="NAME",
-        help=CONDITIONS_HELP + "; allowed " + ", ".join(CONDITIONS) + " (default: all four)",
+        help=CONDITIONS_HELP
+        + "; allowed "
+        + ", ".join(CONDITIONS)
+        + " (default: all four); on the field string the friction and damping conditions "
+        + ", ".join(FIELD_CONDITIONS)
+        + " (default: "
+        + " ".join(COMPARE_CONDITIONS)
+        + ")",
     )
     p.add_argument(
         "--noise",
         nargs="+",
         type=number_type(0.0, 10.0, unit="rad/s"),
-        default=list(DEFAULT_NOISE_RAD_S),
+        default=None,
         metavar="STD",
-        help="standard deviations of the measurement noise on the speeds, rad/s",
+        help="standard deviations of the measurement noise on the speeds, rad/s (default: "
+        + " ".join(f"{v:g}" for v in DEFAULT_NOISE_RAD_S)
+        + "; on the field string "
+        + " ".join(f"{v:g}" for v in FIELD_NOISE_RAD_S)
+        + ")",
     )
     p.add_argument(
         "--duration",
@@ -613,12 +847,33 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
         parser.fail(
             "--duration", f"{args.duration:g} is not a multiple of the {PLANT_DT_S:g} s plant step"
         )
+    field = is_field(args.env)
+    allowed = FIELD_CONDITIONS if field else CONDITIONS
+    conditions = list(
+        dict.fromkeys(args.conditions or (COMPARE_CONDITIONS if field else CONDITIONS))
+    )
+    wrong = [c for c in conditions if c not in allowed]
+    if wrong:
+        parser.fail(
+            "--conditions",
+            f"{', '.join(wrong)} is not a condition of {args.env}: allowed {', '.join(allowed)}",
+        )
+    noises = list(
+        dict.fromkeys(args.noise or (FIELD_NOISE_RAD_S if field else DEFAULT_NOISE_RAD_S))
+    )
+    cases = comparison_cases(
+        args.env,
+        conditions,
+        reading=args.reading,
+        depths_m=list(dict.fromkeys(args.depths)),
+        controller_model=args.controller_model,
+    )
     agent = None if args.no_agent else load_agent(agent_loader)
     start = time.perf_counter()
     rows, traces = run_comparison(
         list(dict.fromkeys(controllers)),
-        list(dict.fromkeys(args.conditions)),
-        list(dict.fromkeys(args.noise)),
+        conditions,
+        noises,
         duration_s=args.duration,
         seed=args.seed,
         reading=args.reading,
@@ -626,22 +881,38 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
         agent=agent,
         keep_traces=not args.no_plots,
         progress=not args.no_progress,
+        env_id=args.env,
+        cases=cases,
+        observations=list(dict.fromkeys(args.observations)),
     )
     simulated = time.perf_counter() - start
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
-    print(
-        f"Scenario: WOB {SCENARIO.wob.initial_n:,.0f} N, V_ref {SCENARIO.reference.value(0.0):g} "
-        f"rad/s, {args.duration:g} s from rest; uncertainty reading '{args.reading}', gains "
-        f"'{args.gains}', seed {args.seed}.\n"
-    )
+    if field:
+        points = ", ".join(f"{w:g} kN at {r:g} rpm" for w, r in COMPARE_POINTS)
+        print(
+            f"Scenarios: field_2500m at {', '.join(f'{d:,.0f}' for d in args.depths)} m; {points}; "
+            f"conditions {', '.join(conditions)}; {args.duration:g} s from rest; the "
+            f"controllers know the {args.controller_model} string; gains '{args.gains}', seed "
+            f"{args.seed}.\n"
+        )
+    else:
+        print(
+            f"Scenario: WOB {SCENARIO.wob.initial_n:,.0f} N, V_ref "
+            f"{SCENARIO.reference.value(0.0):g} rad/s, {args.duration:g} s from rest; uncertainty "
+            f"reading '{args.reading}', gains '{args.gains}', seed {args.seed}.\n"
+        )
     print(markdown_table(rows))
+    keys = FIELD_ROW_KEYS if field else ROW_KEYS
     written = [
-        write_csv(rows, out / "compare.csv", ROW_KEYS),
-        write_json([{k: r[k] for k in ROW_KEYS} for r in rows], out / "compare.json"),
+        write_csv(rows, out / "compare.csv", keys),
+        write_json([{k: r[k] for k in keys} for r in rows], out / "compare.json"),
     ]
-    if not args.no_plots:
-        written += write_figures(rows, traces, out / "figures")
+    if not args.no_plots and rows:
+        chosen, focus = (
+            figure_cases([c.field for c in cases if c.field is not None]) if field else (None, None)
+        )
+        written += write_figures(rows, traces, out / "figures", chosen, focus)
     total = time.perf_counter() - start
     print(
         f"\n{len(rows)} runs simulated in {simulated:.1f} s ({total:.1f} s with output); "

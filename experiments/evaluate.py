@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -49,10 +50,27 @@ from agents.policy import (
     load_policy,
 )
 from drill_env.control import controller_names
-from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics, run_episode
+from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
 from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, WobProfile
 from experiments.arguments import ArgumentParser, names_type
+from experiments.field import (
+    ENV_IDS,
+    FIELD_ENV,
+    HELD_OUT_CASES,
+    HELD_OUT_EPISODE_S,
+    HELD_OUT_FIGURES,
+    OBSERVATIONS,
+    PAPER_ENV,
+    FieldCase,
+    is_field,
+    observations_of,
+    run_label,
+    run_on,
+)
+from experiments.field import (
+    prone as field_prone,
+)
 from experiments.tables import write_csv, write_json
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -61,6 +79,7 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = [
     "BASE_CONTROLLER",
     "EPISODE_S",
+    "FIELD_HELD_OUT",
     "HELD_OUT",
     "HeldOutScenario",
     "evaluate",
@@ -85,17 +104,20 @@ class HeldOutScenario:
     uncertainty condition and the scenario.
 
     Attributes:
-        id: ``h01``, ``h02``, ...
+        id: ``h01``, ``h02``, ... (``f01``, ... on the field string)
         seed: Reset seed of the run.
         condition: The paper's parametric-uncertainty condition (``nominal``,
-            ``condition1``..``condition3``).
+            ``condition1``..``condition3``), or the field string's friction and damping
+            condition.
         scenario: The scenario (``NOISE_STD_RAD_S`` noise, from rest).
+        field: The field scenario it was made from (``None`` on the paper's string).
     """
 
     id: str
     seed: int
     condition: str
     scenario: Scenario
+    field: FieldCase | None = None
 
     @property
     def reference_speed_rad_s(self) -> float:
@@ -104,17 +126,29 @@ class HeldOutScenario:
 
     @property
     def prone(self) -> bool:
-        """Stick-slip prone: V_ref <= 6 rad/s, or a WOB of at least 150 kN at some time."""
+        """Stick-slip prone: V_ref <= 6 rad/s, or a WOB of at least 150 kN at some time (on the
+        field string: :func:`experiments.field.prone`)."""
+        if self.field is not None:
+            return field_prone(self.field)
         wob = self.scenario.wob
         wob_max = max(wob.initial_n, wob.final_n or 0.0)
         return self.reference_speed_rad_s <= 6.0 or wob_max >= 150e3
 
     def env_kwargs(self) -> dict[str, Any]:
-        """The ``DrillString-v0`` keywords of the run."""
-        return {**self.scenario.keywords(), "episode_s": EPISODE_S}
+        """The env keywords of the run (``DrillString-v0``'s, or ``DrillStringField-v0``'s)."""
+        episode_s = EPISODE_S if self.field is None else HELD_OUT_EPISODE_S
+        return {**self.scenario.keywords(), "episode_s": episode_s}
 
     def row(self) -> dict[str, Any]:
         """The scenario's columns of a result row."""
+        if self.field is not None:
+            return {
+                "scenario": self.id,
+                **self.field.columns(),
+                "in_range": self.field.in_range(),
+                "seed": self.seed,
+                "prone": self.prone,
+            }
         wob = self.scenario.wob
         return {
             "scenario": self.id,
@@ -172,13 +206,35 @@ HELD_OUT: Final[tuple[HeldOutScenario, ...]] = (
 """The held-out scenarios: WOB 60-200 kN (eight with one step change), V_ref 4-16 rad/s, the
 four uncertainty conditions, ``NOISE_STD_RAD_S`` noise, ``EPISODE_S`` seconds from rest."""
 
-FIGURE_SCENARIOS: Final = ("h01", "h02", "h08", "h14")
+FIELD_NOISE_STD_RAD_S: Final = 0.05
+"""Noise of the measured speeds in the field's held-out runs, rad/s (the env's; the surface
+torque and the telemetry carry the env's noise too)."""
+
+FIELD_HELD_OUT: Final[tuple[HeldOutScenario, ...]] = tuple(
+    HeldOutScenario(c.id, c.seed, c.condition.name, c.scenario(FIELD_NOISE_STD_RAD_S), c)
+    for c in HELD_OUT_CASES
+)
+"""The held-out scenarios of ``DrillStringField-v0`` (:data:`experiments.field.HELD_OUT_CASES`:
+16 fixed scenarios, 8 within the env's randomisation ranges, 8 outside them), the controllers
+knowing the nominal string."""
+
+FIGURE_SCENARIOS: Final = ("h01", "h02", "h08", "h14", *HELD_OUT_FIGURES)
 """Scenarios drawn one by one (bit speed and torque, base against residual)."""
 
 
-def run_scenario(held_out: HeldOutScenario, policy: Policy, env_kwargs: Mapping[str, Any]) -> Trace:
-    """One held-out run of ``policy`` in ``DrillString-v0(**scenario, **env_kwargs)``."""
-    return run_episode({**held_out.env_kwargs(), **env_kwargs}, policy, held_out.seed)
+def held_out_set(env_id: str) -> tuple[HeldOutScenario, ...]:
+    """The held-out scenarios of ``env_id``."""
+    return FIELD_HELD_OUT if is_field(env_id) else HELD_OUT
+
+
+def run_scenario(
+    held_out: HeldOutScenario,
+    policy: Policy,
+    env_kwargs: Mapping[str, Any],
+    env_id: str = PAPER_ENV,
+) -> Trace:
+    """One held-out run of ``policy`` in ``env_id(**scenario, **env_kwargs)``."""
+    return run_on(env_id, {**held_out.env_kwargs(), **env_kwargs}, policy, held_out.seed)
 
 
 def evaluate(
@@ -187,6 +243,9 @@ def evaluate(
     scenarios: Sequence[HeldOutScenario] = HELD_OUT,
     keep_traces: Sequence[str] = (),
     progress: bool = False,
+    *,
+    env_id: str = PAPER_ENV,
+    observations: Sequence[str] = OBSERVATIONS,
 ) -> tuple[list[dict[str, Any]], dict[tuple[str, str], Trace]]:
     """Score every controller and agent on every scenario.
 
@@ -197,21 +256,31 @@ def evaluate(
         scenarios: The scenarios (default :data:`HELD_OUT`).
         keep_traces: Labels (controller names or agent names) whose traces are returned.
         progress: Show a progress bar.
+        env_id: The env of every run; on the field string each controller runs with each of
+            ``observations`` it can use (:func:`experiments.field.observations_of`).
+        observations: The observation modes of the field string.
 
     Returns:
-        One row per (scenario, controller or agent) with the scenario, ``prone`` and the metrics;
-        and the kept traces by (scenario id, label).
+        One row per (scenario, controller or agent) with the scenario, ``prone`` and the metrics
+        (and the ``observation`` mode on the field string); and the kept traces by (scenario
+        id, label), a label being :func:`experiments.field.run_label` of the row.
     """
+    field = is_field(env_id)
     names = list(controller_names() if controllers is None else controllers)
     # Controllers run with the first agent's decision period: the same noise stream, and a
     # zero residual is then exactly the agent's base controller.
-    common = {
-        k: v for k, v in (agents[0].env_kwargs if agents else {}).items() if k != "base_controller"
-    }
-    jobs: list[tuple[str, Policy, dict[str, Any]]] = [
-        (name, ZeroAction(), {**common, "base_controller": name}) for name in names
-    ]
-    jobs += [(agent.name, agent, dict(agent.env_kwargs)) for agent in agents]
+    own = ("base_controller", "observation")
+    common = {k: v for k, v in (agents[0].env_kwargs if agents else {}).items() if k not in own}
+    jobs: list[tuple[str, str | None, Policy, dict[str, Any]]] = []
+    for name in names:
+        for obs in observations_of(name, observations) if field else (None,):
+            kwargs = {**common, "base_controller": name}
+            if obs is not None:
+                kwargs["observation"] = obs
+            jobs.append((name, obs, ZeroAction(), kwargs))
+    for agent in agents:
+        obs = agent.env_kwargs.get("observation", "surface") if field else None
+        jobs.append((agent.name, obs, agent, dict(agent.env_kwargs)))
     rows: list[dict[str, Any]] = []
     traces: dict[tuple[str, str], Trace] = {}
     total = len(scenarios) * len(jobs)
@@ -221,13 +290,25 @@ def evaluate(
 
         bar = tqdm(total=total, desc="held-out runs", unit="run")
     for scenario in scenarios:
-        for label, policy, kwargs in jobs:
-            trace = run_scenario(scenario, policy, kwargs)
-            metrics = episode_metrics(trace)
+        for label, obs, policy, kwargs in jobs:
             row = scenario.row()
-            rows.append({"scenario": row.pop("scenario"), "controller": label, **row, **metrics})
-            if label in keep_traces:
-                traces[(scenario.id, label)] = trace
+            head: dict[str, Any] = {"scenario": row.pop("scenario"), "controller": label}
+            if obs is not None:
+                head["observation"] = obs
+            try:
+                trace = run_scenario(scenario, policy, kwargs, env_id)
+            except ValueError as err:
+                if not field:
+                    raise
+                # A controller that cannot be made for this string (soft_speed where the
+                # drive's own damping exceeds the pipe impedance): a row without metrics.
+                missing: dict[str, Any] = dict.fromkeys(METRIC_KEYS)
+                rows.append({**head, **row, **missing, "diverged": False, "note": str(err)})
+            else:
+                note = {"note": ""} if field else {}
+                rows.append({**head, **row, **episode_metrics(trace), **note})
+                if run_label(head) in keep_traces:
+                    traces[(scenario.id, run_label(head))] = trace
             if bar is not None:
                 bar.update()
     if bar is not None:
@@ -244,17 +325,22 @@ def summarize(rows: Sequence[Mapping[str, Any]], base: str = BASE_CONTROLLER) ->
     """Means per controller, ratios to ``base`` and whether each meets the goal.
 
     The goal, per agent: mean IAE at most 0.7 x the base controller's, mean RMSD no higher, and
-    a lower mean stick-slip severity over the stick-slip-prone scenarios.
+    a lower mean stick-slip severity over the stick-slip-prone scenarios. Rows with a ``note``
+    (a controller that could not be made for the string) are left out. Rows are grouped by
+    :func:`experiments.field.run_label` (on the field string: controller and observation
+    mode, so ``base`` is then for example ``proposed (state)``).
     """
-    labels = list(dict.fromkeys(r["controller"] for r in rows))
+    labels = list(dict.fromkeys(run_label(r) for r in rows))
     means: dict[str, dict[str, float]] = {}
     for label in labels:
-        mine = [r for r in rows if r["controller"] == label]
+        mine = [r for r in rows if run_label(r) == label and not r.get("note")]
         prone = [r for r in mine if r["prone"]]
         entry = {key: _mean([r[key] for r in mine]) for key in METRIC_KEYS}
         entry["severity_prone"] = _mean([r["stick_slip_severity"] for r in prone])
         entry["unsettled"] = float(sum(r["settling_time_s"] is None for r in mine))
         entry["diverged"] = float(sum(bool(r["diverged"]) for r in mine))
+        if len(mine) != sum(run_label(r) == label for r in rows):
+            entry["runs"] = float(len(mine))  # some scenarios could not be run
         means[label] = entry
     summary: dict[str, Any] = {"base_controller": base, "means": means, "goal": {}}
     if base in means:
@@ -275,8 +361,9 @@ def summarize(rows: Sequence[Mapping[str, Any]], base: str = BASE_CONTROLLER) ->
 
 def markdown_table(summary: Mapping[str, Any]) -> str:
     """The per-controller means as a markdown table (ratios to the base controller)."""
+    base = str(summary.get("base_controller", BASE_CONTROLLER))
     lines = [
-        "| controller | IAE (rad) | vs proposed | RMSD (kN m) | vs proposed | severity, prone | "
+        f"| controller | IAE (rad) | vs {base} | RMSD (kN m) | vs {base} | severity, prone | "
         "severity, all | overshoot (%) | unsettled | stuck | chattering (kN m/s) |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
@@ -285,6 +372,8 @@ def markdown_table(summary: Mapping[str, Any]) -> str:
         g = goal.get(label, {})
         iae_r = f"{(g['iae_ratio'] - 1) * 100:+.1f} %" if g else ""
         rmsd_r = f"{(g['rmsd_ratio'] - 1) * 100:+.1f} %" if g else ""
+        if "runs" in m:  # some scenarios could not be run for it
+            label = f"{label} ({int(m['runs'])} runs)"
         lines.append(
             f"| {label} | {m['iae']:.1f} | {iae_r} | {m['rmsd_nm'] / 1e3:.2f} | {rmsd_r} | "
             f"{m['severity_prone']:.3f} | {m['stick_slip_severity']:.3f} | "
@@ -295,29 +384,42 @@ def markdown_table(summary: Mapping[str, Any]) -> str:
 
 
 def per_scenario_table(rows: Sequence[Mapping[str, Any]], labels: Sequence[str]) -> str:
-    """IAE and severity per scenario for ``labels`` (markdown)."""
-    head = "| scenario | V_ref | WOB (kN) | condition | prone | " + " | ".join(
-        f"IAE {label} | sev. {label}" for label in labels
+    """IAE and severity per scenario for ``labels`` (markdown; on the field string with the
+    string and its depth)."""
+    field = bool(rows) and "measured_depth_m" in rows[0]
+    extra = ["string"] if field else []
+    head = (
+        "| scenario | "
+        + "".join(f"{e} | " for e in extra)
+        + "V_ref | WOB (kN) | condition | prone | "
+        + " | ".join(f"IAE {label} | sev. {label}" for label in labels)
     )
-    lines = [head + " |", "|" + "---|" * (5 + 2 * len(labels))]
-    by_key = {(r["scenario"], r["controller"]): r for r in rows}
+    lines = [head + " |", "|" + "---|" * (5 + len(extra) + 2 * len(labels))]
+    by_key = {(r["scenario"], run_label(r)): r for r in rows}
     for scenario in dict.fromkeys(r["scenario"] for r in rows):
         first = next(r for r in rows if r["scenario"] == scenario)
         wob = f"{first['wob_n'] / 1e3:.0f}"
         if first["wob_final_n"] is not None:
             wob += f" -> {first['wob_final_n'] / 1e3:.0f} @ {first['wob_step_time_s']:.0f} s"
-        cells = [
-            scenario,
-            f"{first['reference_speed_rad_s']:g}",
+        cells = [scenario]
+        if field:
+            cells.append(f"{first['parameters']} at {first['measured_depth_m']:,.0f} m")
+        cells += [
+            f"{first['reference_speed_rad_s']:.3g}"
+            if field
+            else f"{first['reference_speed_rad_s']:g}",
             wob,
-            first["uncertainty"],
+            first["condition"] if field else first["uncertainty"],
             "yes" if first["prone"] else "",
         ]
         for label in labels:
             r = by_key.get((scenario, label))
-            cells += (
-                ["", ""] if r is None else [f"{r['iae']:.0f}", f"{r['stick_slip_severity']:.2f}"]
-            )
+            if r is None:
+                cells += ["", ""]
+            elif r["iae"] is None:  # not run: the controller cannot be made for this string
+                cells += ["n/a", "n/a"]
+            else:
+                cells += [f"{r['iae']:.0f}", f"{r['stick_slip_severity']:.2f}"]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -335,13 +437,20 @@ def write_outputs(
 
 
 def _scenario_title(row: Mapping[str, Any], lines: int = 1) -> str:
-    """``h08: V_ref 8 rad/s, WOB 100 -> 190 kN at 50 s, nominal`` (on two lines if asked)."""
+    """``h08: V_ref 8 rad/s, WOB 100 -> 190 kN at 50 s, nominal`` (on two lines if asked; on
+    the field string the string's depth and the reference in rpm)."""
     wob = f"{row['wob_n'] / 1e3:.0f}"
     if row["wob_final_n"] is not None:
         wob += f" -> {row['wob_final_n'] / 1e3:.0f} kN at {row['wob_step_time_s']:g} s"
     else:
         wob += " kN"
-    head = f"{row['scenario']}: V_ref {row['reference_speed_rad_s']:g} rad/s, {row['uncertainty']}"
+    if "measured_depth_m" in row:
+        rpm = row["reference_speed_rad_s"] * 60.0 / (2.0 * math.pi)
+        head = f"{row['scenario']}: {row['measured_depth_m']:,.0f} m, {rpm:.0f} rpm, {row['condition']}"
+    else:
+        head = (
+            f"{row['scenario']}: V_ref {row['reference_speed_rad_s']:g} rad/s, {row['uncertainty']}"
+        )
     return f"{head}\nWOB {wob}" if lines == 2 else f"{head}, WOB {wob}"
 
 
@@ -401,7 +510,7 @@ def heldout_figures(
                     band_s=0.5 if quantity == "torque" else None,
                 ),
             )
-    chosen_rows = [r for r in rows if r["controller"] in labels]
+    chosen_rows = [{**r, "controller": run_label(r)} for r in rows if run_label(r) in labels]
     if chosen_rows:
         yield (
             "heldout_iae_severity.png",
@@ -449,15 +558,41 @@ stick-slip severity per scenario, and writes heldout.csv, heldout.json, summary.
 figures/ into --out. The goal per agent: mean IAE at most 0.7 x the proposed SMC's, mean RMSD
 no higher, lower mean severity over the 14 stick-slip-prone scenarios.
 
+With --env DrillStringField-v0 the set is the field string's: 16 fixed scenarios f01-f16
+(f01-f08 within the env's randomisation ranges: field_2500m at 1.2-4.5 km, 60-200 kN, 50-150
+rpm, friction and mud damping in their ranges; f09-f12 on deep_5000m at 3.8-6 km; f13-f16
+outside the ranges: 5.5 km, 800 m, 220 kN at 30 rpm with friction outside every range,
+180 rpm), the env's sensors, telemetry and actuator, 0.05 rad/s speed noise, 100 s from rest.
+The controllers know the nominal string; the paper's sliding-mode controllers run with the
+whole state measured, the speed loops with each of --observations. Only models whose
+config.json names that env (env_kwargs.env_id) run there; the means are compared with
+proposed (state), and the per-scenario table lists every controller.
+
 examples:
   drill-gym evaluate                               # the models shipped in agents/models/
   drill-gym evaluate runs/residual_ppo__1/model    # a model of your own
   drill-gym evaluate --controllers proposed --scenarios h01 h14 --no-plots
+  drill-gym evaluate --env DrillStringField-v0 --out results/field-evaluate
 """
 
 
 def _parser() -> ArgumentParser:
     parser = ArgumentParser(prog="drill-gym evaluate", description=DESCRIPTION)
+    parser.add_argument(
+        "--env",
+        choices=ENV_IDS,
+        default=PAPER_ENV,
+        help="the env of the held-out set: the paper's 4-DOF string or the distributed field "
+        "string",
+    )
+    parser.add_argument(
+        "--observations",
+        nargs="+",
+        choices=OBSERVATIONS,
+        default=list(OBSERVATIONS),
+        help="observation modes of the speed loops on the field string (the paper's "
+        "controllers always run with state)",
+    )
     parser.add_argument(
         "models",
         nargs="*",
@@ -476,13 +611,15 @@ def _parser() -> ArgumentParser:
         + " (default: all; an agent's base controller is always added)",
     )
     ids = [s.id for s in HELD_OUT]
+    field_ids = [s.id for s in FIELD_HELD_OUT]
     parser.add_argument(
         "--scenarios",
         nargs="+",
         default=None,
         metavar="ID",
-        type=names_type(lambda: ids, "scenario"),
-        help=f"only these held-out scenarios, {ids[0]} to {ids[-1]} (default: all 20)",
+        type=names_type(lambda: ids + field_ids, "scenario"),
+        help=f"only these held-out scenarios, {ids[0]} to {ids[-1]} (default: all 20; on "
+        f"{FIELD_ENV} {field_ids[0]} to {field_ids[-1]}, all 16)",
     )
     parser.add_argument(
         "--out", type=Path, default=Path("results/evaluate"), metavar="DIR", help="output folder"
@@ -506,29 +643,70 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(list(argv) if argv is not None else None)
 
+    field = is_field(args.env)
     paths = [Path(p) for p in args.models] or shipped_models()
-    if not paths:
+    if not paths and not field:
         parser.error(f"no MODEL given and no model shipped in {DEFAULT_MODEL_DIR}")
     agents = [load_policy(p, trust_pickle=args.trust_pickle) for p in paths]
+    for agent, path in zip(agents, paths, strict=True):
+        if agent.env_id != args.env:
+            if args.models:
+                parser.error(f"MODEL {path} is for {agent.env_id}, not for {args.env}")
+            print(f"evaluate: {path} is for {agent.env_id}: left out", file=sys.stderr)
+    paths = [p for a, p in zip(agents, paths, strict=True) if a.env_id == args.env]
+    agents = [a for a in agents if a.env_id == args.env]
     labels = [a.name for a in agents]
     if len(set(labels)) != len(labels):
         for a, p in zip(agents, paths, strict=True):
             a.name = f"{a.name}:{p}"
         labels = [a.name for a in agents]
-    scenarios: Sequence[HeldOutScenario] = HELD_OUT
+    held_out = held_out_set(args.env)
+    scenarios: Sequence[HeldOutScenario] = held_out
     if args.scenarios:
-        scenarios = [s for s in HELD_OUT if s.id in args.scenarios]
+        wrong = [i for i in args.scenarios if i not in {s.id for s in held_out}]
+        if wrong:
+            parser.fail(
+                "--scenarios",
+                f"{', '.join(wrong)} is not a held-out scenario of {args.env}: allowed "
+                f"{held_out[0].id} to {held_out[-1].id}",
+            )
+        scenarios = [s for s in held_out if s.id in args.scenarios]
     out: Path = args.out
     t0 = time.perf_counter()
     base_names = sorted({a.env_kwargs.get("base_controller") or BASE_CONTROLLER for a in agents})
+    if field and not agents:
+        base_names = [BASE_CONTROLLER]
     controllers = args.controllers
     if controllers is not None:
         controllers = list(dict.fromkeys([*controllers, *base_names]))
-    keep = [*base_names, *labels]
+    base_label = BASE_CONTROLLER
+    bases = base_names
+    if field:  # a run's label is its controller and observation mode
+        base_label = run_label({"controller": BASE_CONTROLLER, "observation": "state"})
+        bases = list(
+            dict.fromkeys(
+                run_label(
+                    {
+                        "controller": a.env_kwargs.get("base_controller") or BASE_CONTROLLER,
+                        "observation": a.env_kwargs.get("observation", "surface")
+                        if a.env_kwargs.get("base_controller")
+                        else "state",
+                    }
+                )
+                for a in agents
+            )
+        ) or [base_label]
+    keep = [*bases, *labels]
     rows, traces = evaluate(
-        agents, controllers, scenarios, keep_traces=keep, progress=not args.no_progress
+        agents,
+        controllers,
+        scenarios,
+        keep_traces=keep,
+        progress=not args.no_progress,
+        env_id=args.env,
+        observations=list(dict.fromkeys(args.observations)),
     )
-    summary = summarize(rows)
+    summary = summarize(rows, base_label)
     summary["seconds"] = round(time.perf_counter() - t0, 1)
     summary["models"] = {a.name: str(p) for a, p in zip(agents, paths, strict=True)}
     written = write_outputs(rows, summary, out)
@@ -537,7 +715,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     total = time.perf_counter() - t0
     print(markdown_table(summary))
     print()
-    print(per_scenario_table(rows, keep))
+    print(per_scenario_table(rows, list(summary["means"]) if field else keep))
     print()
     for label, g in summary["goal"].items():
         if label in labels:

@@ -43,6 +43,7 @@ from drill_env.evaluation import Trace
 
 if TYPE_CHECKING:  # pragma: no cover
     from experiments.stick_slip_map import StickSlipMap
+    from experiments.waves import StringHistory
 
 __all__ = [
     "DPI",
@@ -63,7 +64,9 @@ __all__ = [
     "plot_learning_curves",
     "read_csv_columns",
     "save_figure",
+    "space_time_figure",
     "speed_torque_figure",
+    "string_response_figure",
     "text_outside",
     "text_overlaps",
     "text_problems",
@@ -291,6 +294,14 @@ def _wrap(text: str, width_in: float, fontsize: float = 12.0) -> str:
     """``text`` broken into lines that fit ``width_in`` inches at ``fontsize`` points."""
     chars = max(20, int(width_in * 72 / (0.55 * fontsize)))
     return "\n".join(textwrap.wrap(text, chars, break_on_hyphens=False)) if text else text
+
+
+def _legend_columns(fig: Figure, labels: Sequence[str], fontsize: float, most: int = 6) -> int:
+    """Columns of a legend under the axes: at most ``most``, and few enough that a row of the
+    longest label fits the figure's width."""
+    char_in = 0.55 * fontsize / 72.0
+    entry_in = char_in * max((len(str(t)) for t in labels), default=1) + 0.7
+    return max(1, min(len(labels), most, int(fig.get_figwidth() / entry_in)))
 
 
 def _suptitle(fig: Figure, text: str) -> None:
@@ -620,17 +631,23 @@ def speed_torque_figure(
             clip = _clip_handle(bounds, 1.0, "kN m")
             if clip is not None:
                 handles.append(clip)
-        ax_w.legend(
-            handles=handles,
-            title=name or None,
-            loc="lower center",
-            bbox_to_anchor=(0.5, 1.02),
-            ncol=2 if n > 1 else 3,
-            fontsize=9,
-            title_fontsize=10,
-            frameon=False,
-            borderaxespad=0.0,
-        )
+        ncol = 2 if n > 1 else 3
+        while True:  # fewer columns while the legend is wider than its share of the figure
+            legend = ax_w.legend(
+                handles=handles,
+                title=name or None,
+                loc="lower center",
+                bbox_to_anchor=(0.5, 1.02),
+                ncol=ncol,
+                fontsize=9,
+                title_fontsize=10,
+                frameon=False,
+                borderaxespad=0.0,
+            )
+            width = legend.get_window_extent(fig.canvas.get_renderer()).width  # type: ignore[attr-defined]
+            if ncol == 1 or width <= fig.get_figwidth() * fig.dpi / n:
+                break
+            ncol -= 1
         ax_u.set_xlabel("time (s)")
         for ax in (ax_w, ax_u):
             ax.grid(True, alpha=0.3)
@@ -927,7 +944,7 @@ def metric_bars_figure(
             handles=handles,
             title=key_label(hue),
             loc="outside lower center",
-            ncol=min(len(handles), 6),
+            ncol=_legend_columns(fig, [value_label(hue, h) for h in hues], 10.0),
             fontsize=10,
             title_fontsize=10,
         )
@@ -1068,7 +1085,7 @@ def map_figure(result: StickSlipMap) -> Figure:
         (axes[0], "severity", f"severity, capped at {SEVERITY_LIMIT:g}"),
         (axes[1], "stuck", "stuck fraction"),
     ):
-        mesh = _heatmap(ax, result, quantity, f"{result.controller}: {label}")
+        mesh = _heatmap(ax, result, quantity, f"{result.label}: {label}")
         fig.colorbar(
             mesh,
             ax=ax,
@@ -1094,8 +1111,8 @@ def maps_figure(results: Sequence[StickSlipMap]) -> Figure:
     severity: list[Any] = []
     stuck: list[Any] = []
     for col, result in enumerate(results):
-        severity.append(_heatmap(axes[0, col], result, "severity", result.controller))
-        stuck.append(_heatmap(axes[1, col], result, "stuck", result.controller))
+        severity.append(_heatmap(axes[0, col], result, "severity", result.label))
+        stuck.append(_heatmap(axes[1, col], result, "stuck", result.label))
         if col:
             axes[0, col].set_ylabel("")
             axes[1, col].set_ylabel("")
@@ -1112,10 +1129,172 @@ def maps_figure(results: Sequence[StickSlipMap]) -> Figure:
 
 def _caption(result: StickSlipMap) -> str:
     noise = "no noise" if result.noise_std_rad_s == 0 else f"noise {result.noise_std_rad_s:g} rad/s"
+    plant = f"plant {result.parameters}"
+    if result.measured_depth_m is not None:
+        plant += f" at {result.measured_depth_m:,.0f} m"
     return (
-        f"plant {result.parameters}, runs of {result.duration_s:g} s from rest, last "
+        f"{plant}, runs of {result.duration_s:g} s from rest, last "
         f"{result.window_s:g} s analysed, {noise}"
     )
+
+
+# ------------------------------------------------------------ the field string's waves
+def string_response_figure(
+    histories: Mapping[str, StringHistory], title: str = "", *, ncols: int = 5
+) -> Figure:
+    """Bit speed (with the reference), top-drive speed and surface torque against time, one
+    column of three panels per run, up to ``ncols`` runs per row; one speed axis for every
+    speed panel and one torque axis for every torque panel, so the runs compare at a glance.
+
+    Args:
+        histories: Run label -> node history (:class:`experiments.waves.StringHistory`).
+        title: Figure title.
+        ncols: Runs per row.
+
+    Raises:
+        ValueError: if ``histories`` is empty.
+    """
+    if not histories:
+        raise ValueError("histories is empty: nothing to plot")
+    n = len(histories)
+    ncols = max(1, min(ncols, n))
+    groups = math.ceil(n / ncols)
+    fig = _figure(3.3 * ncols + 1.0, 5.6 * groups + 1.0)
+    grid = np.asarray(fig.subplots(3 * groups, ncols, squeeze=False, sharex=True))
+    speed_axes: list[Axes] = []
+    torque_axes: list[Axes] = []
+    rows = (
+        ("bit speed (rad/s)", "bit"),
+        ("top-drive speed (rad/s)", "top"),
+        ("surface torque (kN m)", "torque"),
+    )
+    for k, (label, history) in enumerate(histories.items()):
+        g, col = divmod(k, ncols)
+        color = color_of(label, k)
+        for r, (ylabel, what) in enumerate(rows):
+            ax = grid[3 * g + r, col]
+            t = history.time_s
+            if what == "bit":
+                ax.plot(t, history.reference_rad_s, color="k", ls=(0, (4, 2)), lw=1.0)
+                ax.plot(t, history.bit_speed_rad_s, color=color, lw=1.3)
+                ax.set_title(label, fontsize=10)
+            elif what == "top":
+                ax.plot(t, history.reference_rad_s, color="k", ls=(0, (4, 2)), lw=1.0)
+                ax.plot(t, history.top_drive_speed_rad_s, color=color, lw=1.3)
+            else:
+                ax.plot(t, history.surface_torque_nm / 1e3, color=color, lw=1.3)
+            (torque_axes if what == "torque" else speed_axes).append(ax)
+            ax.grid(True, alpha=0.3)
+            ax.ticklabel_format(axis="x", useOffset=False)
+            if col == 0:
+                ax.set_ylabel(ylabel, fontsize=9)
+            if r == 2:
+                ax.tick_params(labelbottom=True)
+                ax.set_xlabel("time (s)", fontsize=9)
+    for group in (speed_axes, torque_axes):
+        lows = [a.get_ylim()[0] for a in group]
+        highs = [a.get_ylim()[1] for a in group]
+        for a in group:
+            a.set_ylim(min(lows), max(highs))
+    for ax in grid.ravel()[3 * n :]:
+        ax.set_visible(False)
+    for k in range(n, groups * ncols):
+        g, col = divmod(k, ncols)
+        for r in range(3):
+            grid[3 * g + r, col].set_visible(False)
+    fig.legend(
+        handles=[Line2D([], [], color="k", ls=(0, (4, 2)), lw=1.0, label="reference bit speed")],
+        loc="outside lower center",
+        fontsize=10,
+    )
+    _suptitle(fig, title)
+    return fig
+
+
+def _slip_onsets(history: StringHistory, threshold_rad_s: float = 0.05) -> npt.NDArray[np.float64]:
+    """Times at which the bit starts to turn again after sticking, s (at most one per travel
+    time of a wave from the bit to the surface)."""
+    moving = history.bit_speed_rad_s > threshold_rad_s
+    starts = history.time_s[np.flatnonzero(moving[1:] & ~moving[:-1]) + 1]
+    gap = float(history.node_depth_m[-1]) / history.wave_speed_m_s
+    kept: list[float] = []
+    for t in starts:  # one per cycle: a release within one travel time of the last is the same
+        if not kept or t - kept[-1] > gap:
+            kept.append(float(t))
+    return np.array(kept)
+
+
+def space_time_figure(history: StringHistory, title: str = "") -> Figure:
+    """The torsional waves along the string: node speed (top) and the torque each element
+    carries (bottom) as colour maps over time (x) and depth (y, the surface at the top).
+
+    The dashed white line is the top of the BHA. Each dotted line starts at the bit when it
+    breaks free and climbs at the pipe's wave speed ``c``: where the colours change along it,
+    the release wave is travelling up the string; it reaches the top drive ``D / c`` later.
+
+    Args:
+        history: The node history of one run (:class:`experiments.waves.StringHistory`),
+            typically its last stick-slip cycles.
+        title: Figure title.
+
+    Raises:
+        ValueError: if the history has fewer than two samples.
+    """
+    if history.time_s.size < 2:
+        raise ValueError("history has fewer than two samples: nothing to plot")
+    fig = _figure(10.0, 7.6)
+    ax_w, ax_t = fig.subplots(2, 1, sharex=True, sharey=True)
+    t = history.time_s
+    depth = history.node_depth_m
+    mid = 0.5 * (depth[1:] + depth[:-1])
+    speed_high = max(float(np.percentile(history.speed_rad_s, 99.5)), 1e-3)
+    mesh_w = ax_w.pcolormesh(
+        t, depth, history.speed_rad_s.T, shading="nearest", cmap="viridis",
+        norm=Normalize(0.0, speed_high), rasterized=True,
+    )  # fmt: skip
+    torque = history.torque_nm.T / 1e3
+    mesh_t = ax_t.pcolormesh(
+        t, mid, torque, shading="nearest", cmap="magma",
+        norm=Normalize(float(np.percentile(torque, 0.5)), float(np.percentile(torque, 99.5))),
+        rasterized=True,
+    )  # fmt: skip
+    bottom = float(depth[-1])
+    handles: list[Any] = [
+        Line2D([], [], color="white", ls="--", lw=1.4, label="top of the BHA"),
+    ]
+    onsets = _slip_onsets(history)
+    travel = bottom / history.wave_speed_m_s
+    for ax in (ax_w, ax_t):
+        ax.axhline(history.pipe_length_m, color="white", ls="--", lw=1.4)
+        for t0 in onsets:
+            ax.plot([t0, t0 + travel], [bottom, 0.0], color="white", ls=":", lw=1.6)
+        ax.set_xlim(float(t[0]), float(t[-1]))
+        ax.set_ylim(bottom, 0.0)
+        ax.set_ylabel("depth (m)")
+    if onsets.size:
+        handles.append(
+            Line2D(
+                [],
+                [],
+                color="white",
+                ls=":",
+                lw=1.6,
+                label=f"from the bit's release at c = {history.wave_speed_m_s:,.0f} m/s: "
+                f"at the surface {travel:.2f} s later",
+            )  # fmt: skip
+        )
+    ax_w.set_title("node speed")
+    ax_t.set_title("torque carried by the string")
+    ax_t.set_xlabel("time (s)")
+    ax_t.ticklabel_format(axis="x", useOffset=False)
+    fig.colorbar(mesh_w, ax=ax_w, label="speed (rad/s)", extend="max")
+    fig.colorbar(mesh_t, ax=ax_t, label="torque (kN m)", extend="both")
+    legend = fig.legend(handles=handles, loc="outside lower center", ncol=len(handles), fontsize=10)
+    legend.get_frame().set_facecolor("0.45")
+    for text in legend.get_texts():
+        text.set_color("white")
+    _suptitle(fig, title)
+    return fig
 
 
 # -------------------------------------------------------------------- learning curves

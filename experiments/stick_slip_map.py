@@ -35,7 +35,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Final
+from typing import Any, Final, NamedTuple
 
 import gymnasium as gym
 import numpy as np
@@ -44,11 +44,21 @@ from tqdm import tqdm
 
 import baselines  # noqa: F401  (registers the built-in controllers, in their order)
 from drill_env.control import controller_names
+from drill_env.distributed import DISTRIBUTED_PRESETS, with_measured_depth
 from drill_env.evaluation import reset_each
 from drill_env.limits import MAX_REFERENCE_RAD_S, MAX_WOB_N
 from drill_env.metrics import WindowStatistics
 from drill_env.parameters import PLANT_DT_S, PRESETS
+from drill_env.scenarios import RPM
 from experiments.arguments import ArgumentParser, names_type, number_type
+from experiments.field import (
+    ENV_IDS,
+    FIELD_ENV,
+    OBSERVATIONS,
+    PAPER_ENV,
+    is_field,
+    observations_of,
+)
 from experiments.plots import map_figure, maps_figure, save_figure
 from experiments.tables import write_csv
 
@@ -66,6 +76,9 @@ CSV_COLUMNS: Final = ("wob_n", "reference_speed_rad_s", "stick_slip_severity", "
 
 DEFAULT_WINDOW_S: Final = 40.0
 """Analysis window at the end of each run, s (longer than one stick-slip period)."""
+FIELD_WINDOW_S: Final = 50.0
+"""Analysis window on the field string, s: at least four of its longest stick-slip cycles
+(4-11 s at 1.5-5 km)."""
 MAX_CHUNK_STEPS: Final = 1000
 """Plant steps per compiled call (1 s): bounds the memory of the per-step records."""
 UNSTABLE_SEVERITY: Final = 0.5
@@ -90,6 +103,11 @@ class StickSlipMap:
         seed: Seed of cell 0 (cell ``i`` uses ``seed + i``).
         parameters: Plant preset name.
         wall_time_s: Wall-clock time of the simulation, s.
+        env_id: The env of the runs (``DrillString-v0`` or ``DrillStringField-v0``).
+        observation: The field env's observation mode the controller ran with (``None`` on
+            ``DrillString-v0``).
+        measured_depth_m: The field string's measured depth, m (``None`` on
+            ``DrillString-v0``).
     """
 
     controller: str
@@ -103,6 +121,23 @@ class StickSlipMap:
     seed: int
     parameters: str
     wall_time_s: float
+    env_id: str = PAPER_ENV
+    observation: str | None = None
+    measured_depth_m: float | None = None
+
+    @property
+    def label(self) -> str:
+        """The controller, with the observation mode on the field string."""
+        if self.observation is None:
+            return self.controller
+        return f"{self.controller} ({self.observation})"
+
+    def file_stem(self) -> str:
+        """``stick_slip_map_<controller>``, on the field string with the observation mode and
+        the depth: ``stick_slip_map_stiff_pi_surface_2500m``."""
+        if self.observation is None or self.measured_depth_m is None:
+            return f"stick_slip_map_{self.controller}"
+        return f"stick_slip_map_{self.controller}_{self.observation}_{self.measured_depth_m:g}m"
 
     @property
     def cells(self) -> int:
@@ -181,8 +216,12 @@ def compute_map(
     window_s: float = DEFAULT_WINDOW_S,
     noise_std_rad_s: float = 0.0,
     seed: int = 0,
-    parameters: str = "zribi2024",
+    parameters: str | None = None,
     progress: bool = True,
+    *,
+    env_id: str = PAPER_ENV,
+    observation: str | None = None,
+    measured_depth_m: float | None = None,
 ) -> StickSlipMap:
     """Run every (WOB, reference speed) cell from rest and measure its stick-slip.
 
@@ -194,8 +233,15 @@ def compute_map(
         window_s: Analysis window at the end of each run, s (in (0, duration_s]).
         noise_std_rad_s: Measurement noise on the speeds, rad/s (0 for a deterministic map).
         seed: Seed of cell 0; cell ``i`` (WOB-major) is reset with ``seed + i``.
-        parameters: Plant preset name.
+        parameters: Plant preset name: a 4-DOF one on ``DrillString-v0`` (default
+            ``zribi2024``), a distributed one on ``DrillStringField-v0`` (default
+            ``field_2500m``).
         progress: Show a tqdm progress bar (on stderr).
+        env_id: The env of the runs (:data:`experiments.field.ENV_IDS`).
+        observation: On the field string, the observation mode of the controller (``state`` or
+            ``surface``; default ``state``). Without noise the surface torque and the
+            telemetry are exact too; with noise they carry the env's default noise.
+        measured_depth_m: On the field string, its measured depth, m (default the preset's).
 
     Returns:
         The :class:`StickSlipMap`.
@@ -206,8 +252,31 @@ def compute_map(
     names = controller_names()
     if controller not in names:
         raise ValueError(f"unknown controller {controller!r}: valid names are {', '.join(names)}")
-    if parameters not in PRESETS:
-        raise ValueError(f"parameters = {parameters!r} is not a known preset: {sorted(PRESETS)}")
+    field = is_field(env_id)
+    presets = DISTRIBUTED_PRESETS if field else PRESETS
+    if parameters is None:
+        parameters = DEFAULTS[env_id].parameters
+    if parameters not in presets:
+        raise ValueError(
+            f"parameters = {parameters!r} is not a known preset of {env_id}: {sorted(presets)}"
+        )
+    extra: dict[str, Any] = {}
+    if field:
+        observation = observation or "state"
+        if observation not in OBSERVATIONS:
+            raise ValueError(
+                f"observation = {observation!r} is not valid: allowed {', '.join(OBSERVATIONS)}"
+            )
+        if measured_depth_m is None:
+            measured_depth_m = DISTRIBUTED_PRESETS[parameters].measured_depth_m
+        with_measured_depth(parameters, measured_depth_m)  # validates the depth
+        extra = {"observation": observation, "measured_depth_m": float(measured_depth_m)}
+        if noise_std_rad_s == 0:
+            extra.update(torque_noise_std_nm=0.0, telemetry_noise_std_rad_s=0.0)
+    elif observation is not None or measured_depth_m is not None:
+        raise ValueError(
+            f"observation and measured_depth_m are keywords of the field string, not of {env_id}"
+        )
     wobs = np.atleast_1d(np.asarray(wob_n, dtype=np.float64))
     speeds = np.atleast_1d(np.asarray(reference_speed_rad_s, dtype=np.float64))
     for label, values, upper in (
@@ -239,7 +308,7 @@ def compute_map(
     n = len(cells)
     started = time.perf_counter()
     venv = gym.make_vec(
-        "DrillString-v0",
+        env_id,
         num_envs=n,
         parameters=parameters,
         randomize=False,
@@ -247,6 +316,7 @@ def compute_map(
         control_dt_s=chunk * PLANT_DT_S,
         episode_s=total_steps * PLANT_DT_S,
         noise_std_rad_s=float(noise_std_rad_s),
+        **extra,
     )
     reset_each(
         venv,
@@ -294,6 +364,9 @@ def compute_map(
         seed=int(seed),
         parameters=parameters,
         wall_time_s=time.perf_counter() - started,
+        env_id=env_id,
+        observation=observation if field else None,
+        measured_depth_m=float(measured_depth_m) if measured_depth_m is not None else None,
     )
 
 
@@ -315,11 +388,45 @@ figures is the boundary of that region.
 Writes, per controller, stick_slip_map_NAME.csv and stick_slip_map_NAME.png into --out, and
 stick_slip_maps.png with every controller side by side when there are several.
 
+With --env DrillStringField-v0 the cells run on the distributed field string (--parameters
+field_2500m or deep_5000m) at each of --depths, each controller with each of --observations
+(the paper's sliding-mode controllers always with state: they need the whole state); the files are named
+stick_slip_map_NAME_OBSERVATION_DEPTHm and stick_slip_maps_DEPTHm.png. Its defaults: WOB
+50-200 kN, 40-160 rpm (4.19-16.76 rad/s), 100 s runs with the last 50 s analysed (the field
+string's stick-slip cycles last 4-11 s, so the window holds at least four of the longest).
+
 examples:
   drill-gym map                                         # stiff_pi on the default grid
   drill-gym map --controllers stiff_pi soft_speed z_torque proposed --out results/maps
   drill-gym map --wob-n 5 --speed-n 4 --duration 40 --window 20   # a quick coarse map
+  drill-gym map --env DrillStringField-v0 --controllers soft_speed --depths 1500 2500 4000
 """
+
+
+class _Defaults(NamedTuple):
+    wob_min: float
+    wob_max: float
+    wob_n: int
+    speed_min: float
+    speed_max: float
+    speed_n: int
+    duration: float
+    window: float
+    parameters: str
+
+
+DEFAULTS: Final[dict[str, _Defaults]] = {
+    PAPER_ENV: _Defaults(40e3, 200e3, 20, 1.0, 16.0, 16, 100.0, DEFAULT_WINDOW_S, "zribi2024"),
+    FIELD_ENV: _Defaults(
+        50e3, 200e3, 16, 40 * RPM, 160 * RPM, 13, 100.0, FIELD_WINDOW_S, "field_2500m"
+    ),
+}
+"""The grid and run defaults of the command line on each env."""
+
+
+def _default(name: str, unit: str = "") -> str:
+    paper, field = (getattr(DEFAULTS[e], name) for e in (PAPER_ENV, FIELD_ENV))
+    return f"(default: {paper:g}{unit}; {field:g}{unit} on {FIELD_ENV})"
 
 
 def _parser() -> ArgumentParser:
@@ -336,48 +443,69 @@ def _parser() -> ArgumentParser:
     parser.add_argument(  # the earlier name, still accepted
         "--controller", dest="controllers", nargs="+", type=controllers, help=argparse.SUPPRESS
     )
+    parser.add_argument(
+        "--env",
+        choices=ENV_IDS,
+        default=PAPER_ENV,
+        help="the env of the cells: the paper's 4-DOF string or the distributed field string",
+    )
+    parser.add_argument(
+        "--depths",
+        nargs="+",
+        type=number_type(300.0, 10_000.0, unit="m"),
+        default=None,
+        metavar="M",
+        help="measured depths of the field string, m, one map each (default: the preset's)",
+    )
+    parser.add_argument(
+        "--observations",
+        nargs="+",
+        choices=OBSERVATIONS,
+        default=list(OBSERVATIONS),
+        help="observation modes of the controllers on the field string (the paper's "
+        "controllers always run with state)",
+    )
     wob = number_type(0.0, MAX_WOB_N, open_low=True, unit="N")
     speed = number_type(0.0, MAX_REFERENCE_RAD_S, open_low=True, unit="rad/s")
     count = number_type(1, 10_000, integer=True)
     parser.add_argument(
-        "--wob-min", type=wob, default=40e3, metavar="NEWTONS", help="lowest WOB, N"
+        "--wob-min", type=wob, metavar="NEWTONS", help="lowest WOB, N " + _default("wob_min")
     )
     parser.add_argument(
-        "--wob-max", type=wob, default=200e3, metavar="NEWTONS", help="highest WOB, N"
+        "--wob-max", type=wob, metavar="NEWTONS", help="highest WOB, N " + _default("wob_max")
     )
     parser.add_argument(
-        "--wob-n", type=count, default=20, metavar="COUNT", help="number of WOB values"
+        "--wob-n", type=count, metavar="COUNT", help="number of WOB values " + _default("wob_n")
     )
     parser.add_argument(
         "--speed-min",
         type=speed,
-        default=1.0,
         metavar="RAD_S",
-        help="lowest reference bit speed, rad/s",
+        help="lowest reference bit speed, rad/s " + _default("speed_min"),
     )
     parser.add_argument(
         "--speed-max",
         type=speed,
-        default=16.0,
         metavar="RAD_S",
-        help="highest reference bit speed, rad/s",
+        help="highest reference bit speed, rad/s " + _default("speed_max"),
     )
     parser.add_argument(
-        "--speed-n", type=count, default=16, metavar="COUNT", help="number of reference speeds"
+        "--speed-n",
+        type=count,
+        metavar="COUNT",
+        help="number of reference speeds " + _default("speed_n"),
     )
     parser.add_argument(
         "--duration",
         type=number_type(0.0, 1e4, open_low=True, unit="s"),
-        default=100.0,
         metavar="S",
-        help="length of each run from rest, s (a multiple of 0.1 s)",
+        help="length of each run from rest, s (a multiple of 0.1 s) " + _default("duration"),
     )
     parser.add_argument(
         "--window",
         type=number_type(0.0, 1e4, open_low=True, unit="s"),
-        default=DEFAULT_WINDOW_S,
         metavar="S",
-        help="analysis window at the end of each run, s (at most --duration)",
+        help="analysis window at the end of each run, s (at most --duration) " + _default("window"),
     )
     parser.add_argument(
         "--noise",
@@ -385,10 +513,14 @@ def _parser() -> ArgumentParser:
         default=0.0,
         metavar="STD",
         help="standard deviation of the measurement noise on the speeds, rad/s (0: the map is "
-        "deterministic)",
+        "deterministic; on the field string the surface torque and telemetry are then exact, "
+        "else they carry the env's noise)",
     )
     parser.add_argument(
-        "--parameters", default="zribi2024", choices=sorted(PRESETS), help="plant parameter preset"
+        "--parameters",
+        choices=sorted(PRESETS) + sorted(DISTRIBUTED_PRESETS),
+        help="plant parameter preset: a 4-DOF one on DrillString-v0, a distributed one on "
+        f"{FIELD_ENV} (default: zribi2024; field_2500m on {FIELD_ENV})",
     )
     parser.add_argument(
         "--out", type=Path, default=Path("results"), metavar="DIR", help="output folder"
@@ -412,6 +544,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     parser = _parser()
     args = parser.parse_args(argv)
+    field = is_field(args.env)
+    defaults = DEFAULTS[args.env]
+    for name in defaults._fields:
+        if getattr(args, name) is None:
+            setattr(args, name, getattr(defaults, name))
+    presets = DISTRIBUTED_PRESETS if field else PRESETS
+    if args.parameters not in presets:
+        parser.fail(
+            "--parameters",
+            f"{args.parameters} is not a preset of {args.env}: allowed {', '.join(sorted(presets))}",
+        )
+    if not field and args.depths is not None:
+        parser.fail("--depths", f"is an option of the field string ({FIELD_ENV})")
     try:
         wobs = grid_values("wob", args.wob_min, args.wob_max, args.wob_n, MAX_WOB_N)
         speeds = grid_values(
@@ -426,8 +571,23 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     if abs(round(args.duration * 10) - args.duration * 10) > 1e-6:
         parser.fail("--duration", f"{args.duration:g} is not a multiple of 0.1 s")
-    results = []
-    for name in dict.fromkeys(args.controllers):
+    runs: list[tuple[str, str | None, float | None]] = []
+    if field:
+        string = DISTRIBUTED_PRESETS[args.parameters]
+        depths = list(dict.fromkeys(args.depths or [string.measured_depth_m]))
+        for depth in depths:
+            if depth <= string.bha_length_m:
+                parser.fail(
+                    "--depths",
+                    f"{depth:g} is out of range: allowed > BHA length {string.bha_length_m} m",
+                )
+        for name in dict.fromkeys(args.controllers):
+            modes = observations_of(name, args.observations)
+            runs += [(name, obs, depth) for depth in depths for obs in modes]
+    else:
+        runs = [(name, None, None) for name in dict.fromkeys(args.controllers)]
+    results: dict[float | None, list[StickSlipMap]] = {}
+    for name, observation, depth in runs:
         result = compute_map(
             name,
             wobs,
@@ -438,20 +598,27 @@ def main(argv: Sequence[str] | None = None) -> int:
             seed=args.seed,
             parameters=args.parameters,
             progress=not args.no_progress,
+            env_id=args.env,
+            observation=observation,
+            measured_depth_m=depth,
         )
-        written = [write_map_csv(result, args.out / f"stick_slip_map_{name}.csv")]
+        stem = result.file_stem()
+        written = [write_map_csv(result, args.out / f"{stem}.csv")]
         if not args.no_plots:
-            written.append(save_figure(map_figure(result), args.out / f"stick_slip_map_{name}.png"))
+            written.append(save_figure(map_figure(result), args.out / f"{stem}.png"))
         simulated = result.cells * result.duration_s
         print(
-            f"{name}: {result.cells} cells x {result.duration_s:g} s in "
-            f"{result.wall_time_s:.1f} s ({simulated / result.wall_time_s:,.0f} simulated s per "
-            f"wall s); {int(result.unstable().sum())} cells in stick-slip; wrote "
+            f"{result.label}{'' if depth is None else f' at {depth:g} m'}: {result.cells} cells "
+            f"x {result.duration_s:g} s in {result.wall_time_s:.1f} s "
+            f"({simulated / result.wall_time_s:,.0f} simulated s per wall s); "
+            f"{int(result.unstable().sum())} cells in stick-slip; wrote "
             + " and ".join(str(p) for p in written)
         )
-        results.append(result)
-    if len(results) > 1 and not args.no_plots:
-        print(f"wrote {save_figure(maps_figure(results), args.out / 'stick_slip_maps.png')}")
+        results.setdefault(depth, []).append(result)
+    for depth, maps in results.items():
+        if len(maps) > 1 and not args.no_plots:
+            name = "stick_slip_maps.png" if depth is None else f"stick_slip_maps_{depth:g}m.png"
+            print(f"wrote {save_figure(maps_figure(maps), args.out / name)}")
     return 0
 
 

@@ -109,7 +109,7 @@ def test_an_unknown_command_is_one_line(
     assert code == 2 and err.count("\n") == 1
     assert re.match(
         r"drill-gym: error: unknown (command|option) '.*': allowed commands compare, map, train, "
-        r"evaluate, convert \(see drill-gym --help\)\n$",
+        r"evaluate, convert, waves \(see drill-gym --help\)\n$",
         err,
     )
 

@@ -1,0 +1,763 @@
+"""``drill-gym waves``: the torsional waves of the field string and what each controller does
+with them.
+
+The field string (``DrillStringField-v0``) carries torsional waves at ``c = sqrt(G / rho)``
+(2,788 m/s in the Well B pipe) between the top drive and the bit; a stick-slip cycle is the
+string's lowest mode with the top drive held (top clamped, bit free), whose period is about
+``4 L / c`` for a uniform pipe. This study puts numbers and pictures to that:
+
+1. **The strings** (:func:`string_table`): per depth, the pipe length, the wave's one-way and
+   round-trip travel times ``L / c`` and ``2 L / c``, the pipe impedance ``Z = J sqrt(G rho)``,
+   the stick-slip period ``2 pi / w_ss`` (top clamped, bit free), the period with the bit stuck
+   and the same numbers of the 4-DOF equivalent the paper's controllers are written on
+   (:func:`drill_env.modes.lumped_equivalent`), beside the paper's own 4-DOF plant; and the
+   cycle period the stiff speed loop actually shows there (:func:`cycle_period_s`).
+2. **The runs** (:func:`record_run`): every controller, with each observation mode it can use,
+   on one stick-slip-prone scenario (default 2,500 m, 150 kN, 60 rpm, nominal friction) with
+   the true state of every node read at every decision (``env.unwrapped.string_state()``);
+   the stick-slip severity, stuck fraction and RMSE over the last ``window`` seconds, the
+   cycle period, and for the linear speed loops the reflection coefficient ``|r|`` their top
+   drive presents to a wave at the stick-slip frequency.
+3. **What the 4-DOF equivalent's mismatch costs** (:func:`equivalent_table`): the same
+   controller (same gains, same 4-DOF model, same actuator, sensors and noise) on the 4-DOF
+   equivalent itself (``DrillString-v0`` with ``parameters=lumped_equivalent(string)``) and on
+   the distributed string it stands for.
+
+Outputs (``--out``, default ``results/waves``): ``waves.json`` (the three tables) and, under
+``figures/``, ``field_response.png`` (bit speed, top-drive speed and surface torque of every
+run) and ``field_space_time_<run>.png`` (node speed and element torque along the depth
+against time, over the last stick-slip cycles).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Final
+
+import gymnasium as gym
+import numpy as np
+import numpy.typing as npt
+
+import baselines  # noqa: F401  (registers the built-in controllers, in their order)
+from baselines.string_modes import reflection_coefficient, string_modes, top_drive_impedance
+from drill_env.control import controller_names, make_controller
+from drill_env.distributed import DISTRIBUTED_PRESETS, DistributedStringParameters
+from drill_env.evaluation import ZeroAction
+from drill_env.metrics import episode_metrics_from_samples
+from drill_env.modes import (
+    lumped_equivalent,
+    natural_frequencies_hz,
+    pipe_impedance,
+    pipe_travel_time_s,
+)
+from drill_env.parameters import PLANT_DT_S, PRESETS, DrillStringParameters
+from drill_env.scenarios import WobProfile
+from experiments.arguments import ArgumentParser, names_type, number_type
+from experiments.field import (
+    FIELD_CONDITIONS,
+    FIELD_ENV,
+    OBSERVATIONS,
+    PAPER_ENV,
+    FieldCase,
+    file_label,
+    observations_of,
+    run_label,
+)
+from experiments.tables import Column, markdown_table, write_json
+
+__all__ = [
+    "RECORD_DT_S",
+    "RunRecord",
+    "StringHistory",
+    "cycle_period_s",
+    "equivalent_table",
+    "main",
+    "record_run",
+    "reflection_table",
+    "string_table",
+]
+
+RECORD_DT_S: Final = 0.02
+"""Decision period of the recorded runs, s: the node states are read every 20 ms (the
+controllers still act at every 1 ms plant step)."""
+DEFAULT_DEPTHS_M: Final = (1_500.0, 2_500.0, 4_000.0)
+"""Depths of the string table, m."""
+WINDOW_S: Final = 50.0
+"""Analysis window at the end of each run, s (as ``drill-gym map`` on the field string)."""
+SPACE_TIME_S: Final = 12.0
+"""Length of the space-time figures, s (two stick-slip cycles at 2,500 m)."""
+STEADY_SEVERITY: Final = 0.1
+"""Below this severity a run turns steadily and table 4 gives no cycle period."""
+RESPONSE_S: Final = 30.0
+"""Length of the response figure, s."""
+ACTUATOR: Final = {
+    "actuator_dead_time_s": 0.02,
+    "actuator_lag_s": 0.02,
+    "torque_rate_limit_nm_per_s": 100e3,
+    "max_torque_nm": 50_800.0,
+}
+"""The field env's top drive, given to ``DrillString-v0`` when it runs the 4-DOF equivalent."""
+
+
+@dataclass(frozen=True)
+class StringHistory:
+    """The true state of every node of a field string at every decision of one run.
+
+    Attributes:
+        time_s: Time of each sample, (m,), s.
+        node_depth_m: Depth of each node, (n,), m (node 0: the top drive, n - 1: the bit).
+        speed_rad_s: Node speeds, (m, n), rad/s.
+        torque_nm: Element torques, (m, n - 1), N m (column 0: the surface torque).
+        reference_rad_s: Reference bit speed, (m,), rad/s.
+        pipe_length_m: Length of the drill pipe (the depth of the BHA's top), m.
+        wave_speed_m_s: Torsional wave speed in the pipe, m/s.
+    """
+
+    time_s: npt.NDArray[np.float64]
+    node_depth_m: npt.NDArray[np.float64]
+    speed_rad_s: npt.NDArray[np.float64]
+    torque_nm: npt.NDArray[np.float64]
+    reference_rad_s: npt.NDArray[np.float64]
+    pipe_length_m: float
+    wave_speed_m_s: float
+
+    @property
+    def bit_speed_rad_s(self) -> npt.NDArray[np.float64]:
+        """Bit speed, (m,), rad/s."""
+        return self.speed_rad_s[:, -1]
+
+    @property
+    def top_drive_speed_rad_s(self) -> npt.NDArray[np.float64]:
+        """Top-drive speed, (m,), rad/s."""
+        return self.speed_rad_s[:, 0]
+
+    @property
+    def surface_torque_nm(self) -> npt.NDArray[np.float64]:
+        """Torque at the top of the string, (m,), N m."""
+        return self.torque_nm[:, 0]
+
+    def window(self, start_s: float, end_s: float | None = None) -> StringHistory:
+        """The samples with ``start_s <= time_s < end_s``."""
+        keep = self.time_s >= start_s
+        if end_s is not None:
+            keep &= self.time_s < end_s
+        return StringHistory(
+            self.time_s[keep],
+            self.node_depth_m,
+            self.speed_rad_s[keep],
+            self.torque_nm[keep],
+            self.reference_rad_s[keep],
+            self.pipe_length_m,
+            self.wave_speed_m_s,
+        )
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """One recorded run: its node history and its numbers over the analysis window.
+
+    Attributes:
+        label: Controller and observation mode (``soft_speed (surface)``).
+        history: The node states at every decision.
+        metrics: Over the window: ``stick_slip_severity``, ``stuck_fraction``, ``rmse``,
+            ``mean_bit_speed_rad_s``, the cycle periods of the bit and the top drive, the top
+            drive's lowest and highest speed, the fastest speed of any node and its depth; and
+            ``diverged``.
+    """
+
+    label: str
+    history: StringHistory
+    metrics: dict[str, Any]
+
+
+def cycle_period_s(
+    signal: npt.ArrayLike, dt_s: float, shortest_s: float = 0.3, longest_s: float = 30.0
+) -> float | None:
+    """The period of the strongest oscillation of ``signal`` (sampled every ``dt_s``): the
+    shortest lag between ``shortest_s`` and ``longest_s`` at which its autocorrelation has a
+    peak of at least 80 % of its highest one there (so a cycle of two unequal slips reads as
+    the time between sticks, not as the pair); ``None`` when the signal hardly oscillates (no
+    peak above 0.3 of the zero-lag value).
+
+    Args:
+        signal: Samples, (m,).
+        dt_s: Sampling period, s.
+        shortest_s: Shortest period looked for, s.
+        longest_s: Longest period looked for, s (at most half the record).
+    """
+    x = np.asarray(signal, dtype=np.float64)
+    x = x - x.mean()
+    energy = float(np.dot(x, x))
+    if x.size < 4 or energy <= 1e-12 * max(x.size, 1):
+        return None
+    n = x.size
+    spectrum = np.fft.rfft(x, 2 * n)
+    acf = np.fft.irfft(spectrum * np.conj(spectrum))[:n] / energy
+    lo = max(1, int(round(shortest_s / dt_s)))
+    hi = min(n // 2, int(round(longest_s / dt_s)))
+    if hi <= lo + 1:
+        return None
+    lags = np.arange(lo, hi)
+    inner = acf[lo:hi]
+    peaks = np.flatnonzero((inner[1:-1] >= inner[:-2]) & (inner[1:-1] > inner[2:])) + 1
+    if peaks.size == 0:
+        return None
+    highest = float(inner[peaks].max())
+    if highest < 0.3:
+        return None
+    best = peaks[inner[peaks] >= 0.8 * highest][0]
+    return float(lags[best] * dt_s)
+
+
+def _case(depth_m: float, wob_n: float, rpm: float, condition: str) -> FieldCase:
+    return FieldCase(
+        f"{depth_m / 1e3:g}km-{wob_n / 1e3:g}kN-{rpm:g}rpm-{condition}",
+        "field_2500m",
+        float(depth_m),
+        WobProfile(float(wob_n)),
+        float(rpm),
+        FIELD_CONDITIONS[condition],
+    )
+
+
+def record_run(
+    case: FieldCase,
+    controller: str,
+    observation: str,
+    *,
+    duration_s: float = 100.0,
+    window_s: float = WINDOW_S,
+    noise_std_rad_s: float = 0.05,
+    seed: int = 0,
+) -> RunRecord:
+    """One run of ``controller`` on the field string of ``case``, the state of every node read
+    at every decision (:data:`RECORD_DT_S`).
+
+    The bit-speed metrics are taken at every plant step over the last ``window_s`` seconds
+    (``env.plant_samples()``); the cycle period from the bit speed at the decisions.
+    """
+    kwargs = {
+        **case.scenario(noise_std_rad_s).keywords(),
+        "episode_s": float(duration_s),
+        "base_controller": controller,
+        "observation": observation,
+        "control_dt_s": RECORD_DT_S,
+    }
+    env = gym.make(FIELD_ENV, **kwargs)
+    field_env: Any = env.unwrapped
+    string = case.string()
+    start = duration_s - window_s
+    times: list[float] = []
+    speeds: list[npt.NDArray[np.float64]] = []
+    torques: list[npt.NDArray[np.float64]] = []
+    refs: list[float] = []
+    bit: list[npt.NDArray[np.float64]] = []
+    stuck: list[npt.NDArray[np.bool_]] = []
+    ref_steps: list[npt.NDArray[np.float64]] = []
+    torque_steps: list[npt.NDArray[np.float64]] = []
+    diverged = False
+    try:
+        _, info = env.reset(seed=seed)
+        state = field_env.string_state()
+        depth = state.node_depth_m
+        zero = np.zeros(1, dtype=np.float32)
+        while True:
+            _, _, terminated, truncated, info = env.step(zero)
+            state = field_env.string_state()
+            times.append(float(info["time_s"]))
+            speeds.append(state.speed_rad_s)
+            torques.append(state.torque_nm)
+            refs.append(float(info["reference_speed_rad_s"]))
+            if times[-1] > start + 1e-9:
+                samples = field_env.plant_samples()
+                bit.append(samples.bit_speed_rad_s.copy())
+                stuck.append(samples.bit_stuck.copy())
+                ref_steps.append(samples.reference_rad_s.copy())
+                torque_steps.append(samples.torque_nm.copy())
+            if terminated or truncated:
+                diverged = bool(terminated)
+                break
+    finally:
+        env.close()
+    history = StringHistory(
+        np.array(times),
+        depth,
+        np.array(speeds),
+        np.array(torques),
+        np.array(refs),
+        string.pipe.length_m,
+        string.pipe.wave_speed_m_s,
+    )
+    window = episode_metrics_from_samples(
+        np.concatenate(bit),
+        np.concatenate(ref_steps),
+        np.concatenate(torque_steps),
+        np.concatenate(stuck),
+        PLANT_DT_S,
+    )
+    w = np.concatenate(bit)
+    late = history.window(start)
+    metrics = {
+        "stick_slip_severity": float((w.max() - w.min()) / (2.0 * max(w.mean(), 1e-9))),
+        "stuck_fraction": float(window["stuck_fraction"]),
+        "rmse": float(window["rmse"]),
+        "mean_bit_speed_rad_s": float(w.mean()),
+        "cycle_period_s": cycle_period_s(late.bit_speed_rad_s, RECORD_DT_S),
+        "top_drive_period_s": cycle_period_s(late.top_drive_speed_rad_s, RECORD_DT_S),
+        "top_drive_min_rad_s": float(late.top_drive_speed_rad_s.min()),
+        "top_drive_max_rad_s": float(late.top_drive_speed_rad_s.max()),
+        "fastest_node_rad_s": float(late.speed_rad_s.max()),
+        "fastest_node_depth_m": float(depth[int(np.argmax(late.speed_rad_s.max(axis=0)))]),
+        "diverged": diverged,
+    }
+    return RunRecord(
+        run_label({"controller": controller, "observation": observation}), history, metrics
+    )
+
+
+# ------------------------------------------------------------------------------- tables
+def _string_row(
+    name: str, string: DistributedStringParameters | DrillStringParameters
+) -> dict[str, Any]:
+    """The wave numbers of one string (a 4-DOF plant is its own "equivalent")."""
+    if isinstance(string, DistributedStringParameters):
+        eq = lumped_equivalent(string)
+        first, second = natural_frequencies_hz(string, 2, top="clamped", bit="free")
+        stuck = natural_frequencies_hz(string, 1, top="clamped", bit="stuck")[0]
+        travel = pipe_travel_time_s(string)
+        pipe: float | None = string.pipe.length_m
+    else:
+        eq = string
+        first, second = 1.0 / string_modes(string, "clamped", "free").periods_s[:2]
+        stuck = 1.0 / string_modes(string, "clamped", "stuck").periods_s[0]
+        travel = math.sqrt(string.J_pi / string.k_pi)
+        pipe = None
+    eq_free = string_modes(eq, "clamped", "free").periods_s
+    return {
+        "string": name,
+        "pipe_length_m": pipe,
+        "one_way_s": travel,
+        "round_trip_s": 2.0 * travel,
+        "impedance_nm_s_rad": pipe_impedance(string),
+        "stick_slip_period_s": 1.0 / first,
+        "second_mode_period_s": 1.0 / second,
+        "stuck_bit_period_s": 1.0 / stuck,
+        "four_dof_second_mode_period_s": float(eq_free[1]),
+        "four_dof_stuck_bit_period_s": float(string_modes(eq, "clamped", "stuck").periods_s[0]),
+    }
+
+
+def string_table(depths_m: Sequence[float]) -> list[dict[str, Any]]:
+    """The wave numbers of ``field_2500m`` at each depth, of ``deep_5000m`` and of the paper's
+    4-DOF plant ``zribi2024``: one-way and round-trip travel times along the pipe (s), the pipe
+    impedance (N m s/rad), the periods of the lowest two modes with the top drive held and the
+    bit free (the first is the stick-slip period) and of the lowest with the bit stuck (s), and
+    the second clamped-top, free-bit period and the stuck-bit period of the 4-DOF equivalent
+    (:func:`drill_env.modes.lumped_equivalent`; for ``zribi2024`` its own)."""
+    from drill_env.distributed import with_measured_depth
+
+    rows = [
+        _string_row(f"field_2500m at {d:,.0f} m", with_measured_depth("field_2500m", d))
+        for d in depths_m
+    ]
+    rows.append(_string_row("deep_5000m at 5,000 m", DISTRIBUTED_PRESETS["deep_5000m"]))
+    rows.append(_string_row("zribi2024 (the paper's 4-DOF plant)", PRESETS["zribi2024"]))
+    return rows
+
+
+def reflection_table(string: DistributedStringParameters) -> list[dict[str, Any]]:
+    """The top drive each speed loop makes, seen by a torsional wave at the string's
+    stick-slip frequency ``w_ss``: ``Z_td = kp + c_dt + i (w J_dt - ki / w)`` and the reflection
+    coefficient ``r = (Z - Z_td) / (Z + Z_td)`` (``|r| = 1``: the wave goes back down whole,
+    ``0``: it is absorbed). For ``z_torque`` with a perfect inner loop the drive gives way at
+    ``dT / z`` behind the high-pass of its running mean, ``Z_td = z (1 + 1 / (i w tau))``.
+    """
+    rows = []
+    for name in ("stiff_pi", "soft_speed", "z_torque"):
+        try:
+            tuning = make_controller(name).tuning(string)  # type: ignore[attr-defined]
+        except ValueError as err:
+            rows.append({"controller": name, "note": str(err)})
+            continue
+        w = tuning.stick_slip_rad_s
+        if name == "z_torque":
+            z_td = tuning.z * (1.0 + 1.0 / (1j * w * tuning.tau_mean_s))
+        else:
+            z_td = top_drive_impedance(
+                w,
+                tuning.kp,
+                tuning.ki,
+                string.top_drive_inertia_kg_m2,
+                string.damping.top_drive_nm_s_rad,
+            )
+        r = reflection_coefficient(z_td, tuning.pipe_impedance)
+        rows.append(
+            {
+                "controller": name,
+                "kp_nm_s_rad": tuning.kp,
+                "ki_nm_rad": tuning.ki,
+                "z_nm_s_rad": tuning.z,
+                "drive_impedance_abs_nm_s_rad": abs(z_td),
+                "reflection_abs": abs(r),
+                "note": "",
+            }
+        )
+    return rows
+
+
+def equivalent_table(
+    cases: Sequence[FieldCase],
+    controllers: Sequence[str],
+    *,
+    duration_s: float = 100.0,
+    window_s: float = WINDOW_S,
+    noise_std_rad_s: float = 0.05,
+    seed: int = 0,
+) -> list[dict[str, Any]]:
+    """Each controller on the 4-DOF equivalent of each case's string and on the string itself,
+    with the full state measured, the same noise on the speeds, the field env's top drive
+    (dead time, lag, rate limit, torque limit) and no torque or telemetry noise in both: the
+    stick-slip severity, stuck fraction and cycle period (none below a severity of
+    :data:`STEADY_SEVERITY`) over the last ``window_s`` seconds.
+
+    On the 4-DOF plant the controller's model is the equivalent too, so the laws are the same
+    functions of the same numbers: only the plant differs. (The speed loops are tuned from their
+    model's modes, which differ between the two: this is a test of the SMCs.)
+    """
+    from drill_env.evaluation import rollout
+
+    rows = []
+    for case in cases:
+        eq = lumped_equivalent(case.string())
+        for name in controllers:
+            out: dict[str, Any] = {"scenario": case.id, "controller": name}
+            for key, env_id, kwargs in (
+                (
+                    "equivalent",
+                    PAPER_ENV,
+                    {
+                        "parameters": eq,
+                        "wob_n": case.wob.initial_n,
+                        "reference_speed_rad_s": case.reference_speed_rad_s,
+                        **ACTUATOR,
+                    },
+                ),
+                (
+                    "string",
+                    FIELD_ENV,
+                    {
+                        **case.scenario(noise_std_rad_s, "exact").keywords(),
+                        "observation": "state",
+                        "torque_noise_std_nm": 0.0,
+                        "telemetry_noise_std_rad_s": 0.0,
+                    },
+                ),
+            ):
+                env = gym.make(
+                    env_id,
+                    **{
+                        "randomize": False,
+                        **kwargs,
+                        "noise_std_rad_s": noise_std_rad_s,
+                        "base_controller": name,
+                        "episode_s": duration_s,
+                        "control_dt_s": 0.5,
+                    },
+                )
+                try:
+                    trace = rollout(env, ZeroAction(), seed)
+                finally:
+                    env.close()
+                late = trace.time_s >= duration_s - window_s
+                w = trace.bit_speed_rad_s[late]
+                severity = float((w.max() - w.min()) / (2 * max(w.mean(), 1e-9)))
+                out[f"{key}_severity"] = severity
+                out[f"{key}_stuck_fraction"] = float(trace.bit_stuck[late].mean())
+                # the cycle of a run that turns steadily is that of its ripples: left out
+                steady = severity < STEADY_SEVERITY
+                out[f"{key}_period_s"] = None if steady else cycle_period_s(w[::20], 0.02)
+            rows.append(out)
+    return rows
+
+
+STRING_COLUMNS: Final = (
+    Column("string", "string", align="left"),
+    Column("pipe_length_m", "pipe (m)", "{:,.0f}"),
+    Column("one_way_s", "L/c (s)", "{:.2f}"),
+    Column("round_trip_s", "2L/c (s)", "{:.2f}"),
+    Column("impedance_nm_s_rad", "Z (N m s/rad)", "{:,.0f}"),
+    Column("stick_slip_period_s", "T1: stick-slip period (s)", "{:.2f}"),
+    Column("second_mode_period_s", "T2: second mode (s)", "{:.2f}"),
+    Column("stuck_bit_period_s", "bit stuck (s)", "{:.2f}"),
+    Column("four_dof_second_mode_period_s", "4-DOF equivalent T2 (s)", "{:.2f}"),
+    Column("four_dof_stuck_bit_period_s", "4-DOF equivalent, bit stuck (s)", "{:.2f}"),
+    Column("stiff_pi_cycle_s", "stiff_pi cycle (s)", "{:.2f}"),
+)
+RUN_COLUMNS: Final = (
+    Column("label", "controller", align="left"),
+    Column("stick_slip_severity", "severity", "{:.2f}"),
+    Column("stuck_fraction", "stuck fraction", "{:.3f}"),
+    Column("rmse", "RMSE (rad/s)", "{:.2f}"),
+    Column("mean_bit_speed_rad_s", "mean bit speed (rad/s)", "{:.2f}"),
+    Column("cycle_period_s", "bit cycle (s)", "{:.2f}"),
+    Column("top_drive_period_s", "top-drive cycle (s)", "{:.2f}"),
+    Column("top_drive_min_rad_s", "top drive, min (rad/s)", "{:.2f}"),
+    Column("top_drive_max_rad_s", "top drive, max (rad/s)", "{:.2f}"),
+    Column("fastest_node_rad_s", "fastest node (rad/s)", "{:.1f}"),
+    Column("fastest_node_depth_m", "at depth (m)", "{:,.0f}"),
+)
+REFLECTION_COLUMNS: Final = (
+    Column("controller", "controller", align="left"),
+    Column("kp_nm_s_rad", "kp (N m s/rad)", "{:,.0f}"),
+    Column("ki_nm_rad", "ki (N m/rad)", "{:,.0f}"),
+    Column("z_nm_s_rad", "z (N m s/rad)", "{:,.0f}"),
+    Column("drive_impedance_abs_nm_s_rad", "|Z_td| at w_ss (N m s/rad)", "{:,.0f}"),
+    Column("reflection_abs", "|r| at w_ss", "{:.3f}"),
+    Column("note", "note", align="left"),
+)
+EQUIVALENT_COLUMNS: Final = (
+    Column("scenario", "scenario", align="left"),
+    Column("controller", "controller", align="left"),
+    Column("equivalent_severity", "severity, 4-DOF equivalent", "{:.2f}"),
+    Column("string_severity", "severity, field string", "{:.2f}"),
+    Column("equivalent_stuck_fraction", "stuck, 4-DOF", "{:.3f}"),
+    Column("string_stuck_fraction", "stuck, string", "{:.3f}"),
+    Column("equivalent_period_s", "cycle, 4-DOF (s)", "{:.2f}"),
+    Column("string_period_s", "cycle, string (s)", "{:.2f}"),
+)
+
+
+# ---------------------------------------------------------------------------- command line
+DESCRIPTION: Final = f"""\
+The torsional waves of the field string ({FIELD_ENV}) and what each controller does with
+them. Prints four tables and writes waves.json and figures/ into --out:
+
+  1. the strings: per depth of field_2500m (--depths), and deep_5000m and the paper's 4-DOF
+     plant for comparison, the wave's travel times L/c and 2L/c along the pipe, the pipe
+     impedance Z, the periods T1 (the stick-slip period) and T2 of the lowest two modes with
+     the top drive held and the bit free, the period with the bit stuck, the same for the 4-DOF
+     equivalent, and the cycle the stiff speed loop shows at --wob and --rpm;
+  2. the speed loops' top drive as a wave sees it at the stick-slip frequency: its impedance
+     and reflection coefficient |r| (1: a wave goes back down whole; 0: absorbed);
+  3. every controller, with each observation mode it can use (the paper's sliding-mode
+     controllers: the whole state), at --depth, --wob, --rpm and --condition: stick-slip
+     severity, stuck fraction, RMSE and mean bit speed over the last --window seconds, the
+     cycle periods of the bit and of the top drive, the top drive's range of speed and the
+     fastest node with its depth;
+  4. the paper's controllers on their own 4-DOF equivalent against the string it stands for,
+     at the two operating points of drill-gym compare and each depth (same model, gains,
+     actuator and noise: only the plant differs).
+
+Figures: field_response.png (bit speed with the reference, top-drive speed and surface torque
+of every run over its last 30 s) and field_space_time_RUN.png (node speed and element torque
+along the depth against time, over the last 12 s: the torsional waves travelling up and down).
+
+examples:
+  drill-gym waves
+  drill-gym waves --controllers stiff_pi soft_speed --depth 4000 --out results/waves-4km
+"""
+
+
+def _parser() -> ArgumentParser:
+    p = ArgumentParser(prog="drill-gym waves", description=DESCRIPTION)
+    p.add_argument(
+        "--controllers",
+        nargs="+",
+        metavar="NAME",
+        type=names_type(controller_names, "controller"),
+        help="controllers to run, by registered name: "
+        + ", ".join(controller_names())
+        + " (default: all)",
+    )
+    p.add_argument(
+        "--observations",
+        nargs="+",
+        choices=OBSERVATIONS,
+        default=list(OBSERVATIONS),
+        help="observation modes of the speed loops (the paper's controllers: state only)",
+    )
+    depth = number_type(300.0, 10_000.0, unit="m")
+    p.add_argument("--depth", type=depth, default=2_500.0, metavar="M", help="depth of the runs, m")
+    p.add_argument(
+        "--depths",
+        nargs="+",
+        type=depth,
+        default=list(DEFAULT_DEPTHS_M),
+        metavar="M",
+        help="depths of the string table and the 4-DOF comparison, m",
+    )
+    p.add_argument(
+        "--wob",
+        type=number_type(0.0, 1e6, open_low=True, unit="N"),
+        default=150e3,
+        metavar="NEWTONS",
+        help="weight on bit of the runs, N",
+    )
+    p.add_argument(
+        "--rpm",
+        type=number_type(0.0, 500.0, open_low=True, unit="rpm"),
+        default=60.0,
+        metavar="RPM",
+        help="reference bit speed of the runs, rpm",
+    )
+    p.add_argument(
+        "--condition",
+        choices=tuple(FIELD_CONDITIONS),
+        default="nominal",
+        help="friction and mud damping of the string",
+    )
+    p.add_argument(
+        "--duration",
+        type=number_type(1.0, 1e4, unit="s"),
+        default=100.0,
+        metavar="S",
+        help="length of each run from rest, s (a multiple of the 20 ms recording period)",
+    )
+    p.add_argument(
+        "--window",
+        type=number_type(0.0, 1e4, open_low=True, unit="s"),
+        default=WINDOW_S,
+        metavar="S",
+        help="analysis window at the end of each run, s",
+    )
+    p.add_argument(
+        "--seed", type=number_type(0, 2**32 - 1, integer=True), default=0, metavar="N",
+        help="reset seed of every run (it drives the noise)",
+    )  # fmt: skip
+    p.add_argument(
+        "--out", type=Path, default=Path("results/waves"), metavar="DIR", help="output folder"
+    )
+    p.add_argument("--no-equivalent", action="store_true", help="skip table 4")
+    p.add_argument("--no-plots", action="store_true", help="write no figures")
+    p.add_argument("--no-progress", action="store_true", help="no progress lines")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``drill-gym waves``: run, print the tables, write ``waves.json`` and the figures."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if args.window > args.duration:
+        parser.fail("--window", f"{args.window:g} is out of range: allowed <= --duration")
+    steps = args.duration / RECORD_DT_S
+    if abs(steps - round(steps)) > 1e-6:
+        parser.fail("--duration", f"{args.duration:g} is not a multiple of {RECORD_DT_S:g} s")
+    bha = DISTRIBUTED_PRESETS["field_2500m"].bha_length_m
+    for d in (args.depth, *args.depths):
+        if d <= bha:
+            parser.fail("--depth", f"{d:g} is out of range: allowed > BHA length {bha} m")
+    names = list(dict.fromkeys(args.controllers or controller_names()))
+    start = time.perf_counter()
+    case = _case(args.depth, args.wob, args.rpm, args.condition)
+
+    def note(text: str) -> None:
+        if not args.no_progress:
+            print(f"waves: {text}", file=sys.stderr)
+
+    strings = string_table(args.depths)
+    prone = [_case(d, args.wob, args.rpm, args.condition) for d in args.depths]
+    deep = DISTRIBUTED_PRESETS["deep_5000m"]
+    prone.append(
+        dataclasses.replace(
+            prone[-1], parameters="deep_5000m", measured_depth_m=deep.measured_depth_m
+        )
+    )
+    for row, c in zip(strings, prone, strict=False):
+        note(f"stiff_pi at {c.measured_depth_m:g} m")
+        run = record_run(c, "stiff_pi", "surface", duration_s=args.duration, window_s=args.window)
+        row["stiff_pi_cycle_s"] = run.metrics["cycle_period_s"]
+    reflections = reflection_table(case.string())
+    runs: list[RunRecord] = []
+    for name in names:
+        for obs in observations_of(name, args.observations):
+            note(f"{name} ({obs}) on {case.id}")
+            runs.append(
+                record_run(
+                    case,
+                    name,
+                    obs,
+                    duration_s=args.duration,
+                    window_s=args.window,
+                    seed=args.seed,
+                )
+            )
+    run_rows = [{"label": r.label, **r.metrics} for r in runs]
+    equivalent: list[dict[str, Any]] = []
+    smcs = [n for n in names if n in ("csmc", "msmc", "asmc", "proposed")]
+    if not args.no_equivalent and smcs:
+        from experiments.field import COMPARE_POINTS
+
+        cases = [
+            _case(d, w * 1e3, r, args.condition) for w, r in COMPARE_POINTS for d in args.depths
+        ]
+        note(f"4-DOF equivalent against the string: {len(cases)} scenarios x {len(smcs)}")
+        equivalent = equivalent_table(
+            cases, smcs, duration_s=args.duration, window_s=args.window, seed=args.seed
+        )
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    print(f"1. The strings (stiff_pi cycle at {args.wob / 1e3:g} kN, {args.rpm:g} rpm, "
+          f"{args.condition}):\n")  # fmt: skip
+    print(markdown_table(strings, STRING_COLUMNS))
+    print(f"\n2. The speed loops' top drive at the stick-slip frequency of {case.id}:\n")
+    print(markdown_table(reflections, REFLECTION_COLUMNS))
+    print(f"\n3. Every controller on {case.id}, last {args.window:g} s of {args.duration:g} s:\n")
+    print(markdown_table(run_rows, RUN_COLUMNS))
+    if equivalent:
+        print("\n4. The paper's controllers on their 4-DOF equivalent and on the string:\n")
+        print(markdown_table(equivalent, EQUIVALENT_COLUMNS))
+    written = [
+        write_json(
+            {
+                "scenario": case.id,
+                "duration_s": args.duration,
+                "window_s": args.window,
+                "strings": strings,
+                "reflections": reflections,
+                "runs": run_rows,
+                "equivalent": equivalent,
+            },
+            out / "waves.json",
+            indent=2,
+        )
+    ]
+    if not args.no_plots and runs:
+        written += write_figures(runs, case, out / "figures", args.duration)
+    print(
+        f"\n{len(runs)} recorded runs in {time.perf_counter() - start:.1f} s; wrote "
+        f"{len(written)} files to {out}/"
+    )
+    return 0
+
+
+def write_figures(
+    runs: Sequence[RunRecord], case: FieldCase, folder: Path, duration_s: float
+) -> list[Path]:
+    """``field_response.png`` and one ``field_space_time_<run>.png`` per run."""
+    from experiments.plots import save_figure, space_time_figure, string_response_figure
+
+    title = (
+        f"{case.measured_depth_m:,.0f} m of field_2500m, WOB {case.wob.initial_n / 1e3:g} kN, "
+        f"{case.reference_rpm:g} rpm, {case.condition.name} friction"
+    )
+    histories = {r.label: r.history.window(duration_s - RESPONSE_S) for r in runs}
+    paths = [
+        save_figure(
+            string_response_figure(histories, f"{title}: last {RESPONSE_S:g} s of each run"),
+            folder / "field_response.png",
+        )
+    ]
+    for r in runs:
+        fig = space_time_figure(r.history.window(duration_s - SPACE_TIME_S), f"{r.label}, {title}")
+        paths.append(save_figure(fig, folder / f"field_space_time_{file_label(r.label)}.png"))
+    return paths
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())
