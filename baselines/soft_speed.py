@@ -16,7 +16,10 @@ Tuning from the controller's model of the string:
   ``Z_td(w_s)`` is real;
 * ``kp = impedance_factor * Z - c_dt``: the drive's whole resistance at ``w_s`` (controller
   plus the drive's own damping ``c_dt``) equals ``impedance_factor`` times the pipe impedance
-  ``Z = sqrt(k_pi J_pi)``; with the default factor 1 the reflection coefficient at ``w_s`` is 0;
+  ``Z = sqrt(k_pi J_pi)``; with the default factor 1 the reflection coefficient at ``w_s`` is 0.
+  When the drive's own damping already exceeds that target (a soft pipe: ``c_dt >
+  impedance_factor Z``) no ``kp`` can lower the resistance, and ``kp = 0`` is the closest match
+  (reflection ``(Z - c_dt) / (Z + c_dt)``);
 * inertia compensation: the set-point acceleration is fed forward, ``J_dt d(ref)/dt``, so that
   the drive follows set-point changes without loading the (soft) PI loop.
 
@@ -44,7 +47,8 @@ class SoftSpeedGains(Gains):
 
     Attributes:
         impedance_factor: The drive's resistance at the stick-slip frequency as a multiple of
-            the pipe impedance, dimensionless (in (0, 100]; must exceed ``c_dt / Z``).
+            the pipe impedance, dimensionless (in (0, 100]; below ``c_dt / Z`` the loop has
+            ``kp = 0``).
         frequency_factor: Tuning frequency as a multiple of the stick-slip frequency,
             dimensionless (in (0, 100]).
         inertia_compensation: Feed the set-point acceleration forward through ``J_dt``.
@@ -78,22 +82,13 @@ class SoftSpeed(SpeedLoopController):
     def tuning(
         self, model: DrillStringParameters | DistributedStringParameters | None = None
     ) -> SpeedLoopTuning:
-        """``kp = impedance_factor Z - c_dt``, ``ki = (frequency_factor w_s)^2 J_dt``,
-        ``j_ff = J_dt`` (when compensating).
-
-        Raises:
-            ValueError: when ``impedance_factor Z <= c_dt`` (no positive ``kp`` matches).
-        """
+        """``kp = max(impedance_factor Z - c_dt, 0)``, ``ki = (frequency_factor w_s)^2 J_dt``,
+        ``j_ff = J_dt`` (when compensating)."""
         m = string_view(self.model if model is None else model)
         g: SoftSpeedGains = self.gains
         z = m.impedance
         w_s = m.stick_slip_rad_s
-        kp = g.impedance_factor * z - m.c_dt
-        if not kp > 0:
-            raise ValueError(
-                f"SoftSpeedGains.impedance_factor = {g.impedance_factor!r} is out of range for "
-                f"this model: allowed > c_dt / Z = {m.c_dt / z:.4g}"
-            )
+        kp = max(g.impedance_factor * z - m.c_dt, 0.0)
         ki = (g.frequency_factor * w_s) ** 2 * m.J_dt
         return SpeedLoopTuning(
             kp=kp,

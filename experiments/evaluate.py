@@ -300,8 +300,8 @@ def evaluate(
             except ValueError as err:
                 if not field:
                     raise
-                # A controller that cannot be made for this string (soft_speed where the
-                # drive's own damping exceeds the pipe impedance): a row without metrics.
+                # A controller that cannot be made for this string (its tuning or model has
+                # no solution there): a row without metrics and the reason.
                 missing: dict[str, Any] = dict.fromkeys(METRIC_KEYS)
                 rows.append({**head, **row, **missing, "diverged": False, "note": str(err)})
             else:

@@ -48,6 +48,7 @@ from baselines.string_modes import (
     stick_slip_frequency,
     top_drive_impedance,
 )
+from drill_env.distributed import resolve_plant
 from drill_env.evaluation import ZeroAction, rollout
 from drill_env.parameters import PRESETS, scale_uncertain
 from experiments.stick_slip_map import StickSlipMap, compute_map
@@ -252,10 +253,22 @@ def test_drive_limits_must_not_be_inverted() -> None:
         DriveLimits(u_min_nm=10.0, u_max_nm=0.0)
 
 
-def test_soft_speed_needs_a_positive_proportional_gain() -> None:
-    # impedance_factor Z must exceed the drive's own damping c_dt = 425 N m s/rad.
-    with pytest.raises(ValueError, match=r"impedance_factor = 0.2 is out of range"):
-        SoftSpeed(impedance_factor=0.2)
+def test_soft_speed_on_a_pipe_softer_than_the_drive_damping_has_no_proportional_gain() -> None:
+    """Where the drive's own damping exceeds the target resistance, kp = 0 is the closest
+    match: the drive then presents exactly its damping at the tuning frequency."""
+    from baselines.string_modes import string_view
+
+    for model, factor in (("deep_5000m", 1.0), ("zribi2024", 0.2)):
+        view = string_view(resolve_plant(model))
+        assert factor * view.impedance < view.c_dt
+        tuning = SoftSpeed(impedance_factor=factor).tuning(resolve_plant(model))
+        assert tuning.kp == 0.0 and tuning.ki > 0.0
+        z_td = top_drive_impedance(
+            view.stick_slip_rad_s, tuning.kp, tuning.ki, view.J_dt, view.c_dt
+        )
+        assert z_td == pytest.approx(view.c_dt)
+        r = reflection_coefficient(z_td, view.impedance)
+        assert r == pytest.approx((view.impedance - view.c_dt) / (view.impedance + view.c_dt))
 
 
 @pytest.mark.parametrize("name", INDUSTRY)
