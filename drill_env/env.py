@@ -374,6 +374,8 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         info["actions_clipped_total"] = episode.actions_clipped
         if b.residual:
             info["residual_torque_nm"] = float(b.command[0])
+        if b.reports_law_slots:
+            info.update({key: float(value[0]) for key, value in b.law_info().items()})
         return info
 
 

@@ -44,6 +44,7 @@ from drill_env.scenarios import (
     UncertaintyReading,
     WobProfile,
 )
+from drill_env.sensors import MeasurementChannel
 from drill_env.validation import check_bool, check_choice, check_range, check_unknown, require
 
 __all__ = [
@@ -246,6 +247,23 @@ class EnvConfig:
     def torque_scale_nm(self) -> float:
         """Scale of torques in the observation, N m."""
         return max(abs(self.min_torque_nm), abs(self.max_torque_nm))
+
+    def measurement_channel(self, speed_noise_std_rad_s: float | None = None) -> MeasurementChannel:
+        """The measurement channel these keywords describe; ``speed_noise_std_rad_s`` (rad/s)
+        replaces ``noise_std_rad_s`` (an episode's scenario may have its own)."""
+        return MeasurementChannel(
+            observation=self.observation,
+            speed_noise_std_rad_s=float(
+                self.noise_std_rad_s if speed_noise_std_rad_s is None else speed_noise_std_rad_s
+            ),
+            torque_noise_std_nm=float(self.torque_noise_std_nm),
+            sensor_period_s=float(self.sensor_period_s),
+            telemetry_period_s=(
+                None if self.telemetry_period_s is None else float(self.telemetry_period_s)
+            ),
+            telemetry_delay_s=float(self.telemetry_delay_s),
+            telemetry_noise_std_rad_s=float(self.telemetry_noise_std_rad_s),
+        )
 
     def string(self) -> DistributedStringParameters:
         """The distributed string of the keywords (at ``measured_depth_m`` when given)."""
