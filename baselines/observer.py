@@ -113,7 +113,7 @@ class ObserverGains(Gains):
     """
 
     modes: int = 8
-    bit_torque_walk_nm: float = 1000.0
+    bit_torque_walk_nm: float = 500.0
     string_torque_noise_nm: float = 1000.0
     speed_noise_floor_rad_s: float = 0.01
     torque_noise_floor_nm: float = 100.0
@@ -394,18 +394,11 @@ def design_observer(
     r_t = max(channel.telemetry_noise_std_rad_s, gains.telemetry_noise_floor_rad_s) ** 2
     h = om.outputs[X_BIT_SPEED]
     w = closed @ qd @ closed.T + k @ r @ k.T  # the fixed-gain filter's error noise per step
+    # From one sample instant to the next the error evolves as e <- F^P e + (noise of
+    # covariance S_P): the covariance before a telemetry value is the prediction covariance of
+    # the filter of that P-step system measuring h z, the solution of its Riccati equation.
     f_period, w_period = _power_and_sum(f, w, period)
-    sigma = filtered  # before the first telemetry value: the surface-only steady state
-    gain = zero
-    for _ in range(500):
-        gain = sigma @ h / (h @ sigma @ h + r_t)
-        updated = sigma - np.outer(gain, h @ sigma)
-        nxt = f_period @ updated @ f_period.T + w_period
-        nxt = 0.5 * (nxt + nxt.T)
-        done = np.abs(nxt - sigma).max() <= 1e-12 * np.abs(nxt).max()
-        sigma = nxt
-        if done:
-            break
+    sigma = discrete_filter_riccati(f_period, h[None, :], w_period, np.array([[r_t]]))
     gain = sigma @ h / (h @ sigma @ h + r_t)
     v_delay = _power_and_sum(f, w, delay)[0] @ gain
     flights = delay // period
