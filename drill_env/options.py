@@ -8,6 +8,7 @@ The same names are accepted by ``gym.make`` and, per episode (the scenario ones)
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Final
@@ -45,7 +46,14 @@ from drill_env.scenarios import (
     WobProfile,
 )
 from drill_env.sensors import MeasurementChannel
-from drill_env.validation import check_bool, check_choice, check_range, check_unknown, require
+from drill_env.validation import (
+    check_bool,
+    check_choice,
+    check_range,
+    check_real,
+    check_unknown,
+    require,
+)
 
 __all__ = [
     "FIELD_MAX_TORQUE_NM",
@@ -187,10 +195,11 @@ class EnvConfig:
         _check_steps("actuator_dead_time_s", self.actuator_dead_time_s, 0.0, MAX_DEAD_TIME_S)
         check_range("actuator_lag_s", self.actuator_lag_s, 0.0, 10.0)
         if self.torque_rate_limit_nm_per_s is not None:
-            rate = check_range(
-                "torque_rate_limit_nm_per_s", self.torque_rate_limit_nm_per_s, 0.0, 1e9
-            )
-            require("torque_rate_limit_nm_per_s", rate, "> 0 (or None: no limit)", rate > 0)
+            rate = check_real("torque_rate_limit_nm_per_s", self.torque_rate_limit_nm_per_s)
+            require(
+                "torque_rate_limit_nm_per_s", self.torque_rate_limit_nm_per_s,
+                "(0, 1e+09] (or None: no limit)", math.isfinite(rate) and 0 < rate <= 1e9,
+            )  # fmt: skip
         if not self.distributed:
             for name in FIELD_ONLY:
                 if getattr(self, name) is not None:
