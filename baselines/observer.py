@@ -21,16 +21,20 @@ value arrives, the bit speed by telemetry, sampled ``D`` plant steps before.
 a distributed string those of :func:`drill_env.modes.probe_nodes`, the coordinates the env
 reports as its 4-DOF state) and of ``d``.
 
+The filter runs in coordinates whose first eight entries are these outputs
+(:func:`design_observer` transforms it), so the estimate is the filter state itself.
+
 Parameter block (``OP_*``, from an offset ``base`` in the law's parameter vector): a header,
-then ``F`` (nz, nz), ``g`` (nz,), ``K`` (nz, 2), the outputs (8, nz), each stored by columns,
-then ``v_D`` (nz,) and ``V`` (J, nz) by rows. State block (``OS_*``, from an offset in the law's state vector): the step counter,
-the last telemetry sample used, the count of telemetry values not used, the estimate
-``x1..x7, d``, ``z``, a scratch vector and the ring buffer of ``cap`` snapshots
-``(sample step, z)``.
+then ``F`` (nz, nz) and ``K`` (nz, 2) stored by columns, ``g`` (nz,), ``v_D`` (nz,) and ``V``
+(J, nz) by rows. State block (``OS_*``, from an offset in the law's state vector): the step
+counter, the last telemetry sample used, the count of telemetry values not used, ``z`` (its
+first eight entries the estimate ``x1..x7, d``), a scratch vector and the ring buffer of
+``cap`` snapshots ``(sample step, z)``.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass
@@ -87,9 +91,10 @@ OP_HEADER: Final = 5
 OS_STEP: Final = 0  # plant steps seen (the law is called once per plant step)
 OS_LAST_SAMPLE: Final = 1  # plant step of the last telemetry sample taken in (-1: none)
 OS_SKIPPED: Final = 2  # telemetry values not used (their delay or instant not as designed)
-OS_ESTIMATE: Final = 3  # x1..x7: the estimated 4-DOF state, rad/s and rad
+OS_Z: Final = 3  # the filter state z (nz), then a scratch vector (nz), then the snapshots
+# The filter runs in coordinates whose first entries are its outputs:
+OS_ESTIMATE: Final = OS_Z  # x1..x7: the estimated 4-DOF state, rad/s and rad
 OS_BIT_TORQUE: Final = OS_ESTIMATE + N_STATE  # the estimated bit-rock torque, N m
-OS_Z: Final = OS_BIT_TORQUE + 1  # the filter state z (nz), then a scratch vector (nz)
 
 
 @dataclass(frozen=True)
@@ -327,6 +332,9 @@ class ObserverDesign:
         prediction_covariance: The steady-state covariance of the prediction, (nz, nz).
         sample_covariance: The periodic covariance at a telemetry sample instant before its
             value is used, (nz, nz) (the filtered steady state without telemetry).
+        coordinates: ``T``, (nz, nz): the filter state is ``T`` times the state of
+            :func:`observer_model` (the identity until :func:`design_observer` moves the
+            filter to output coordinates).
     """
 
     F: FloatArray
@@ -341,6 +349,7 @@ class ObserverDesign:
     capacity: int
     prediction_covariance: FloatArray
     sample_covariance: FloatArray
+    coordinates: FloatArray | None = None
 
     @property
     def nz(self) -> int:
@@ -386,9 +395,9 @@ def design_observer(
     filtered = 0.5 * (filtered + filtered.T)
     zero = np.zeros(nz)
     if channel.telemetry_period_s is None:
-        return ObserverDesign(
-            f, g, k, om.outputs, zero, zero, np.zeros((0, nz)), 0, 0, 0, p, filtered
-        )  # fmt: skip
+        return _in_output_coordinates(
+            ObserverDesign(f, g, k, om.outputs, zero, zero, np.zeros((0, nz)), 0, 0, 0, p, filtered)
+        )
     period = _steps(channel.telemetry_period_s, dt_s)
     delay = _steps(channel.telemetry_delay_s, dt_s)
     r_t = max(channel.telemetry_noise_std_rad_s, gains.telemetry_noise_floor_rad_s) ** 2
@@ -405,28 +414,50 @@ def design_observer(
     v_flight = np.array(
         [_power_and_sum(f, w, j * period)[0] @ gain for j in range(1, flights + 1)]
     ).reshape(flights, nz)
-    return ObserverDesign(
-        f, g, k, om.outputs, gain, v_delay, v_flight, period, delay, flights + 1, p, sigma
-    )  # fmt: skip
+    return _in_output_coordinates(
+        ObserverDesign(
+            f, g, k, om.outputs, gain, v_delay, v_flight, period, delay, flights + 1, p, sigma
+        )
+    )
+
+
+def _in_output_coordinates(design: ObserverDesign) -> ObserverDesign:
+    """The same filter in the coordinates ``T z`` whose first eight entries are the outputs
+    (``T``: the output rows, then an orthonormal basis of their null space): the estimate is
+    then the filter state itself, with nothing to compute at every step."""
+    outputs = design.outputs
+    basis = np.linalg.svd(outputs)[2][outputs.shape[0] :]  # rows spanning the null space
+    t = np.vstack([outputs, basis])
+    t_inv = np.linalg.inv(t)
+    return dataclasses.replace(
+        design,
+        F=t @ design.F @ t_inv,
+        g=t @ design.g,
+        K=t @ design.K,
+        outputs=np.eye(outputs.shape[0], design.nz),
+        telemetry_gain=t @ design.telemetry_gain,
+        v_delay=t @ design.v_delay,
+        v_flight=design.v_flight @ t.T,
+        prediction_covariance=t @ design.prediction_covariance @ t.T,
+        sample_covariance=t @ design.sample_covariance @ t.T,
+        coordinates=t,
+    )
 
 
 def observer_params_size(design: ObserverDesign) -> int:
     """Length of the observer's parameter block."""
     nz = design.nz
-    return (
-        OP_HEADER
-        + nz * nz
-        + nz
-        + N_MEASURED * nz
-        + N_OBSERVER_OUTPUTS * nz
-        + nz
-        + (design.v_flight.shape[0] * nz)
-    )
+    return OP_HEADER + nz * nz + nz + N_MEASURED * nz + nz + design.v_flight.shape[0] * nz
 
 
 def observer_state_size(design: ObserverDesign) -> int:
     """Length of the observer's state block."""
     return OS_Z + 2 * design.nz + design.capacity * (1 + design.nz)
+
+
+def _check_output_coordinates(design: ObserverDesign) -> None:
+    if not np.array_equal(design.outputs, np.eye(N_OBSERVER_OUTPUTS, design.nz)):
+        raise ValueError("the compiled observer needs a design in output coordinates")
 
 
 def pack_observer(design: ObserverDesign) -> FloatArray:
@@ -437,10 +468,11 @@ def pack_observer(design: ObserverDesign) -> FloatArray:
     header[OP_DELAY] = design.delay_steps
     header[OP_CAP] = design.capacity
     header[OP_J] = design.v_flight.shape[0]
+    _check_output_coordinates(design)
     block = np.concatenate(
         [
-            header, design.F.T.ravel(), design.g, design.K.T.ravel(), design.outputs.T.ravel(),
-            design.v_delay, design.v_flight.ravel(),
+            header, design.F.T.ravel(), design.g, design.K.T.ravel(), design.v_delay,
+            design.v_flight.ravel(),
         ]
     )  # fmt: skip
     assert block.size == observer_params_size(design)
@@ -450,6 +482,7 @@ def pack_observer(design: ObserverDesign) -> FloatArray:
 def initial_observer_state(design: ObserverDesign) -> FloatArray:
     """The observer's state block at the start of an episode: the string at rest, no
     telemetry used, no snapshot."""
+    _check_output_coordinates(design)
     state = np.zeros(observer_state_size(design))
     state[OS_LAST_SAMPLE] = -1.0
     ring = OS_Z + 2 * design.nz
@@ -459,8 +492,8 @@ def initial_observer_state(design: ObserverDesign) -> FloatArray:
 
 # ------------------------------------------------------------------------------ compiled
 @njit(cache=True)
-def _use_telemetry(lp, ls, sbase, m, k, sample, nz, period, delay, cap, flights, o_o, o_vd,
-                   o_vj, z, ring) -> None:  # fmt: skip
+def _use_telemetry(lp, ls, sbase, m, k, sample, nz, period, delay, cap, flights, o_vd, o_vj,
+                   z, ring) -> None:  # fmt: skip
     """Fold in the telemetry value of plant step ``sample`` that arrived at step ``k``: its
     innovation against the snapshot of that instant, the correction of the current estimate
     and of the snapshots taken since, each through the filter's transition over the steps
@@ -469,10 +502,7 @@ def _use_telemetry(lp, ls, sbase, m, k, sample, nz, period, delay, cap, flights,
     if k - sample != delay or sample % period != 0 or slot < 0 or ls[slot] != sample:
         ls[sbase + OS_SKIPPED] += 1.0
         return
-    predicted = 0.0  # the bit speed of the snapshot (the outputs are stored by columns)
-    for j in range(nz):
-        predicted += lp[o_o + j * N_OBSERVER_OUTPUTS + X_BIT_SPEED] * ls[slot + 1 + j]
-    innovation = m[M_TELEMETRY_BIT_SPEED] - predicted
+    innovation = m[M_TELEMETRY_BIT_SPEED] - ls[slot + 1 + X_BIT_SPEED]  # z starts with x1..x7
     for j in range(nz):
         ls[z + j] += lp[o_vd + j] * innovation
     for f in range(1, flights + 1):  # the snapshot taken f periods after the sample
@@ -493,8 +523,8 @@ def observer_update(lp, base: int, ls, sbase: int, m, dt: float) -> None:
     block at ``ls[sbase]``, reading the measurement vector ``m`` (``drill_env.layout.M_*``)
     at a plant step of ``dt`` seconds: predict with the torque applied over the last step and
     correct with the held surface samples; keep a snapshot at a telemetry sample instant; fold
-    in a telemetry value that has just arrived at the instant it was sampled. Writes the
-    estimate ``x1..x7, d`` to ``ls[sbase + OS_ESTIMATE:]``."""
+    in a telemetry value that has just arrived at the instant it was sampled. The filter runs
+    in output coordinates: the estimate ``x1..x7, d`` is ``ls[sbase + OS_ESTIMATE:]``."""
     nz = int(lp[base + OP_NZ])
     period = int(lp[base + OP_PERIOD])
     delay = int(lp[base + OP_DELAY])
@@ -503,8 +533,7 @@ def observer_update(lp, base: int, ls, sbase: int, m, dt: float) -> None:
     o_f = base + OP_HEADER
     o_g = o_f + nz * nz
     o_k = o_g + nz
-    o_o = o_k + N_MEASURED * nz
-    o_vd = o_o + N_OBSERVER_OUTPUTS * nz
+    o_vd = o_k + N_MEASURED * nz
     o_vj = o_vd + nz
     z = sbase + OS_Z
     tmp = z + nz
@@ -535,12 +564,4 @@ def observer_update(lp, base: int, ls, sbase: int, m, dt: float) -> None:
             if sample != ls[sbase + OS_LAST_SAMPLE]:
                 ls[sbase + OS_LAST_SAMPLE] = sample
                 _use_telemetry(lp, ls, sbase, m, k, sample, nz, period, delay, cap, flights,
-                               o_o, o_vd, o_vj, z, ring)  # fmt: skip
-    out = sbase + OS_ESTIMATE
-    for i in range(N_OBSERVER_OUTPUTS):  # the outputs, stored by columns too
-        ls[out + i] = 0.0
-    for j in range(nz):
-        zj = ls[z + j]
-        column = o_o + j * N_OBSERVER_OUTPUTS
-        for i in range(N_OBSERVER_OUTPUTS):
-            ls[out + i] += lp[column + i] * zj
+                               o_vd, o_vj, z, ring)  # fmt: skip

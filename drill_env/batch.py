@@ -166,6 +166,10 @@ class StringBatch:
         self.compiled = law is not None
         self._info_slots = () if law is None else law.info_slots
         self._estimate_slots = () if law is None else law.estimate_slots
+        self._estimate_keys = [
+            (f"estimated_{STATE_NAMES[x]}", f"estimate_error_{STATE_NAMES[x]}", REC_X0 + x, slot)
+            for x, slot in self._estimate_slots
+        ]
         self.reports_law_slots = bool(self._info_slots or self._estimate_slots)
         """Whether the compiled law names state slots the env reports (:meth:`law_info`)."""
         n, s = num, self.substeps
@@ -395,10 +399,21 @@ class StringBatch:
         state = self.arrays.law_state
         info = {key: state[:, slot].copy() for key, slot in self._info_slots}
         last = self.arrays.records[:, -1]
-        for index, slot in self._estimate_slots:
-            name = STATE_NAMES[index]
-            info[f"estimated_{name}"] = state[:, slot].copy()
-            info[f"estimate_error_{name}"] = state[:, slot] - last[:, REC_X0 + index]
+        for estimated, error, column, slot in self._estimate_keys:
+            info[estimated] = state[:, slot].copy()
+            info[error] = state[:, slot] - last[:, column]
+        return info
+
+    def law_info_of(self, i: int) -> dict[str, float]:
+        """:meth:`law_info` of string ``i`` as floats (the single env's hot path)."""
+        if not self.reports_law_slots:
+            return {}
+        state = self.arrays.law_state[i].tolist()
+        last = self.arrays.records[i, -1].tolist()
+        info = {key: state[slot] for key, slot in self._info_slots}
+        for estimated, error, column, slot in self._estimate_keys:
+            info[estimated] = state[slot]
+            info[error] = state[slot] - last[column]
         return info
 
     def measurement(self, i: int) -> npt.NDArray[np.float64]:
