@@ -10,7 +10,9 @@ For ``DrillString-v0`` (the 4-DOF plant, an observer of 8 states) and ``DrillStr
     estimates in ``info``), and their ratio;
 (b) ``step`` per plant step in surface mode (the law on its estimate: another trajectory);
 (c) the law alone, called through its address from compiled code 2,000 times over fixed
-    measurement vectors, with the state measured and not.
+    measurement vectors, with the state measured and not;
+(d) the observer's design in numpy (:func:`baselines.observer.design_observer`, its cache
+    cleared), which runs when a law is packed, at every reset with a new model.
 
 Every number is warm (an untimed warm-up first) and the best of ``--repeats`` runs; the
 machine is shared, so only the ratios of one run are meaningful.
@@ -32,7 +34,7 @@ from numba import carray, cfunc, njit
 import baselines  # noqa: F401  (registers the controllers)
 import drill_env  # noqa: F401  (registers the envs)
 from baselines import ProposedASMC
-from baselines.observer import OP_NZ, observer_update
+from baselines.observer import OP_NZ, ObserverGains, design_observer, observer_update
 from baselines.proposed import proposed_law
 from baselines.smc import (
     N_SMC_PARAMS,
@@ -151,6 +153,16 @@ def main() -> None:
             f"{us['surface']:.3f} us. The law alone: {without * 1e9:.0f} ns, with the "
             f"observer (nz = {int(lp[N_SMC_PARAMS + OP_NZ])}) {with_observer * 1e9:.0f} ns"
         )
+        batch = envs["surface"].unwrapped.batch  # type: ignore[attr-defined]
+        model = batch.episodes[0].scenario.controller_model
+        channel = envs["surface"].unwrapped.config.measurement_channel()  # type: ignore[attr-defined]
+        design_s = np.inf
+        for _ in range(args.repeats):
+            design_observer.cache_clear()
+            start = time.perf_counter()
+            design_observer(model, channel, ObserverGains())
+            design_s = min(design_s, time.perf_counter() - start)
+        print(f"{env_id}: the observer's design {design_s * 1e3:.1f} ms")
 
 
 if __name__ == "__main__":

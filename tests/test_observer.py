@@ -115,7 +115,7 @@ def test_riccati_matches_scipy() -> None:
     np.testing.assert_allclose(p, reference, rtol=1e-7, atol=1e-10 * abs(reference).max())
     gain = phi @ p @ model.C.T @ np.linalg.inv(model.C @ p @ model.C.T + r)
     residual = phi @ p @ phi.T - gain @ model.C @ p @ phi.T + qd - p
-    assert abs(residual).max() < 1e-14 * abs(p).max()  # scipy's own: about 1e-10
+    assert abs(residual).max() < 1e-14 * abs(p).max()
 
 
 def test_telemetry_gain_is_the_periodic_steady_state() -> None:
