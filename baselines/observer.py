@@ -82,6 +82,9 @@ __all__ = [
 FloatArray = npt.NDArray[np.float64]
 
 N_MEASURED: Final = 2  # the top-drive speed and the surface torque
+MAX_IN_FLIGHT: Final = 1000
+"""Most telemetry values in flight at once (``delay // period``) an observer keeps snapshots
+for."""
 N_OBSERVER_OUTPUTS: Final = N_STATE + 1  # x1..x7 and the bit-rock torque
 
 # Parameter block header.
@@ -411,9 +414,16 @@ def design_observer(
     gain = sigma @ h / (h @ sigma @ h + r_t)
     v_delay = _power_and_sum(f, w, delay)[0] @ gain
     flights = delay // period
-    v_flight = np.array(
-        [_power_and_sum(f, w, j * period)[0] @ gain for j in range(1, flights + 1)]
-    ).reshape(flights, nz)
+    if flights > MAX_IN_FLIGHT:
+        raise ValueError(
+            f"telemetry_delay_s / telemetry_period_s = {flights} values in flight is out of "
+            f"range for the observer: allowed at most {MAX_IN_FLIGHT}"
+        )
+    v_flight = np.zeros((flights, nz))
+    v = gain
+    for j in range(flights):  # F^((j + 1) P) gain
+        v = f_period @ v
+        v_flight[j] = v
     return _in_output_coordinates(
         ObserverDesign(
             f, g, k, om.outputs, gain, v_delay, v_flight, period, delay, flights + 1, p, sigma

@@ -31,7 +31,6 @@ from drill_env.validation import check_choice, check_range
 
 __all__ = [
     "HOLD_LAST_STEP",
-    "MeasurementChannel",
     "HOLD_SPEED",
     "HOLD_TORQUE",
     "N_HOLD",
@@ -40,6 +39,7 @@ __all__ = [
     "TEL_FIRST",
     "TEL_STEP",
     "TEL_VALUE",
+    "MeasurementChannel",
     "reset_channel",
     "sense_surface",
     "sense_telemetry",

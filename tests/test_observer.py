@@ -545,6 +545,12 @@ def test_observer_gains_are_validated() -> None:
         ProposedASMC(observer={})  # type: ignore[arg-type]
 
 
+def test_too_many_telemetry_values_in_flight_is_a_clear_error() -> None:
+    ch = channel(telemetry_period_s=0.001, telemetry_delay_s=2.0)
+    with pytest.raises(ValueError, match=r"= 2000 values in flight is out of range for the"):
+        design_observer(ZRIBI, ch, ObserverGains())
+
+
 def test_measurement_channel_is_validated() -> None:
     with pytest.raises(ValueError, match=r"observation = 'x' is not a known mode"):
         channel(observation="x")
