@@ -20,7 +20,13 @@ import numpy.typing as npt
 from drill_env import kernel
 from drill_env.actuator import lag_factor
 from drill_env.chain import CHAIN_WORK_ROWS, chain_parameter_length, chain_parameter_vector
-from drill_env.control import CompiledController, CompiledLaw, Controller, resolve_controller
+from drill_env.control import (
+    CompiledController,
+    CompiledLaw,
+    Controller,
+    compile_law,
+    resolve_controller,
+)
 from drill_env.distributed import (
     DistributedStringParameters,
     section_element_counts,
@@ -56,6 +62,7 @@ from drill_env.layout import (
     PROF_REF_V,
     PROF_WOB_T,
     PROF_WOB_V,
+    REC_X0,
     REP_LAW_ERROR,
     REP_LAW_GAIN,
     REP_RESIDUAL_SQUARED,
@@ -64,6 +71,7 @@ from drill_env.layout import (
     REP_TORQUE_SQUARED,
     REP_TRACKING_SUM,
     REP_VARIATION,
+    STATE_NAMES,
     STATUS_OK,
     chain_state_fields,
     observation_fields,
@@ -147,8 +155,23 @@ class StringBatch:
         if controller is not None:
             self.controllers = [controller] + [copy.deepcopy(controller) for _ in range(num - 1)]
             if isinstance(controller, CompiledController):
-                law = controller.compiled_law(None, config.torque_limits)
+                # The law for the env's own model of the string: the vectors' sizes of the
+                # batch (a law's may depend on the kind of model, not on its values).
+                law = compile_law(
+                    controller,
+                    config.fixed_scenario().controller_model,
+                    config.torque_limits,
+                    config.measurement_channel(),
+                )
         self.compiled = law is not None
+        self._info_slots = () if law is None else law.info_slots
+        self._estimate_slots = () if law is None else law.estimate_slots
+        self._estimate_keys = [
+            (f"estimated_{STATE_NAMES[x]}", f"estimate_error_{STATE_NAMES[x]}", REC_X0 + x, slot)
+            for x, slot in self._estimate_slots
+        ]
+        self.reports_law_slots = bool(self._info_slots or self._estimate_slots)
+        """Whether the compiled law names state slots the env reports (:meth:`law_info`)."""
         n, s = num, self.substeps
         # Noise is drawn in blocks: row noise_pos is the current measurement's, the rows after
         # it the next steps'. A block holds several decision periods (fewer for big batches).
@@ -338,15 +361,60 @@ class StringBatch:
             ctrl = self.controllers[i]
             ctrl.reset()
             if self.compiled:
-                law = ctrl.compiled_law(  # type: ignore[attr-defined]
-                    scenario.controller_model, config.torque_limits
+                law = compile_law(
+                    ctrl,  # type: ignore[arg-type]
+                    scenario.controller_model,
+                    config.torque_limits,
+                    config.measurement_channel(scenario.noise_std_rad_s),
                 )
                 if law.address != self.settings.law_address:
                     raise ValueError("every string of a batch must run the same compiled law")
+                if (law.params.size, law.initial_state.size) != (
+                    a.law_params.shape[1],
+                    a.law_state.shape[1],
+                ):
+                    raise ValueError(
+                        "every string of a batch must run a law of the same vector sizes: "
+                        f"got params {law.params.size} and state {law.initial_state.size}, "
+                        f"the batch has {a.law_params.shape[1]} and {a.law_state.shape[1]}"
+                    )
+                if (law.info_slots, law.estimate_slots) != (
+                    self._info_slots,
+                    self._estimate_slots,
+                ):
+                    raise ValueError("every string of a batch must report the same law slots")
                 a.law_params[i] = law.params
                 a.law_state[i] = law.initial_state
         a.report[i] = 0.0
         kernel.observe(a, self.settings, i)
+
+    def law_info(self) -> dict[str, npt.NDArray[np.float64]]:
+        """The state slots the compiled law names (:class:`drill_env.control.CompiledLaw`
+        ``info_slots`` and ``estimate_slots``) after the last step, (num,) each: the named
+        values, ``estimated_<state name>`` and ``estimate_error_<state name>`` (the estimate
+        minus the true state at the plant step of the law's last call, from the records; 0
+        before the first step, NaN for a string that did not move)."""
+        if not self.reports_law_slots:
+            return {}
+        state = self.arrays.law_state
+        info = {key: state[:, slot].copy() for key, slot in self._info_slots}
+        last = self.arrays.records[:, -1]
+        for estimated, error, column, slot in self._estimate_keys:
+            info[estimated] = state[:, slot].copy()
+            info[error] = state[:, slot] - last[:, column]
+        return info
+
+    def law_info_of(self, i: int) -> dict[str, float]:
+        """:meth:`law_info` of string ``i`` as floats (the single env's hot path)."""
+        if not self.reports_law_slots:
+            return {}
+        state = self.arrays.law_state[i].tolist()
+        last = self.arrays.records[i, -1].tolist()
+        info = {key: state[slot] for key, slot in self._info_slots}
+        for estimated, error, column, slot in self._estimate_keys:
+            info[estimated] = state[slot]
+            info[error] = state[slot] - last[column]
+        return info
 
     def measurement(self, i: int) -> npt.NDArray[np.float64]:
         """The measurement vector of string ``i`` now (``drill_env.layout.M_*``: the measured

@@ -4,7 +4,10 @@ one runs inside the plant loop, and the registry of controllers by name.
 Any object with ``reset()`` and ``torque(measurement, reference_speed_rad_s, dt_s)`` can be a
 base controller; the env then calls it from Python at every plant step (the slow path). A
 controller that also has ``compiled_law(model, torque_limits)`` runs inside the compiled plant
-loop instead, state and all, at full speed. Its law is a numba ``cfunc`` with the signature
+loop instead, state and all, at full speed; if its ``compiled_law`` also takes a ``channel``
+keyword, the env passes its :class:`drill_env.sensors.MeasurementChannel` there (what is
+measured, how often, how noisy: what an observer inside the law is designed for; see
+:func:`compile_law`). Its law is a numba ``cfunc`` with the signature
 :data:`LAW_SIGNATURE`::
 
     torque_nm = law(params*, state*, measurement*, reference_rad_s, dt_s)
@@ -20,6 +23,7 @@ registry below (the built-in ones of :mod:`baselines` through the
 from __future__ import annotations
 
 import ctypes
+import inspect
 from collections.abc import Callable
 from importlib import metadata
 from typing import Any, Final, NamedTuple, Protocol, runtime_checkable
@@ -30,9 +34,10 @@ from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
-from drill_env.layout import N_MEASUREMENT
+from drill_env.layout import N_MEASUREMENT, N_STATE
 from drill_env.limits import TorqueLimits
 from drill_env.parameters import DrillStringParameters
+from drill_env.sensors import MeasurementChannel
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -41,6 +46,7 @@ __all__ = [
     "CompiledLaw",
     "Controller",
     "call_law",
+    "compile_law",
     "controller_names",
     "make_controller",
     "register_controller",
@@ -72,6 +78,13 @@ class CompiledLaw(NamedTuple):
         error_slot: Index in the state of the law's error signal (rad/s) that the env reports
             (``sliding_variable_rad_s``) and shows in the residual observation; -1 for none.
         gain_slot: Index in the state of its adaptive gain (``adaptive_gain``); -1 for none.
+        info_slots: ``(info key, state index)`` pairs: state entries the env reports in
+            ``info`` under these keys (their value after the last plant step of a decision).
+        estimate_slots: ``(X_* index, state index)`` pairs: state entries that hold the law's
+            estimate of an entry of the 4-DOF state (``drill_env.layout.STATE_NAMES``) at the
+            plant step of its last call; the env reports each as ``estimated_<name>`` and its
+            error, the estimate minus the true value at that step, as
+            ``estimate_error_<name>``.
     """
 
     function: Any
@@ -79,6 +92,8 @@ class CompiledLaw(NamedTuple):
     initial_state: npt.NDArray[np.float64]
     error_slot: int = -1
     gain_slot: int = -1
+    info_slots: tuple[tuple[str, int], ...] = ()
+    estimate_slots: tuple[tuple[int, int], ...] = ()
 
     @property
     def address(self) -> int:
@@ -139,7 +154,27 @@ class CompiledLaw(NamedTuple):
                     f"CompiledLaw.{name} = {slot!r} is out of range: allowed -1 (none) to "
                     f"{state.size - 1}"
                 )
-        return self._replace(params=params, initial_state=state)
+        info = tuple((str(key), int(slot)) for key, slot in self.info_slots)
+        estimates = tuple((int(index), int(slot)) for index, slot in self.estimate_slots)
+        for key, _ in info:
+            if not key:
+                raise ValueError("CompiledLaw.info_slots: an info key must be a non-empty string")
+        for index, _ in estimates:
+            if not 0 <= index < N_STATE:
+                raise ValueError(
+                    f"CompiledLaw.estimate_slots: state index {index!r} is out of range: "
+                    f"allowed 0 to {N_STATE - 1}"
+                )
+        for name, pairs in (("info_slots", info), ("estimate_slots", estimates)):
+            for _, slot in pairs:
+                if not 0 <= slot < state.size:
+                    raise ValueError(
+                        f"CompiledLaw.{name}: slot {slot!r} is out of range: allowed 0 to "
+                        f"{state.size - 1}"
+                    )
+        return self._replace(
+            params=params, initial_state=state, info_slots=info, estimate_slots=estimates
+        )
 
 
 @intrinsic
@@ -190,6 +225,28 @@ class CompiledController(Controller, Protocol):
         ``controller`` uncertainty reading) and its own otherwise, and the env's top-drive
         ``torque_limits`` (N m) when given."""
         ...
+
+
+def compile_law(
+    controller: CompiledController,
+    model: Any = None,
+    torque_limits: TorqueLimits | None = None,
+    channel: MeasurementChannel | None = None,
+) -> CompiledLaw:
+    """``controller.compiled_law(model, torque_limits, channel=channel)`` when its
+    ``compiled_law`` takes a ``channel`` keyword, else ``compiled_law(model, torque_limits)``
+    (the measurement channel is news only to a law that designs something for it)."""
+    law = controller.compiled_law
+    try:
+        parameters = inspect.signature(law).parameters
+    except (TypeError, ValueError):  # a callable without an introspectable signature
+        parameters = {}  # type: ignore[assignment]
+    takes_channel = "channel" in parameters or any(
+        p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values()
+    )
+    if takes_channel and channel is not None:
+        return law(model, torque_limits, channel=channel)  # type: ignore[call-arg]
+    return law(model, torque_limits)
 
 
 # ----------------------------------------------------------------------------- registry

@@ -239,7 +239,11 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
     ``time_s``, ``bit_speed_rad_s``, ``top_drive_speed_rad_s``, ``reference_speed_rad_s``,
     ``top_drive_torque_nm``, ``wob_n``, ``bit_stuck``, ``reward_terms``, ``action_clipped``,
     ``actions_clipped_total``; in residual mode also ``base_torque_nm``, ``residual_torque_nm``,
-    ``sliding_variable_rad_s``, ``adaptive_gain``; ``termination_reason`` when terminated.
+    ``sliding_variable_rad_s``, ``adaptive_gain``; ``termination_reason`` when terminated; the
+    state slots a compiled base controller names (``drill_env.control.CompiledLaw``
+    ``info_slots`` and ``estimate_slots``: with ``observation="surface"`` the sliding-mode
+    controllers' observer reports ``estimated_<state>`` and ``estimate_error_<state>`` for the
+    seven entries of the 4-DOF state, and ``estimated_bit_torque_nm``; docs/observer.md).
 
     ## Rendering
     ``render_mode="rgb_array"``: ``render()`` returns a ``(480, 800, 3)`` uint8 frame of the
@@ -408,6 +412,8 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         info["actions_clipped_total"] = episode.actions_clipped
         if b.residual:
             info["residual_torque_nm"] = float(b.command[0])
+        if b.reports_law_slots:
+            info.update(b.law_info_of(0))
         return info
 
 
@@ -478,9 +484,11 @@ class DrillStringFieldEnv(DrillStringEnv):
     ## Info
     That of ``DrillString-v0``; ``bit_speed_rad_s`` and ``top_drive_speed_rad_s`` are the true
     speeds of the bit and top-drive nodes, plus ``telemetry_bit_speed_rad_s`` and
-    ``telemetry_age_s`` when telemetry is on. ``env.unwrapped.string_state()`` gives the true
-    state of every node now (:class:`StringState`: depths, speeds, element twists and torques),
-    in either observation mode, for studies of the torsional waves along the string.
+    ``telemetry_age_s`` when telemetry is on. The estimates of a base controller's observer
+    (``estimated_*``, ``estimate_error_*``) are of the 4-DOF state at the probe nodes
+    (``drill_env.modes.probe_nodes``). ``env.unwrapped.string_state()`` gives the true state of
+    every node now (:class:`StringState`: depths, speeds, element twists and torques), in either
+    observation mode, for studies of the torsional waves along the string.
 
     ## Version History
     * v0: initial version.

@@ -8,6 +8,7 @@ The same names are accepted by ``gym.make`` and, per episode (the scenario ones)
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Final
@@ -45,7 +46,15 @@ from drill_env.scenarios import (
     UncertaintyReading,
     WobProfile,
 )
-from drill_env.validation import check_bool, check_choice, check_range, check_unknown, require
+from drill_env.sensors import MeasurementChannel
+from drill_env.validation import (
+    check_bool,
+    check_choice,
+    check_range,
+    check_real,
+    check_unknown,
+    require,
+)
 
 __all__ = [
     "FIELD_MAX_TORQUE_NM",
@@ -187,10 +196,11 @@ class EnvConfig:
         _check_steps("actuator_dead_time_s", self.actuator_dead_time_s, 0.0, MAX_DEAD_TIME_S)
         check_range("actuator_lag_s", self.actuator_lag_s, 0.0, 10.0)
         if self.torque_rate_limit_nm_per_s is not None:
-            rate = check_range(
-                "torque_rate_limit_nm_per_s", self.torque_rate_limit_nm_per_s, 0.0, 1e9
-            )
-            require("torque_rate_limit_nm_per_s", rate, "> 0 (or None: no limit)", rate > 0)
+            rate = check_real("torque_rate_limit_nm_per_s", self.torque_rate_limit_nm_per_s)
+            require(
+                "torque_rate_limit_nm_per_s", self.torque_rate_limit_nm_per_s,
+                "(0, 1e+09] (or None: no limit)", math.isfinite(rate) and 0 < rate <= 1e9,
+            )  # fmt: skip
         if not self.distributed:
             for name in FIELD_ONLY:
                 if getattr(self, name) is not None:
@@ -247,6 +257,23 @@ class EnvConfig:
     def torque_scale_nm(self) -> float:
         """Scale of torques in the observation, N m."""
         return max(abs(self.min_torque_nm), abs(self.max_torque_nm))
+
+    def measurement_channel(self, speed_noise_std_rad_s: float | None = None) -> MeasurementChannel:
+        """The measurement channel these keywords describe; ``speed_noise_std_rad_s`` (rad/s)
+        replaces ``noise_std_rad_s`` (an episode's scenario may have its own)."""
+        return MeasurementChannel(
+            observation=self.observation,
+            speed_noise_std_rad_s=float(
+                self.noise_std_rad_s if speed_noise_std_rad_s is None else speed_noise_std_rad_s
+            ),
+            torque_noise_std_nm=float(self.torque_noise_std_nm),
+            sensor_period_s=float(self.sensor_period_s),
+            telemetry_period_s=(
+                None if self.telemetry_period_s is None else float(self.telemetry_period_s)
+            ),
+            telemetry_delay_s=float(self.telemetry_delay_s),
+            telemetry_noise_std_rad_s=float(self.telemetry_noise_std_rad_s),
+        )
 
     def string(self) -> DistributedStringParameters:
         """The distributed string of the keywords (at ``measured_depth_m`` when given)."""

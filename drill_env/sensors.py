@@ -20,9 +20,14 @@ State of one string:
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Final
 
 from numba import njit
+
+from drill_env.layout import OBSERVATION_MODES
+from drill_env.parameters import PLANT_DT_S
+from drill_env.validation import check_choice, check_range
 
 __all__ = [
     "HOLD_LAST_STEP",
@@ -34,6 +39,7 @@ __all__ = [
     "TEL_FIRST",
     "TEL_STEP",
     "TEL_VALUE",
+    "MeasurementChannel",
     "reset_channel",
     "sense_surface",
     "sense_telemetry",
@@ -51,6 +57,42 @@ TEL_STEP: Final = 1  # the plant step it was sampled at (-1 before the first)
 TEL_FIRST: Final = 2  # the oldest sample in flight: its buffer slot
 TEL_COUNT: Final = 3  # samples in flight
 N_TELEMETRY: Final = 4
+
+
+@dataclass(frozen=True)
+class MeasurementChannel:
+    """What the env's measurement channel delivers to a controller, as the env tells a compiled
+    controller that asks for it (:func:`drill_env.control.compile_law`): enough to design a
+    state observer for it. Built by :meth:`drill_env.options.EnvConfig.measurement_channel`.
+
+    Attributes:
+        observation: ``"state"`` (the 4-DOF state is measured) or ``"surface"`` (only the
+            surface signals and the telemetry).
+        speed_noise_std_rad_s: Noise of the measured speeds, rad/s.
+        torque_noise_std_nm: Noise of the measured surface torque, N m.
+        sensor_period_s: Sampling period of the surface signals (held in between), s.
+        telemetry_period_s: Period of the bit-speed telemetry, s (``None``: no telemetry).
+        telemetry_delay_s: Delay from a telemetry sample to its delivery, s.
+        telemetry_noise_std_rad_s: Noise of the telemetry's bit speed, rad/s.
+    """
+
+    observation: str
+    speed_noise_std_rad_s: float
+    torque_noise_std_nm: float
+    sensor_period_s: float = PLANT_DT_S
+    telemetry_period_s: float | None = None
+    telemetry_delay_s: float = 0.0
+    telemetry_noise_std_rad_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        check_choice("observation", self.observation, OBSERVATION_MODES, "mode")
+        check_range("speed_noise_std_rad_s", self.speed_noise_std_rad_s, 0.0, 10.0)
+        check_range("torque_noise_std_nm", self.torque_noise_std_nm, 0.0, 1e5)
+        check_range("sensor_period_s", self.sensor_period_s, PLANT_DT_S, 10.0)
+        if self.telemetry_period_s is not None:
+            check_range("telemetry_period_s", self.telemetry_period_s, PLANT_DT_S, 600.0)
+        check_range("telemetry_delay_s", self.telemetry_delay_s, 0.0, 600.0)
+        check_range("telemetry_noise_std_rad_s", self.telemetry_noise_std_rad_s, 0.0, 10.0)
 
 
 def telemetry_buffer_size(period_steps: int, delay_steps: int) -> int:
