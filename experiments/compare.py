@@ -47,6 +47,7 @@ from drill_env.metrics import METRIC_KEYS
 from drill_env.parameters import PLANT_DT_S, resolve_parameters
 from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, WobProfile
 from experiments.arguments import ArgumentParser, names_type, number_type
+from experiments.sweep import COMPARE_TASK_RUNS, add_sweep_options, sweep_requested
 from experiments.tables import Column, write_csv, write_json
 from experiments.tables import markdown_table as _markdown
 
@@ -262,40 +263,73 @@ def run_comparison(
     Returns:
         The rows (see :data:`ROW_KEYS`) and the traces by ``(controller, condition, noise)``.
     """
-    preset = GAIN_PRESETS[gains]
-    dt = decision_period(duration_s)
-    labels = [(c, False) for c in controllers]
-    if agent is not None:
-        labels.append((str(agent.name), True))
-    jobs = [(c, a, cond, float(n)) for c, a in labels for cond in conditions for n in noises]
+    jobs = comparison_jobs(controllers, conditions, noises, agent)
     rows: list[dict[str, Any]] = []
     traces: dict[tuple[str, str, float], RunTraces] = {}
     bar = tqdm(jobs, desc="compare", unit="run", file=sys.stderr, disable=not progress)
     for label, is_agent, cond, noise in bar:
         bar.set_postfix_str(f"{label} {cond} noise={noise:g}", refresh=False)
-        scenario = scenario_kwargs(cond, noise, duration_s, reading)
-        if is_agent:
-            own = {k: v for k, v in dict(agent.env_kwargs).items() if k != "max_episode_steps"}
-            kwargs = {**own, **scenario}
-            trace = run_episode(kwargs, agent, seed)
-            gain_label = "agent"
-        else:
-            overrides = preset.get(label)
-            controller = make_controller(label, **(overrides or {}))
-            kwargs = {**scenario, "base_controller": controller, "control_dt_s": dt}
-            trace = run_episode(kwargs, ZeroAction(), seed)
-            gain_label = gains if overrides is not None else "default"
-        metrics = {**episode_metrics(trace), "static_error_rad_s": static_error(trace)}
-        rows.append(_row(label, cond, noise, metrics, gain_label, reading, seed, duration_s))
-        if keep_traces:
-            from experiments.plots import downsample, envelope, time_window
-
-            traces[(label, cond, noise)] = RunTraces(
-                downsample(trace, PLOT_EVERY),
-                time_window(trace, max(trace.duration_s - TAIL_S, 0.0)),
-                envelope(trace, BAND_S),
-            )
+        row, run_traces = score_run(
+            label, is_agent, cond, noise, duration_s=duration_s, seed=seed, reading=reading,
+            gains=gains, agent=agent, keep_traces=keep_traces,
+        )  # fmt: skip
+        rows.append(row)
+        if run_traces is not None:
+            traces[(label, cond, noise)] = run_traces
     return rows, traces
+
+
+def comparison_jobs(
+    controllers: Sequence[str], conditions: Sequence[str], noises: Sequence[float], agent: Any
+) -> list[tuple[str, bool, str, float]]:
+    """The runs of a comparison, in table order: (label, is the agent, condition, noise)."""
+    labels = [(c, False) for c in controllers]
+    if agent is not None:
+        labels.append((str(agent.name), True))
+    return [(c, a, cond, float(n)) for c, a in labels for cond in conditions for n in noises]
+
+
+def score_run(
+    label: str,
+    is_agent: bool,
+    condition: str,
+    noise: float,
+    *,
+    duration_s: float,
+    seed: int,
+    reading: str,
+    gains: str,
+    agent: Any,
+    keep_traces: bool,
+) -> tuple[dict[str, Any], RunTraces | None]:
+    """One run of the comparison (see :func:`run_comparison`): its row and, with
+    ``keep_traces``, the light copies of its trace for the figures."""
+    scenario = scenario_kwargs(condition, noise, duration_s, reading)
+    if is_agent:
+        own = {k: v for k, v in dict(agent.env_kwargs).items() if k != "max_episode_steps"}
+        trace = run_episode({**own, **scenario}, agent, seed)
+        gain_label = "agent"
+    else:
+        overrides = GAIN_PRESETS[gains].get(label)
+        controller = make_controller(label, **(overrides or {}))
+        kwargs = {
+            **scenario,
+            "base_controller": controller,
+            "control_dt_s": decision_period(duration_s),
+        }
+        trace = run_episode(kwargs, ZeroAction(), seed)
+        gain_label = gains if overrides is not None else "default"
+    metrics = {**episode_metrics(trace), "static_error_rad_s": static_error(trace)}
+    row = _row(label, condition, noise, metrics, gain_label, reading, seed, duration_s)
+    if not keep_traces:
+        return row, None
+    from experiments.plots import downsample, envelope, time_window
+
+    return row, RunTraces(
+        downsample(trace, PLOT_EVERY),
+        time_window(trace, max(trace.duration_s - TAIL_S, 0.0)),
+        envelope(trace, BAND_S),
+    )
 
 
 # ----------------------------------------------------------------------------- output
@@ -596,6 +630,10 @@ def _parser() -> ArgumentParser:
     p.add_argument("--no-plots", action="store_true", help="write no figures")
     p.add_argument("--no-agent", action="store_true", help="leave out the shipped residual agent")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_sweep_options(
+        p,
+        f"runs per task on the sweep runner (default: {COMPARE_TASK_RUNS}); does not change the numbers",
+    )
     return p
 
 
@@ -615,18 +653,34 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
         )
     agent = None if args.no_agent else load_agent(agent_loader)
     start = time.perf_counter()
-    rows, traces = run_comparison(
-        list(dict.fromkeys(controllers)),
-        list(dict.fromkeys(args.conditions)),
-        list(dict.fromkeys(args.noise)),
-        duration_s=args.duration,
-        seed=args.seed,
-        reading=args.reading,
-        gains=args.gains,
-        agent=agent,
-        keep_traces=not args.no_plots,
-        progress=not args.no_progress,
-    )
+    figures = not args.no_plots
+    if sweep_requested(args):  # on the sweep runner: Ray, a results file, a resume
+        from experiments.sweep_studies import run_compare_sweep
+
+        rows, traces, figures = run_compare_sweep(
+            args,
+            list(dict.fromkeys(controllers)),
+            list(dict.fromkeys(args.conditions)),
+            list(dict.fromkeys(args.noise)),
+            agent,
+            keep_traces=not args.no_plots,
+        )
+        if not args.no_plots and not figures:
+            print("no figures: runs read from the results file keep no traces (rerun without "
+                  "--resume for the figures)")  # fmt: skip
+    else:
+        rows, traces = run_comparison(
+            list(dict.fromkeys(controllers)),
+            list(dict.fromkeys(args.conditions)),
+            list(dict.fromkeys(args.noise)),
+            duration_s=args.duration,
+            seed=args.seed,
+            reading=args.reading,
+            gains=args.gains,
+            agent=agent,
+            keep_traces=not args.no_plots,
+            progress=not args.no_progress,
+        )
     simulated = time.perf_counter() - start
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
@@ -640,7 +694,7 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
         write_csv(rows, out / "compare.csv", ROW_KEYS),
         write_json([{k: r[k] for k in ROW_KEYS} for r in rows], out / "compare.json"),
     ]
-    if not args.no_plots:
+    if not args.no_plots and figures:
         written += write_figures(rows, traces, out / "figures")
     total = time.perf_counter() - start
     print(

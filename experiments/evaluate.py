@@ -53,6 +53,7 @@ from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics, run
 from drill_env.metrics import METRIC_KEYS
 from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, WobProfile
 from experiments.arguments import ArgumentParser, names_type
+from experiments.sweep import EVALUATE_TASK_RUNS, add_sweep_options, sweep_requested
 from experiments.tables import write_csv, write_json
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -202,16 +203,7 @@ def evaluate(
         One row per (scenario, controller or agent) with the scenario, ``prone`` and the metrics;
         and the kept traces by (scenario id, label).
     """
-    names = list(controller_names() if controllers is None else controllers)
-    # Controllers run with the first agent's decision period: the same noise stream, and a
-    # zero residual is then exactly the agent's base controller.
-    common = {
-        k: v for k, v in (agents[0].env_kwargs if agents else {}).items() if k != "base_controller"
-    }
-    jobs: list[tuple[str, Policy, dict[str, Any]]] = [
-        (name, ZeroAction(), {**common, "base_controller": name}) for name in names
-    ]
-    jobs += [(agent.name, agent, dict(agent.env_kwargs)) for agent in agents]
+    jobs = evaluation_jobs(agents, controllers)
     rows: list[dict[str, Any]] = []
     traces: dict[tuple[str, str], Trace] = {}
     total = len(scenarios) * len(jobs)
@@ -222,17 +214,50 @@ def evaluate(
         bar = tqdm(total=total, desc="held-out runs", unit="run")
     for scenario in scenarios:
         for label, policy, kwargs in jobs:
-            trace = run_scenario(scenario, policy, kwargs)
-            metrics = episode_metrics(trace)
-            row = scenario.row()
-            rows.append({"scenario": row.pop("scenario"), "controller": label, **row, **metrics})
-            if label in keep_traces:
+            row, trace = score_scenario(scenario, label, policy, kwargs, label in keep_traces)
+            rows.append(row)
+            if trace is not None:
                 traces[(scenario.id, label)] = trace
             if bar is not None:
                 bar.update()
     if bar is not None:
         bar.close()
     return rows, traces
+
+
+def evaluation_jobs(
+    agents: Sequence[ResidualPolicy], controllers: Sequence[str] | None = None
+) -> list[tuple[str, Policy, dict[str, Any]]]:
+    """What runs on every scenario: (label, policy, env keywords) of each controller (a zero
+    residual on it) and of each agent."""
+    names = list(controller_names() if controllers is None else controllers)
+    # Controllers run with the first agent's decision period: the same noise stream, and a
+    # zero residual is then exactly the agent's base controller.
+    common = {
+        k: v for k, v in (agents[0].env_kwargs if agents else {}).items() if k != "base_controller"
+    }
+    jobs: list[tuple[str, Policy, dict[str, Any]]] = [
+        (name, ZeroAction(), {**common, "base_controller": name}) for name in names
+    ]
+    jobs += [(agent.name, agent, dict(agent.env_kwargs)) for agent in agents]
+    return jobs
+
+
+def score_scenario(
+    scenario: HeldOutScenario,
+    label: str,
+    policy: Policy,
+    env_kwargs: Mapping[str, Any],
+    keep_trace: bool = False,
+) -> tuple[dict[str, Any], Trace | None]:
+    """One held-out run: its row (scenario columns and metrics) and its trace if kept."""
+    trace = run_scenario(scenario, policy, env_kwargs)
+    metrics = episode_metrics(trace)
+    row = scenario.row()
+    return (
+        {"scenario": row.pop("scenario"), "controller": label, **row, **metrics},
+        trace if keep_trace else None,
+    )
 
 
 def _mean(values: Sequence[float | None]) -> float:
@@ -498,6 +523,11 @@ def _parser() -> ArgumentParser:
         help=f"also load Stable-Baselines3 model.zip files (older models): {PICKLE_RISK}; "
         "only for files you made yourself or got from a source you trust",
     )
+    add_sweep_options(
+        parser,
+        f"held-out runs per task on the sweep runner (default: {EVALUATE_TASK_RUNS}); does not "
+        "change the numbers",
+    )
     return parser
 
 
@@ -525,14 +555,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     if controllers is not None:
         controllers = list(dict.fromkeys([*controllers, *base_names]))
     keep = [*base_names, *labels]
-    rows, traces = evaluate(
-        agents, controllers, scenarios, keep_traces=keep, progress=not args.no_progress
-    )
+    figures = not args.no_plots
+    if sweep_requested(args):  # on the sweep runner: Ray, a results file, a resume
+        from experiments.sweep_studies import run_evaluate_sweep
+
+        rows, traces, figures = run_evaluate_sweep(args, agents, controllers, scenarios, keep)
+        if not args.no_plots and not figures:
+            print("no figures: runs read from the results file keep no traces (rerun without "
+                  "--resume for the figures)")  # fmt: skip
+    else:
+        rows, traces = evaluate(
+            agents, controllers, scenarios, keep_traces=keep, progress=not args.no_progress
+        )
     summary = summarize(rows)
     summary["seconds"] = round(time.perf_counter() - t0, 1)
     summary["models"] = {a.name: str(p) for a, p in zip(agents, paths, strict=True)}
     written = write_outputs(rows, summary, out)
-    if not args.no_plots:
+    if not args.no_plots and figures:
         written += write_figures(rows, traces, keep, out / "figures")
     total = time.perf_counter() - t0
     print(markdown_table(summary))
