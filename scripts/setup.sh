@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Create .venv and install drill-string-gym with its [rl,dev,video] extras into it. Idempotent: the
+# Create .venv and install drill-string-gym with its [rl,dev,video,scale] extras into it. Idempotent: the
 # installs are skipped while .venv/.installed-<sha256 of pyproject.toml> exists and the three
 # packages are importable from it. Works from any working directory.
 set -euo pipefail
@@ -29,7 +29,7 @@ if ! installed; then
     # torch first, pinned: this version is a local CPU wheel here; any other torch request
     # would download a multi-GB CUDA build. The [rl] extra's range is then already satisfied.
     "${pip[@]}" install "torch==2.13.0"
-    "${pip[@]}" install -e ".[rl,dev,video]"
+    "${pip[@]}" install -e ".[rl,dev,video,scale]"
     rm -f .venv/.installed-*
     touch "${stamp}"
 fi
