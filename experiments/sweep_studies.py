@@ -165,6 +165,17 @@ class MapStudy:
             if not values:
                 raise ValueError(f"{label} = [] is empty: the grid needs at least one value")
         _check_task_size("task_cells", self.task_cells)
+        steps = self.duration_s / 0.1
+        if not (math.isfinite(steps) and 0 < steps <= 1e5 and abs(steps - round(steps)) < 1e-6):
+            raise ValueError(
+                f"duration_s = {self.duration_s!r} is out of range: allowed (0, 10000], a "
+                "multiple of 0.1 s"
+            )
+        if not (math.isfinite(self.window_s) and 0 < self.window_s <= self.duration_s):
+            raise ValueError(
+                f"window_s = {self.window_s!r} is out of range: allowed (0, duration_s = "
+                f"{self.duration_s:g}]"
+            )
 
     def spec(self) -> dict[str, Any]:
         """The map's settings (not the task size)."""

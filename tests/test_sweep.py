@@ -248,3 +248,12 @@ def test_map_command_resumes_to_the_same_csv(tmp_path: Path) -> None:
     assert cli_main([*base, "--out", str(tmp_path / "swept"), "--resume"]) == 0
     name = "stick_slip_map_soft_speed.csv"
     assert (tmp_path / "swept" / name).read_text() == (tmp_path / "plain" / name).read_text()
+
+
+def test_bad_map_durations_fail_before_anything_runs() -> None:
+    with pytest.raises(
+        ValueError, match=r"window_s = 40.0 is out of range: allowed \(0, duration_s = 1\]"
+    ):
+        MapStudy(("stiff_pi",), WOBS, SPEEDS, duration_s=1.0)
+    with pytest.raises(ValueError, match=r"duration_s = 1.25 is out of range"):
+        MapStudy(("stiff_pi",), WOBS, SPEEDS, duration_s=1.25, window_s=1.0)
