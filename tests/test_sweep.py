@@ -257,3 +257,27 @@ def test_bad_map_durations_fail_before_anything_runs() -> None:
         MapStudy(("stiff_pi",), WOBS, SPEEDS, duration_s=1.0)
     with pytest.raises(ValueError, match=r"duration_s = 1.25 is out of range"):
         MapStudy(("stiff_pi",), WOBS, SPEEDS, duration_s=1.25, window_s=1.0)
+
+
+def test_a_sweep_on_ray_without_the_scale_extra_is_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Without Ray installed (simulated: its import fails), --workers 2 says which extra."""
+    import builtins
+
+    real_import = builtins.__import__
+
+    def no_ray(name: str, *args: Any, **kwargs: Any) -> Any:
+        if name == "ray" or name.startswith("ray."):
+            raise ModuleNotFoundError("No module named 'ray'", name="ray")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_ray)
+    argv = ["map", "--wob-n", "1", "--speed-n", "1", "--duration", "1", "--window", "1"]
+    assert cli_main([*argv, "--workers", "2", "--no-progress", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err == (
+        "drill-gym map: error: needs the package 'ray', which is not installed (the scale "
+        "extra has Ray and Optuna: pip install -e '.[scale]')\n"
+    )
+    assert not tmp_path.exists() or not any(tmp_path.iterdir())  # nothing written

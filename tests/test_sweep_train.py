@@ -43,7 +43,6 @@ TINY = [
 def test_bad_training_sweep_is_one_line_before_anything_starts(
     argv: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    pytest.importorskip("torch")
     out = tmp_path / "out"
     assert cli_main(["sweep-train", *argv, "--out", str(out)]) == 2
     err = capsys.readouterr().err
