@@ -263,73 +263,40 @@ def run_comparison(
     Returns:
         The rows (see :data:`ROW_KEYS`) and the traces by ``(controller, condition, noise)``.
     """
-    jobs = comparison_jobs(controllers, conditions, noises, agent)
+    preset = GAIN_PRESETS[gains]
+    dt = decision_period(duration_s)
+    labels = [(c, False) for c in controllers]
+    if agent is not None:
+        labels.append((str(agent.name), True))
+    jobs = [(c, a, cond, float(n)) for c, a in labels for cond in conditions for n in noises]
     rows: list[dict[str, Any]] = []
     traces: dict[tuple[str, str, float], RunTraces] = {}
     bar = tqdm(jobs, desc="compare", unit="run", file=sys.stderr, disable=not progress)
     for label, is_agent, cond, noise in bar:
         bar.set_postfix_str(f"{label} {cond} noise={noise:g}", refresh=False)
-        row, run_traces = score_run(
-            label, is_agent, cond, noise, duration_s=duration_s, seed=seed, reading=reading,
-            gains=gains, agent=agent, keep_traces=keep_traces,
-        )  # fmt: skip
-        rows.append(row)
-        if run_traces is not None:
-            traces[(label, cond, noise)] = run_traces
+        scenario = scenario_kwargs(cond, noise, duration_s, reading)
+        if is_agent:
+            own = {k: v for k, v in dict(agent.env_kwargs).items() if k != "max_episode_steps"}
+            kwargs = {**own, **scenario}
+            trace = run_episode(kwargs, agent, seed)
+            gain_label = "agent"
+        else:
+            overrides = preset.get(label)
+            controller = make_controller(label, **(overrides or {}))
+            kwargs = {**scenario, "base_controller": controller, "control_dt_s": dt}
+            trace = run_episode(kwargs, ZeroAction(), seed)
+            gain_label = gains if overrides is not None else "default"
+        metrics = {**episode_metrics(trace), "static_error_rad_s": static_error(trace)}
+        rows.append(_row(label, cond, noise, metrics, gain_label, reading, seed, duration_s))
+        if keep_traces:
+            from experiments.plots import downsample, envelope, time_window
+
+            traces[(label, cond, noise)] = RunTraces(
+                downsample(trace, PLOT_EVERY),
+                time_window(trace, max(trace.duration_s - TAIL_S, 0.0)),
+                envelope(trace, BAND_S),
+            )
     return rows, traces
-
-
-def comparison_jobs(
-    controllers: Sequence[str], conditions: Sequence[str], noises: Sequence[float], agent: Any
-) -> list[tuple[str, bool, str, float]]:
-    """The runs of a comparison, in table order: (label, is the agent, condition, noise)."""
-    labels = [(c, False) for c in controllers]
-    if agent is not None:
-        labels.append((str(agent.name), True))
-    return [(c, a, cond, float(n)) for c, a in labels for cond in conditions for n in noises]
-
-
-def score_run(
-    label: str,
-    is_agent: bool,
-    condition: str,
-    noise: float,
-    *,
-    duration_s: float,
-    seed: int,
-    reading: str,
-    gains: str,
-    agent: Any,
-    keep_traces: bool,
-) -> tuple[dict[str, Any], RunTraces | None]:
-    """One run of the comparison (see :func:`run_comparison`): its row and, with
-    ``keep_traces``, the light copies of its trace for the figures."""
-    scenario = scenario_kwargs(condition, noise, duration_s, reading)
-    if is_agent:
-        own = {k: v for k, v in dict(agent.env_kwargs).items() if k != "max_episode_steps"}
-        trace = run_episode({**own, **scenario}, agent, seed)
-        gain_label = "agent"
-    else:
-        overrides = GAIN_PRESETS[gains].get(label)
-        controller = make_controller(label, **(overrides or {}))
-        kwargs = {
-            **scenario,
-            "base_controller": controller,
-            "control_dt_s": decision_period(duration_s),
-        }
-        trace = run_episode(kwargs, ZeroAction(), seed)
-        gain_label = gains if overrides is not None else "default"
-    metrics = {**episode_metrics(trace), "static_error_rad_s": static_error(trace)}
-    row = _row(label, condition, noise, metrics, gain_label, reading, seed, duration_s)
-    if not keep_traces:
-        return row, None
-    from experiments.plots import downsample, envelope, time_window
-
-    return row, RunTraces(
-        downsample(trace, PLOT_EVERY),
-        time_window(trace, max(trace.duration_s - TAIL_S, 0.0)),
-        envelope(trace, BAND_S),
-    )
 
 
 # ----------------------------------------------------------------------------- output

@@ -53,7 +53,7 @@ from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics, run
 from drill_env.metrics import METRIC_KEYS
 from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, WobProfile
 from experiments.arguments import ArgumentParser, names_type
-from experiments.sweep import EVALUATE_TASK_RUNS, add_sweep_options, sweep_requested
+from experiments.sweep import EVALUATE_TASK_SCENARIOS, add_sweep_options, sweep_requested
 from experiments.tables import write_csv, write_json
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -203,33 +203,6 @@ def evaluate(
         One row per (scenario, controller or agent) with the scenario, ``prone`` and the metrics;
         and the kept traces by (scenario id, label).
     """
-    jobs = evaluation_jobs(agents, controllers)
-    rows: list[dict[str, Any]] = []
-    traces: dict[tuple[str, str], Trace] = {}
-    total = len(scenarios) * len(jobs)
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=total, desc="held-out runs", unit="run")
-    for scenario in scenarios:
-        for label, policy, kwargs in jobs:
-            row, trace = score_scenario(scenario, label, policy, kwargs, label in keep_traces)
-            rows.append(row)
-            if trace is not None:
-                traces[(scenario.id, label)] = trace
-            if bar is not None:
-                bar.update()
-    if bar is not None:
-        bar.close()
-    return rows, traces
-
-
-def evaluation_jobs(
-    agents: Sequence[ResidualPolicy], controllers: Sequence[str] | None = None
-) -> list[tuple[str, Policy, dict[str, Any]]]:
-    """What runs on every scenario: (label, policy, env keywords) of each controller (a zero
-    residual on it) and of each agent."""
     names = list(controller_names() if controllers is None else controllers)
     # Controllers run with the first agent's decision period: the same noise stream, and a
     # zero residual is then exactly the agent's base controller.
@@ -240,24 +213,27 @@ def evaluation_jobs(
         (name, ZeroAction(), {**common, "base_controller": name}) for name in names
     ]
     jobs += [(agent.name, agent, dict(agent.env_kwargs)) for agent in agents]
-    return jobs
+    rows: list[dict[str, Any]] = []
+    traces: dict[tuple[str, str], Trace] = {}
+    total = len(scenarios) * len(jobs)
+    bar = None
+    if progress:
+        from tqdm import tqdm
 
-
-def score_scenario(
-    scenario: HeldOutScenario,
-    label: str,
-    policy: Policy,
-    env_kwargs: Mapping[str, Any],
-    keep_trace: bool = False,
-) -> tuple[dict[str, Any], Trace | None]:
-    """One held-out run: its row (scenario columns and metrics) and its trace if kept."""
-    trace = run_scenario(scenario, policy, env_kwargs)
-    metrics = episode_metrics(trace)
-    row = scenario.row()
-    return (
-        {"scenario": row.pop("scenario"), "controller": label, **row, **metrics},
-        trace if keep_trace else None,
-    )
+        bar = tqdm(total=total, desc="held-out runs", unit="run")
+    for scenario in scenarios:
+        for label, policy, kwargs in jobs:
+            trace = run_scenario(scenario, policy, kwargs)
+            metrics = episode_metrics(trace)
+            row = scenario.row()
+            rows.append({"scenario": row.pop("scenario"), "controller": label, **row, **metrics})
+            if label in keep_traces:
+                traces[(scenario.id, label)] = trace
+            if bar is not None:
+                bar.update()
+    if bar is not None:
+        bar.close()
+    return rows, traces
 
 
 def _mean(values: Sequence[float | None]) -> float:
@@ -525,8 +501,8 @@ def _parser() -> ArgumentParser:
     )
     add_sweep_options(
         parser,
-        f"held-out runs per task on the sweep runner (default: {EVALUATE_TASK_RUNS}); does not "
-        "change the numbers",
+        f"held-out scenarios per task on the sweep runner, each with every controller and agent "
+        f"(default: {EVALUATE_TASK_SCENARIOS}); does not change the numbers",
     )
     return parser
 

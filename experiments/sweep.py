@@ -59,7 +59,7 @@ __all__ = [
     "ADDRESS_VARIABLE",
     "COMPARE_TASK_RUNS",
     "DEFAULT_MAX_RETRIES",
-    "EVALUATE_TASK_RUNS",
+    "EVALUATE_TASK_SCENARIOS",
     "MAP_TASK_CELLS",
     "PROBABILITY_TASK_CELLS",
     "RESULTS_FORMAT",
@@ -101,8 +101,8 @@ PROBABILITY_TASK_CELLS: Final = 2
 """Default cells per probability-map task (each cell is ``draws`` runs)."""
 COMPARE_TASK_RUNS: Final = 1
 """Default runs per comparison task (a run is 150 s of plant time: a task of its own)."""
-EVALUATE_TASK_RUNS: Final = 2
-"""Default runs per held-out evaluation task (100 s each)."""
+EVALUATE_TASK_SCENARIOS: Final = 1
+"""Default held-out scenarios per evaluation task (each run by every controller and agent)."""
 
 
 class TaskResult(NamedTuple):

@@ -6,9 +6,10 @@ map, the comparison and the held-out evaluation, split into tasks.
   of one ``gym.make_vec`` (cell ``i`` of the whole grid, WOB-major, keeps its reset seed
   ``seed + i``), so the map equals the one ``compute_map`` computes over the whole grid.
 * :class:`CompareStudy`: an item is one run of the comparison
-  (:func:`experiments.compare.score_run`); a task is a few runs.
-* :class:`EvaluateStudy`: an item is one held-out run of a controller or an agent
-  (:func:`experiments.evaluate.score_scenario`); a task is a few runs.
+  (:func:`experiments.compare.run_comparison` of one controller, condition and noise); a task
+  is a few runs.
+* :class:`EvaluateStudy`: an item is one held-out scenario run by every controller and agent
+  (:func:`experiments.evaluate.evaluate` of that scenario); a task is a few scenarios.
 
 Traces for the figures travel back in memory (a task's extras), never into the results file:
 after ``--resume`` the runs read from the file have none, and the commands then draw no
@@ -26,11 +27,10 @@ from typing import Any
 import numpy as np
 
 from drill_env.control import controller_names
-from drill_env.evaluation import Policy
 from experiments.stick_slip_map import DEFAULT_WINDOW_S, StickSlipMap, compute_map
 from experiments.sweep import (
     COMPARE_TASK_RUNS,
-    EVALUATE_TASK_RUNS,
+    EVALUATE_TASK_SCENARIOS,
     MAP_TASK_CELLS,
     SweepOutcome,
     Task,
@@ -40,14 +40,14 @@ from experiments.sweep import (
 
 __all__ = [
     "COMPARE_TASK_RUNS",
-    "EVALUATE_TASK_RUNS",
+    "EVALUATE_TASK_SCENARIOS",
     "MAP_TASK_CELLS",
     "CompareStudy",
     "EvaluateStudy",
     "MapStudy",
     "agent_fingerprint",
     "compare_runs_task",
-    "evaluate_runs_task",
+    "evaluate_scenarios_task",
     "map_rows_task",
 ]
 
@@ -262,21 +262,21 @@ def compare_runs_task(
     agent: Any,
     keep_traces: bool,
 ) -> TaskResult:
-    """Runs of the comparison (:func:`experiments.compare.score_run`); records by
+    """Runs of the comparison, each one :func:`experiments.compare.run_comparison` of one
+    controller (or the agent), one condition and one noise level; records by
     :func:`compare_item`, extras: the light traces by ``(label, condition, noise)``."""
-    from experiments.compare import score_run
+    from experiments.compare import run_comparison
 
     records: dict[str, dict[str, Any]] = {}
     traces: dict[tuple[str, str, float], Any] = {}
     for label, is_agent, condition, noise in runs:
-        row, run_traces = score_run(
-            label, is_agent, condition, noise, duration_s=duration_s, seed=seed,
-            reading=reading, gains=gains, agent=agent if is_agent else None,
-            keep_traces=keep_traces,
+        rows, run_traces = run_comparison(
+            [] if is_agent else [label], [condition], [noise], duration_s=duration_s,
+            seed=seed, reading=reading, gains=gains, agent=agent if is_agent else None,
+            keep_traces=keep_traces, progress=False,
         )  # fmt: skip
-        records[compare_item(label, condition, noise)] = row
-        if run_traces is not None:
-            traces[(label, condition, float(noise))] = run_traces
+        records[compare_item(label, condition, noise)] = rows[0]
+        traces.update(run_traces)
     return TaskResult(records, traces or None)
 
 
@@ -287,7 +287,8 @@ def compare_item(label: str, condition: str, noise: float) -> str:
 
 @dataclass(frozen=True)
 class CompareStudy:
-    """The comparison (:func:`experiments.compare.run_comparison`) on the sweep runner.
+    """The comparison (:func:`experiments.compare.run_comparison`) on the sweep runner: an
+    item is one run (controller or agent, condition, noise), a task ``task_runs`` of them.
 
     Attributes: as :func:`experiments.compare.run_comparison`, plus ``task_runs``, the runs
     per task (does not change the numbers).
@@ -325,10 +326,17 @@ class CompareStudy:
         _check_task_size("task_runs", self.task_runs)
 
     def jobs(self) -> list[tuple[str, bool, str, float]]:
-        """The runs in table order (:func:`experiments.compare.comparison_jobs`)."""
-        from experiments.compare import comparison_jobs
-
-        return comparison_jobs(self.controllers, self.conditions, self.noises, self.agent)
+        """The runs in table order, as :func:`experiments.compare.run_comparison` makes them:
+        (label, is the agent, condition, noise)."""
+        labels = [(c, False) for c in self.controllers]
+        if self.agent is not None:
+            labels.append((str(self.agent.name), True))
+        return [
+            (c, a, cond, float(n))
+            for c, a in labels
+            for cond in self.conditions
+            for n in self.noises
+        ]
 
     def spec(self) -> dict[str, Any]:
         """The comparison's settings (not the task size, nor whether traces are kept)."""
@@ -379,37 +387,38 @@ class CompareStudy:
 
 
 # ----------------------------------------------------------------------------- evaluate
-def evaluate_runs_task(
-    runs: Sequence[tuple[Any, str, Policy, dict[str, Any], bool]],
+def evaluate_scenarios_task(
+    scenarios: Sequence[Any],
+    agents: Sequence[Any],
+    controllers: Sequence[str] | None,
+    keep_traces: Sequence[str],
 ) -> TaskResult:
-    """Held-out runs (:func:`experiments.evaluate.score_scenario`) of (scenario, label,
-    policy, env keywords, keep the trace); records by ``{scenario id}/{label}``, extras: the
-    kept traces by ``(scenario id, label)``."""
-    from experiments.evaluate import score_scenario
+    """Held-out scenarios, each run by every controller and agent
+    (:func:`experiments.evaluate.evaluate`); one record per scenario id (``rows``: its rows in
+    table order), extras: the kept traces by ``(scenario id, label)``."""
+    from experiments.evaluate import evaluate
 
-    records: dict[str, dict[str, Any]] = {}
-    traces: dict[tuple[str, str], Any] = {}
-    for scenario, label, policy, kwargs, keep in runs:
-        row, trace = score_scenario(scenario, label, policy, kwargs, keep)
-        records[f"{scenario.id}/{label}"] = row
-        if trace is not None:
-            traces[(scenario.id, label)] = trace
+    rows, traces = evaluate(list(agents), controllers, list(scenarios), keep_traces=keep_traces)
+    records = {s.id: {"rows": [r for r in rows if r["scenario"] == s.id]} for s in scenarios}
     return TaskResult(records, traces or None)
 
 
 @dataclass(frozen=True)
 class EvaluateStudy:
-    """The held-out evaluation (:func:`experiments.evaluate.evaluate`) on the sweep runner.
+    """The held-out evaluation (:func:`experiments.evaluate.evaluate`) on the sweep runner: an
+    item is one held-out scenario run by every controller and agent (the controllers run with
+    the first agent's decision period, so a scenario is the unit), a task ``task_scenarios`` of
+    them.
 
-    Attributes: as :func:`experiments.evaluate.evaluate`, plus ``task_runs``, the runs per
-    task (does not change the numbers).
+    Attributes: as :func:`experiments.evaluate.evaluate`, plus ``task_scenarios`` (does not
+    change the numbers).
     """
 
     agents: tuple[Any, ...]
     controllers: tuple[str, ...] | None
     scenarios: tuple[Any, ...]
     keep_traces: tuple[str, ...] = ()
-    task_runs: int = EVALUATE_TASK_RUNS
+    task_scenarios: int = EVALUATE_TASK_SCENARIOS
     name: str = "evaluate"
 
     def __post_init__(self) -> None:
@@ -417,54 +426,44 @@ class EvaluateStudy:
             _check_controllers(self.controllers)
         if not self.scenarios:
             raise ValueError("scenarios = [] is empty: the evaluation needs at least one")
-        _check_task_size("task_runs", self.task_runs)
-
-    def _runs(self) -> list[tuple[str, Policy, dict[str, Any]]]:
-        from experiments.evaluate import evaluation_jobs
-
-        return evaluation_jobs(list(self.agents), self.controllers)
-
-    def jobs(self) -> list[tuple[Any, str, Policy, dict[str, Any]]]:
-        """(scenario, label, policy, env keywords) in table order."""
-        runs = self._runs()
-        return [(s, label, p, kw) for s in self.scenarios for label, p, kw in runs]
+        _check_task_size("task_scenarios", self.task_scenarios)
 
     def spec(self) -> dict[str, Any]:
         """The evaluation's settings (not the task size, nor which traces are kept)."""
         return {
             "scenarios": [s.id for s in self.scenarios],
-            "labels": [label for label, _, _ in self._runs()],
             "controllers": None if self.controllers is None else list(self.controllers),
             "agents": [agent_fingerprint(a) for a in self.agents],
         }
 
     def items(self) -> list[str]:
-        """One item per (scenario, controller or agent)."""
-        return [f"{s.id}/{label}" for s, label, _, _ in self.jobs()]
+        """One item per held-out scenario."""
+        return [s.id for s in self.scenarios]
 
     def tasks(self, missing: Sequence[str]) -> list[Task]:
-        """``task_runs`` missing runs per task."""
+        """``task_scenarios`` missing scenarios per task."""
         wanted = set(missing)
-        jobs = [j for j in self.jobs() if f"{j[0].id}/{j[1]}" in wanted]
+        chosen = [s for s in self.scenarios if s.id in wanted]
         return [
             Task(
-                key="/".join(f"{s.id}/{label}" for s, label, _, _ in block),
-                function=evaluate_runs_task,
+                key="/".join(s.id for s in block),
+                function=evaluate_scenarios_task,
                 kwargs={
-                    "runs": [
-                        (s, label, p, kw, label in self.keep_traces) for s, label, p, kw in block
-                    ]
+                    "scenarios": block,
+                    "agents": list(self.agents),
+                    "controllers": None if self.controllers is None else list(self.controllers),
+                    "keep_traces": list(self.keep_traces),
                 },
-                items=tuple(f"{s.id}/{label}" for s, label, _, _ in block),
+                items=tuple(s.id for s in block),
             )
-            for block in chunks(jobs, self.task_runs)
+            for block in chunks(chosen, self.task_scenarios)
         ]
 
     def results(
         self, outcome: SweepOutcome
     ) -> tuple[list[dict[str, Any]], dict[tuple[str, str], Any]]:
         """The rows in table order and the kept traces of the runs made this time."""
-        rows = [outcome.records[k] for k in self.items()]
+        rows = [row for k in self.items() for row in outcome.records[k]["rows"]]
         traces: dict[tuple[str, str], Any] = {}
         for extras in outcome.extras.values():
             traces.update(extras)
@@ -559,7 +558,7 @@ def run_evaluate_sweep(
         None if controllers is None else tuple(controllers),
         tuple(scenarios),
         keep_traces=tuple(keep) if not args.no_plots else (),
-        task_runs=args.task_size or EVALUATE_TASK_RUNS,
+        task_scenarios=args.task_size or EVALUATE_TASK_SCENARIOS,
     )
     backend = backend_from_args(args)
     path = results_path_from_args(args, Path(args.out) / "heldout.jsonl")

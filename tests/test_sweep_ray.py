@@ -57,8 +57,10 @@ def test_heldout_evaluation_on_ray_equals_the_serial_one() -> None:
     assert agent is not None
     scenarios = [s for s in HELD_OUT if s.id in ("h01", "h08")]
     rows, _ = evaluate([agent], ["proposed"], scenarios)
-    study = EvaluateStudy((agent,), ("proposed",), tuple(scenarios), task_runs=1)
-    swept, _ = study.results(run_sweep(study, RAY, progress=False))
+    study = EvaluateStudy((agent,), ("proposed",), tuple(scenarios), task_scenarios=1)
+    outcome = run_sweep(study, RAY, progress=False)
+    assert sorted(outcome.ran) == ["h01", "h08"]  # one task per scenario
+    swept, _ = study.results(outcome)
     assert [(r["scenario"], r["controller"]) for r in swept] == [
         ("h01", "proposed"), ("h01", agent.name), ("h08", "proposed"), ("h08", agent.name),
     ]  # fmt: skip
@@ -152,3 +154,24 @@ def test_probability_map_on_ray_equals_the_serial_one() -> None:
     assert swept.severity.tobytes() == serial.severity.tobytes()
     assert swept.stuck_fraction.tobytes() == serial.stuck_fraction.tobytes()
     np.testing.assert_array_equal(swept.probability, serial.probability)
+
+
+def test_compare_and_evaluate_commands_with_workers_write_the_serial_files(tmp_path: Path) -> None:
+    """Through the command line: the same CSV as the serial run, and the figures drawn from
+    the traces that came back from the workers."""
+    base = ["compare", "--controllers", "csmc", "proposed", "--conditions", "nominal"]
+    base += ["--noise", "0.1", "--duration", "2", "--no-agent", "--no-progress"]
+    assert cli_main([*base, "--no-plots", "--out", str(tmp_path / "c1")]) == 0
+    assert cli_main([*base, "--workers", "2", "--out", str(tmp_path / "c2")]) == 0
+    assert (tmp_path / "c2" / "compare.csv").read_text() == (
+        tmp_path / "c1" / "compare.csv"
+    ).read_text()
+    assert (tmp_path / "c2" / "figures" / "speed_torque_proposed.png").is_file()
+    base = ["evaluate", "--controllers", "proposed", "--scenarios", "h01", "h14", "--no-plots"]
+    base += ["--no-progress"]
+    assert cli_main([*base, "--out", str(tmp_path / "e1")]) == 0
+    assert cli_main([*base, "--workers", "2", "--out", str(tmp_path / "e2")]) == 0
+    assert (tmp_path / "e2" / "heldout.csv").read_text() == (
+        tmp_path / "e1" / "heldout.csv"
+    ).read_text()
+    assert len((tmp_path / "e2" / "heldout.jsonl").read_text().splitlines()) == 3  # header, 2 tasks
