@@ -59,7 +59,7 @@ def _usage() -> str:
         "",
         "commands:",
     ]
-    lines += [f"  {name:<15} {text}" for name, (_, text) in SUBCOMMANDS.items()]
+    lines += [f"  {name:<16} {text}" for name, (_, text) in SUBCOMMANDS.items()]
     lines += [
         "",
         "Run 'drill-gym COMMAND --help' for the options of a command.",

@@ -17,7 +17,7 @@ one JSON record per item, and optional extras (traces for figures) that stay in 
   task whose worker process dies is run again (Ray's ``max_retries``). Workers run with
   :data:`WORKER_ENV` (one thread for BLAS, OpenMP and numba: one task per CPU); each worker
   process loads numba's on-disk cache of ``drill_env`` the first time it runs a task (a few
-  seconds; a minute of compilation when the cache is cold).
+  seconds; longer when the cache is cold and numba compiles).
 
 Both paths call the same task functions with the same arguments, and every seed is a pure
 function of the study's spec and an item's index, so the numbers do not depend on the

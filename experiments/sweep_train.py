@@ -7,8 +7,9 @@ project's pickle-free format, ``best/`` and ``model/``). Each validation of a ru
 ``validate_every`` decisions and at the end; the ratios of the validation scenarios to the
 base controller) is reported to Tune: ``iae_ratio``, ``rmsd_ratio``, ``severity_ratio``,
 ``score`` and ``timesteps``. Tune's scheduler stops trials early on the validation IAE ratio
-(``--scheduler asha``, the default: asynchronous successive halving over the validations;
-``median``: the median stopping rule; ``none``).
+(``--scheduler asha``, the default: asynchronous successive halving over the validations,
+reduction factor 2; ``median``: the median stopping rule; ``none``), never before a trial's
+``--grace-period`` validations (default 2).
 
 The trials:
 
@@ -189,6 +190,7 @@ class SweepSpec:
         sampler: ``random`` or ``optuna``.
         scheduler: ``asha``, ``median`` or ``none``.
         settings: Fixed training settings (``SWEEP_DEFAULTS`` and ``--set``).
+        grace_period: Validations every trial reports before the scheduler may stop it.
     """
 
     seeds: tuple[int, ...]
@@ -198,10 +200,13 @@ class SweepSpec:
     sampler: str
     scheduler: str
     settings: Mapping[str, Any]
+    grace_period: int = 2
 
     def __post_init__(self) -> None:
         if not self.seeds:
             raise ValueError("--seeds is empty: give one or more seeds")
+        if self.grace_period < 1:
+            raise ValueError(f"--grace-period {self.grace_period} is out of range: allowed >= 1")
         if self.num_samples < 1:
             raise ValueError(f"--samples {self.num_samples} is out of range: allowed >= 1")
         if self.sampler == "optuna":
@@ -330,12 +335,14 @@ def _scheduler(spec: SweepSpec) -> Any:
 
     if spec.scheduler == "median":
         return MedianStoppingRule(
-            time_attr="training_iteration", grace_period=1, min_samples_required=2
+            time_attr="training_iteration",
+            grace_period=spec.grace_period,
+            min_samples_required=2,
         )
     return ASHAScheduler(
         time_attr="training_iteration",
         max_t=spec.validations() + 1,  # above the last report: a trial that ends is not stopped
-        grace_period=1,
+        grace_period=spec.grace_period,
         reduction_factor=2,
     )
 
@@ -562,6 +569,14 @@ def _parser() -> ArgumentParser:
         help="early stopping on the validation IAE ratio: ASHA, the median stopping rule, none",
     )
     p.add_argument(
+        "--grace-period",
+        type=number_type(1, 10_000, integer=True),
+        default=2,
+        metavar="N",
+        help="validations every trial reports before the scheduler may stop it (the first "
+        "ones of a residual agent are close to the base controller's and say little)",
+    )
+    p.add_argument(
         "--set",
         nargs="+",
         default=[],
@@ -627,6 +642,7 @@ def spec_from_args(parser: ArgumentParser, args: Any) -> SweepSpec:
             sampler=args.sampler,
             scheduler=args.scheduler,
             settings=settings,
+            grace_period=args.grace_period,
         )
     except (ValueError, TypeError) as err:
         parser.error(str(err))

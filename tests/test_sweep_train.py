@@ -38,6 +38,7 @@ TINY = [
         (["--set", "seed=3"], r"unknown training setting 'seed'"),
         (["--grid", "gamma=0.9,0.99", "--set", "gamma=0.9"], r"gamma is set more than once"),
         (["--heldout-scenarios", "h99"], r"argument --heldout-scenarios: unknown scenario 'h99'"),
+        (["--grace-period", "0"], r"argument --grace-period: 0 is out of range"),
     ],
 )  # fmt: skip
 def test_bad_training_sweep_is_one_line_before_anything_starts(
@@ -62,7 +63,9 @@ def test_two_trial_sweep_on_the_local_cluster(
     from agents.policy import load_policy
 
     out = tmp_path / "sweep"
-    assert cli_main(["sweep-train", "--seeds", "1", "2", *TINY, "--out", str(out)]) == 0
+    # No ASHA rung before the end (grace of 4 validations, 3 reported): both trials complete.
+    argv = ["sweep-train", "--seeds", "1", "2", "--grace-period", "4", *TINY]
+    assert cli_main([*argv, "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "sweep-train: 2 trials (2 seeds), 3 validations each, scheduler asha" in printed
     with (out / "trials.csv").open() as f:
