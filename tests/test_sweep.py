@@ -281,3 +281,34 @@ def test_a_sweep_on_ray_without_the_scale_extra_is_one_line(
         "extra has Ray and Optuna: pip install -e '.[scale]')\n"
     )
     assert not tmp_path.exists() or not any(tmp_path.iterdir())  # nothing written
+
+
+def test_ray_is_imported_only_when_a_sweep_runs_on_it() -> None:
+    """The core, the controllers and the agents never import Ray; the studies import it only
+    inside the functions that run on it."""
+    import ast
+    import subprocess
+    import sys
+    import tempfile
+
+    root = Path(__file__).resolve().parents[1]
+    for package in ("drill_env", "baselines", "agents"):
+        for path in (root / package).rglob("*.py"):
+            tree = ast.parse(path.read_text())
+            names = [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]
+            names += [n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)]
+            assert not [n for n in names if n.split(".")[0] in ("ray", "optuna")], path
+    code = (
+        "import sys\n"
+        "import experiments.cli, experiments.sweep, experiments.sweep_studies\n"
+        "import experiments.probability_map, experiments.sweep_train, experiments.stick_slip_map\n"
+        "from experiments.stick_slip_map import main\n"
+        "main(['--wob-n', '1', '--speed-n', '1', '--duration', '1', '--window', '1', '--no-plots',"
+        " '--no-progress', '--out', sys.argv[1], '--resume'])\n"
+        "print(sorted(m for m in ('ray', 'optuna') if m in sys.modules))\n"
+    )
+    with tempfile.TemporaryDirectory() as out:
+        result = subprocess.run(
+            [sys.executable, "-c", code, out], cwd=root, capture_output=True, text=True, check=True
+        )
+    assert result.stdout.strip().splitlines()[-1] == "[]"
