@@ -169,9 +169,13 @@ def run_command(prog: str, main: Callable[[], int], debug: bool) -> int:
     except ModuleNotFoundError as exc:
         if debug:
             raise
+        extra = (
+            "the scale extra has Ray and Optuna: pip install -e '.[scale]'"
+            if str(exc.name).split(".")[0] in ("ray", "optuna")
+            else "the rl extra has torch and stable-baselines3: pip install -e '.[rl]'"
+        )
         print(
-            f"{prog}: error: needs the package {exc.name!r}, which is not installed "
-            "(the rl extra has torch and stable-baselines3: pip install -e '.[rl]')",
+            f"{prog}: error: needs the package {exc.name!r}, which is not installed ({extra})",
             file=sys.stderr,
         )
         return USAGE_ERROR

@@ -1,7 +1,8 @@
 """``drill-gym``: the command line of drill-string-gym.
 
 Subcommands, each a module with ``main(argv)`` imported only when used (so the core needs no
-torch): ``compare``, ``map``, ``train``, ``evaluate``, ``convert``, ``waves``. Every user error ends with
+torch): ``compare``, ``map``, ``probability-map``, ``train``, ``sweep-train``, ``evaluate``,
+``convert``, ``waves``. Every user error ends with
 one line on standard error and exit code 2 (:mod:`experiments.arguments`); ``DRILL_GYM_DEBUG=1``
 shows the traceback instead.
 """
@@ -26,7 +27,15 @@ SUBCOMMANDS = {
         "experiments.stick_slip_map",
         "stick-slip map of controllers over weight on bit x reference speed",
     ),
+    "probability-map": (
+        "experiments.probability_map",
+        "probability of stick-slip over WOB (or depth) x reference speed under uncertainty",
+    ),
     "train": ("experiments.train", "train the residual PPO agent (needs the rl extra)"),
+    "sweep-train": (
+        "experiments.sweep_train",
+        "multi-seed training and hyperparameter search on Ray Tune (rl and scale extras)",
+    ),
     "evaluate": (
         "experiments.evaluate",
         "score trained agents and every controller on the held-out scenarios",
@@ -54,7 +63,7 @@ def _usage() -> str:
         "",
         "commands:",
     ]
-    lines += [f"  {name:<9} {text}" for name, (_, text) in SUBCOMMANDS.items()]
+    lines += [f"  {name:<16} {text}" for name, (_, text) in SUBCOMMANDS.items()]
     lines += [
         "",
         "Run 'drill-gym COMMAND --help' for the options of a command.",

@@ -65,6 +65,7 @@ from experiments.field import (
     run_label,
     run_on,
 )
+from experiments.sweep import COMPARE_TASK_RUNS, add_sweep_options, sweep_requested
 from experiments.tables import Column, write_csv, write_json
 from experiments.tables import markdown_table as _markdown
 
@@ -830,6 +831,10 @@ def _parser() -> ArgumentParser:
     p.add_argument("--no-plots", action="store_true", help="write no figures")
     p.add_argument("--no-agent", action="store_true", help="leave out the shipped residual agent")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_sweep_options(
+        p,
+        f"runs per task on the sweep runner (default: {COMPARE_TASK_RUNS}); does not change the numbers",
+    )
     return p
 
 
@@ -870,21 +875,43 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
     )
     agent = None if args.no_agent else load_agent(agent_loader)
     start = time.perf_counter()
-    rows, traces = run_comparison(
-        list(dict.fromkeys(controllers)),
-        conditions,
-        noises,
-        duration_s=args.duration,
-        seed=args.seed,
-        reading=args.reading,
-        gains=args.gains,
-        agent=agent,
-        keep_traces=not args.no_plots,
-        progress=not args.no_progress,
-        env_id=args.env,
-        cases=cases,
-        observations=list(dict.fromkeys(args.observations)),
-    )
+    figures = not args.no_plots
+    if sweep_requested(args):  # on the sweep runner: Ray, a results file, a resume
+        if field:
+            parser.fail(
+                "--workers",
+                f"the sweep runner runs the comparison on {PAPER_ENV}: run the "
+                f"{args.env} comparison without --workers, --ray, --address or --resume",
+            )
+        from experiments.sweep_studies import run_compare_sweep
+
+        rows, traces, figures = run_compare_sweep(
+            args,
+            list(dict.fromkeys(controllers)),
+            conditions,
+            noises,
+            agent,
+            keep_traces=not args.no_plots,
+        )
+        if not args.no_plots and not figures:
+            print("no figures: runs read from the results file keep no traces (rerun without "
+                  "--resume for the figures)")  # fmt: skip
+    else:
+        rows, traces = run_comparison(
+            list(dict.fromkeys(controllers)),
+            conditions,
+            noises,
+            duration_s=args.duration,
+            seed=args.seed,
+            reading=args.reading,
+            gains=args.gains,
+            agent=agent,
+            keep_traces=not args.no_plots,
+            progress=not args.no_progress,
+            env_id=args.env,
+            cases=cases,
+            observations=list(dict.fromkeys(args.observations)),
+        )
     simulated = time.perf_counter() - start
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
@@ -908,7 +935,7 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
         write_csv(rows, out / "compare.csv", keys),
         write_json([{k: r[k] for k in keys} for r in rows], out / "compare.json"),
     ]
-    if not args.no_plots and rows:
+    if not args.no_plots and figures and rows:
         chosen, focus = (
             figure_cases([c.field for c in cases if c.field is not None]) if field else (None, None)
         )

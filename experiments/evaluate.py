@@ -71,6 +71,7 @@ from experiments.field import (
 from experiments.field import (
     prone as field_prone,
 )
+from experiments.sweep import EVALUATE_TASK_SCENARIOS, add_sweep_options, sweep_requested
 from experiments.tables import write_csv, write_json
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -635,6 +636,11 @@ def _parser() -> ArgumentParser:
         help=f"also load Stable-Baselines3 model.zip files (older models): {PICKLE_RISK}; "
         "only for files you made yourself or got from a source you trust",
     )
+    add_sweep_options(
+        parser,
+        f"held-out scenarios per task on the sweep runner, each with every controller and agent "
+        f"(default: {EVALUATE_TASK_SCENARIOS}); does not change the numbers",
+    )
     return parser
 
 
@@ -697,20 +703,35 @@ def main(argv: Sequence[str] | None = None) -> int:
             )
         ) or [base_label]
     keep = [*bases, *labels]
-    rows, traces = evaluate(
-        agents,
-        controllers,
-        scenarios,
-        keep_traces=keep,
-        progress=not args.no_progress,
-        env_id=args.env,
-        observations=list(dict.fromkeys(args.observations)),
-    )
+    figures = not args.no_plots
+    if sweep_requested(args):  # on the sweep runner: Ray, a results file, a resume
+        if field:
+            parser.fail(
+                "--workers",
+                f"the sweep runner runs the held-out evaluation on {PAPER_ENV}: run the "
+                f"{args.env} evaluation without --workers, --ray, --address or --resume",
+            )
+        from experiments.sweep_studies import run_evaluate_sweep
+
+        rows, traces, figures = run_evaluate_sweep(args, agents, controllers, scenarios, keep)
+        if not args.no_plots and not figures:
+            print("no figures: runs read from the results file keep no traces (rerun without "
+                  "--resume for the figures)")  # fmt: skip
+    else:
+        rows, traces = evaluate(
+            agents,
+            controllers,
+            scenarios,
+            keep_traces=keep,
+            progress=not args.no_progress,
+            env_id=args.env,
+            observations=list(dict.fromkeys(args.observations)),
+        )
     summary = summarize(rows, base_label)
     summary["seconds"] = round(time.perf_counter() - t0, 1)
     summary["models"] = {a.name: str(p) for a, p in zip(agents, paths, strict=True)}
     written = write_outputs(rows, summary, out)
-    if not args.no_plots:
+    if not args.no_plots and figures:
         written += write_figures(rows, traces, keep, out / "figures")
     total = time.perf_counter() - t0
     print(markdown_table(summary))

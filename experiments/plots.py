@@ -42,6 +42,7 @@ from matplotlib.text import Text
 from drill_env.evaluation import Trace
 
 if TYPE_CHECKING:  # pragma: no cover
+    from experiments.probability_map import ProbabilityMap
     from experiments.stick_slip_map import StickSlipMap
     from experiments.waves import StringHistory
 
@@ -62,6 +63,7 @@ __all__ = [
     "metric_bars_figure",
     "panels_figure",
     "plot_learning_curves",
+    "probability_figure",
     "read_csv_columns",
     "save_figure",
     "space_time_figure",
@@ -1360,3 +1362,63 @@ def learning_curves_figure(runs: Mapping[str, str | Path], title: str = "") -> F
 def plot_learning_curves(runs: Mapping[str, str | Path], path: str | Path, title: str = "") -> Path:
     """:func:`learning_curves_figure` written as PNG to ``path``; returns the path."""
     return save_figure(learning_curves_figure(runs, title), path)
+
+
+# ------------------------------------------------------------- probability of stick-slip
+PROBABILITY_LEVELS: Final = (0.1, 0.5, 0.9)
+"""Contour lines of the probability maps."""
+PROBABILITY_LABEL: Final = "probability of stick-slip (share of the draws)"
+"""Colour-bar label of the probability maps."""
+_ROW_LABELS: Final = {"wob": ("WOB (kN)", 1e-3), "depth": ("measured depth (m)", 1.0)}
+
+
+def probability_figure(result: ProbabilityMap) -> Figure:
+    """The probability of stick-slip of one controller as a heatmap over (WOB or depth) x
+    reference speed, with contour lines at :data:`PROBABILITY_LEVELS` (labelled) and a
+    labelled colour bar."""
+    fig = _figure(8.0, 5.6)
+    ax = fig.subplots()
+    label, scale = _ROW_LABELS[result.row_axis]
+    probability = result.probability
+    mesh = ax.pcolormesh(
+        _edges(result.reference_speed_rad_s),
+        _edges(result.rows) * scale,
+        probability,
+        cmap="YlOrRd",
+        norm=Normalize(0.0, 1.0),
+        shading="flat",
+    )
+    fig.colorbar(mesh, ax=ax, label=PROBABILITY_LABEL)
+    drawn = [v for v in PROBABILITY_LEVELS if probability.min() < v < probability.max()]
+    if drawn and min(probability.shape) > 1:
+        styles = {0.1: ":", 0.5: "-", 0.9: "--"}
+        lines = ax.contour(
+            result.reference_speed_rad_s,
+            result.rows * scale,
+            probability,
+            levels=drawn,
+            colors="black",
+            linestyles=[styles.get(v, "-") for v in drawn],
+            linewidths=1.6,
+        )
+        ax.clabel(lines, fmt="%.1f", fontsize=9, inline=True)
+        handles = [
+            Line2D([], [], color="black", ls=styles.get(v, "-"), lw=1.6, label=f"p = {v:g}")
+            for v in drawn
+        ]
+        fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=10)
+    ax.set_xlabel("reference bit speed (rad/s)")
+    ax.set_ylabel(label)
+    ax.set_title(f"{result.controller} on {result.env_id}")
+    fixed = ""
+    if result.wob_n is not None:
+        fixed = f", WOB {result.wob_n / 1e3:g} kN"
+    elif result.depth_m is not None:
+        fixed = f", measured depth {result.depth_m:g} m"
+    noise = "no noise" if result.noise_std_rad_s == 0 else f"noise {result.noise_std_rad_s:g} rad/s"
+    _suptitle(
+        fig,
+        f"plant {result.parameters}{fixed}; {result.draws} draws per cell ({result.uncertainty}); "
+        f"runs of {result.duration_s:g} s from rest, last {result.window_s:g} s analysed, {noise}",
+    )
+    return fig

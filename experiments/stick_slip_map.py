@@ -32,7 +32,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final, NamedTuple
@@ -60,6 +60,7 @@ from experiments.field import (
     observations_of,
 )
 from experiments.plots import map_figure, maps_figure, save_figure
+from experiments.sweep import MAP_TASK_CELLS, add_sweep_options, sweep_requested
 from experiments.tables import write_csv
 
 __all__ = [
@@ -68,6 +69,7 @@ __all__ = [
     "compute_map",
     "grid_values",
     "main",
+    "stick_slip",
     "write_map_csv",
 ]
 
@@ -83,6 +85,29 @@ MAX_CHUNK_STEPS: Final = 1000
 """Plant steps per compiled call (1 s): bounds the memory of the per-step records."""
 UNSTABLE_SEVERITY: Final = 0.5
 """A cell counts as stick-slipping when its severity exceeds this or its bit ever sticks."""
+
+
+def stick_slip(
+    severity: npt.ArrayLike,
+    stuck_fraction: npt.ArrayLike,
+    severity_limit: float = UNSTABLE_SEVERITY,
+) -> npt.NDArray[np.bool_]:
+    """The stick-slip criterion of the maps: the bit stuck at some point of the window or the
+    severity is above ``severity_limit``; a diverged run (NaN severity) counts as stick-slip.
+
+    Args:
+        severity: Stick-slip severity of each run over its window (NaN: diverged), any shape.
+        stuck_fraction: Share of the window with the bit stuck, the same shape.
+        severity_limit: Severity above which a run is in stick-slip.
+
+    Returns:
+        Whether each run is in stick-slip, the same shape.
+    """
+    sev = np.asarray(severity, dtype=np.float64)
+    stuck = np.asarray(stuck_fraction, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        result: npt.NDArray[np.bool_] = (stuck > 0.0) | (sev > severity_limit) | np.isnan(sev)
+    return result
 
 
 @dataclass(frozen=True)
@@ -150,10 +175,8 @@ class StickSlipMap:
         return np.isnan(self.severity)
 
     def unstable(self, severity_limit: float = UNSTABLE_SEVERITY) -> npt.NDArray[np.bool_]:
-        """Cells in stick-slip: the bit stuck at some point of the window or the severity is
-        above ``severity_limit`` (diverged cells count as unstable), (n_wob, n_speed)."""
-        with np.errstate(invalid="ignore"):
-            return (self.stuck_fraction > 0.0) | (self.severity > severity_limit) | self.diverged
+        """Cells in stick-slip (:func:`stick_slip`), (n_wob, n_speed)."""
+        return stick_slip(self.severity, self.stuck_fraction, severity_limit)
 
     def rows(self) -> list[tuple[float, float, float, float]]:
         """One ``CSV_COLUMNS`` tuple per cell, WOB-major."""
@@ -534,6 +557,11 @@ def _parser() -> ArgumentParser:
     )
     parser.add_argument("--no-plots", action="store_true", help="write the CSV files only")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_sweep_options(
+        parser,
+        f"map cells per task on the sweep runner, rounded down to whole WOB rows (default: "
+        f"{MAP_TASK_CELLS}); does not change the numbers",
+    )
     return parser
 
 
@@ -586,22 +614,41 @@ def main(argv: Sequence[str] | None = None) -> int:
             runs += [(name, obs, depth) for depth in depths for obs in modes]
     else:
         runs = [(name, None, None) for name in dict.fromkeys(args.controllers)]
-    results: dict[float | None, list[StickSlipMap]] = {}
-    for name, observation, depth in runs:
-        result = compute_map(
-            name,
-            wobs,
-            speeds,
-            duration_s=args.duration,
-            window_s=args.window,
-            noise_std_rad_s=args.noise,
-            seed=args.seed,
-            parameters=args.parameters,
-            progress=not args.no_progress,
-            env_id=args.env,
-            observation=observation,
-            measured_depth_m=depth,
+    computed: Iterable[tuple[StickSlipMap, float | None]]
+    if sweep_requested(args):  # on the sweep runner: Ray, a results file, a resume
+        if field:
+            parser.fail(
+                "--workers",
+                f"the sweep runner runs the maps of {PAPER_ENV}: run the {args.env} maps "
+                "without --workers, --ray, --address or --resume (or drill-gym probability-map "
+                "--rows depth for maps over depth on the sweep runner)",
+            )
+        from experiments.sweep_studies import run_map_sweep
+
+        computed = ((m, None) for m in run_map_sweep(args, [r[0] for r in runs], wobs, speeds))
+    else:
+        computed = (
+            (
+                compute_map(
+                    name,
+                    wobs,
+                    speeds,
+                    duration_s=args.duration,
+                    window_s=args.window,
+                    noise_std_rad_s=args.noise,
+                    seed=args.seed,
+                    parameters=args.parameters,
+                    progress=not args.no_progress,
+                    env_id=args.env,
+                    observation=observation,
+                    measured_depth_m=depth,
+                ),
+                depth,
+            )
+            for name, observation, depth in runs
         )
+    results: dict[float | None, list[StickSlipMap]] = {}
+    for result, depth in computed:
         stem = result.file_stem()
         written = [write_map_csv(result, args.out / f"{stem}.csv")]
         if not args.no_plots:

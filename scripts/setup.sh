@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# Create .venv and install drill-string-gym with its [rl,dev,video] extras into it. Idempotent: the
-# installs are skipped while .venv/.installed-<sha256 of pyproject.toml> exists and the three
-# packages are importable from it. Works from any working directory.
+# Create .venv and install drill-string-gym with its [rl,dev,video,scale] extras into it.
+# Idempotent: the installs are skipped while .venv/.installed-<sha256 of pyproject.toml> exists and
+# the three packages are importable from it. Works from any working directory. The scale extra
+# (Ray, Optuna) is for the sweeps; its tests run in the default suite.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
@@ -29,7 +30,7 @@ if ! installed; then
     # torch first, pinned: this version is a local CPU wheel here; any other torch request
     # would download a multi-GB CUDA build. The [rl] extra's range is then already satisfied.
     "${pip[@]}" install "torch==2.13.0"
-    "${pip[@]}" install -e ".[rl,dev,video]"
+    "${pip[@]}" install -e ".[rl,dev,video,scale]"
     rm -f .venv/.installed-*
     touch "${stamp}"
 fi

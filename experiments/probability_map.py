@@ -1,0 +1,766 @@
+"""``drill-gym probability-map``: the probability of stick-slip over WOB x reference speed (or
+measured depth x reference speed) under parametric uncertainty.
+
+A stick-slip map (``drill-gym map``) runs each cell once, on the nominal plant. A driller does
+not know the plant that well: the damping of the mud, the friction at the bit and the
+stiffness of the pipe are uncertain. Here every cell runs ``draws`` times from rest, each run
+on a plant drawn from the env's own randomisation:
+
+* ``DrillString-v0``: the uncertainty Deltas (relative increases of ``c_pi``, ``k_pi`` and
+  ``c_dt``) of :class:`drill_env.scenarios.Randomization`, uniform over ``delta_range``
+  (0 to 0.75 by default, the span of the paper's Table 3);
+* ``DrillStringField-v0``: the friction and damping of
+  :class:`drill_env.scenarios.FieldRandomization` (static friction ``mu_a`` 0.6-1.0, the ratio
+  ``mu_0 / mu_a`` 0.5-0.8, the Stribeck rate ``xi`` 0.3-1.0 s/rad, the mud damping factor
+  0.5-2), at the cell's measured depth.
+
+WOB and reference are constant, as in the map (the randomisation's WOB and reference ranges
+are set to the cell's values and its WOB step to none, so only the plant is drawn). A draw is
+in stick-slip by the map's criterion (:func:`experiments.stick_slip_map.stick_slip`: the bit
+sticks in the analysis window, or its severity exceeds 0.5, or the run diverged); a cell's
+probability is the share of its draws in stick-slip.
+
+Draw ``k`` of every cell uses the reset seed ``seed + k``: every cell sees the same ``draws``
+plants (common random numbers), so neighbouring cells differ by their WOB, speed or depth and
+not by their luck, and the numbers depend only on the settings, never on how the cells are
+batched or scheduled.
+
+The cells run on the sweep runner (:mod:`experiments.sweep`): a task is ``--task-size`` cells,
+all their draws the strings of one ``gym.make_vec`` (one compiled call per step); serially,
+or on Ray with ``--workers N``.
+
+Rows: ``--rows wob`` (default) maps WOB x reference speed (on the field string at the fixed
+``--depth``, by default the preset's); ``--rows depth`` (``DrillStringField-v0`` only) maps
+measured depth x reference speed at the fixed ``--wob``: how the risk moves as the well gets
+deeper and the pipe softer.
+
+Outputs (``--out``): per controller ``stick_slip_probability_<name>.csv`` (columns: the row
+value ``wob_n`` or ``measured_depth_m``, ``reference_speed_rad_s``, ``draws``,
+``stick_slip_probability``, ``mean_severity``, ``mean_stuck_fraction``, ``diverged``) and
+``stick_slip_probability_<name>.png`` (heatmap, contours at 0.1, 0.5 and 0.9).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Final
+
+import gymnasium as gym
+import numpy as np
+import numpy.typing as npt
+
+import baselines  # noqa: F401  (registers the built-in controllers, in their order)
+import drill_env
+from drill_env.control import controller_names
+from drill_env.distributed import DISTRIBUTED_PRESETS, resolve_distributed_parameters
+from drill_env.evaluation import reset_each
+from drill_env.limits import MAX_REFERENCE_RAD_S, MAX_WOB_N
+from drill_env.metrics import WindowStatistics
+from drill_env.parameters import PLANT_DT_S, PRESETS
+from drill_env.scenarios import FieldRandomization, Randomization
+from experiments.arguments import ArgumentParser, names_type, number_type
+from experiments.stick_slip_map import DEFAULT_WINDOW_S, grid_values, stick_slip
+from experiments.sweep import (
+    PROBABILITY_TASK_CELLS,
+    SweepOutcome,
+    Task,
+    TaskResult,
+    add_sweep_options,
+    backend_from_args,
+    chunks,
+    results_path_from_args,
+    run_sweep,
+)
+from experiments.tables import write_csv
+
+__all__ = [
+    "CSV_COLUMNS",
+    "ENVS",
+    "ProbabilityMap",
+    "ProbabilityStudy",
+    "main",
+    "probability_cells_task",
+    "write_probability_csv",
+]
+
+ENVS: Final = (drill_env.ENV_ID, drill_env.FIELD_ENV_ID)
+"""The envs a probability map runs on."""
+ROW_AXES: Final = ("wob", "depth")
+"""What the rows of the map are: WOB, or measured depth (the field string)."""
+ROW_KEYS: Final = {"wob": "wob_n", "depth": "measured_depth_m"}
+"""CSV column of the row value."""
+CSV_TAIL: Final = (
+    "reference_speed_rad_s",
+    "draws",
+    "stick_slip_probability",
+    "mean_severity",
+    "mean_stuck_fraction",
+    "diverged",
+)
+CSV_COLUMNS: Final = {axis: (key, *CSV_TAIL) for axis, key in ROW_KEYS.items()}
+"""Columns of the CSV by row axis, one row per cell."""
+DEFAULT_DELTA_RANGE: Final = Randomization().delta_range
+"""Range of each uncertainty Delta on ``DrillString-v0`` (the env's default)."""
+MAX_CHUNK_STEPS: Final = 1000
+"""Plant steps per compiled call (1 s)."""
+
+
+def _chunk_steps(total_steps: int) -> int:
+    """The largest divisor of ``total_steps`` up to ``MAX_CHUNK_STEPS``."""
+    return next(d for d in range(min(MAX_CHUNK_STEPS, total_steps), 0, -1) if total_steps % d == 0)
+
+
+def _randomization(
+    env_id: str, wob_n: float, speed: float, depth_m: float | None, delta_range: Sequence[float]
+) -> Randomization | FieldRandomization:
+    """The env's randomisation with WOB and reference fixed to a cell's, no WOB step, and (on
+    the field string) the depth fixed: only the plant is drawn."""
+    if env_id == drill_env.FIELD_ENV_ID:
+        assert depth_m is not None
+        return FieldRandomization(
+            wob_range_n=(wob_n, wob_n),
+            wob_step_probability=0.0,
+            reference_range_rad_s=(speed, speed),
+            measured_depth_range_m=(depth_m, depth_m),
+        )
+    return Randomization(
+        wob_range_n=(wob_n, wob_n),
+        wob_step_probability=0.0,
+        reference_range_rad_s=(speed, speed),
+        delta_range=(float(delta_range[0]), float(delta_range[1])),
+    )
+
+
+def probability_cells_task(
+    env_id: str,
+    controller: str,
+    cells: Sequence[tuple[str, float, float, float | None]],
+    draws: int,
+    duration_s: float,
+    window_s: float,
+    noise_std_rad_s: float,
+    seed: int,
+    parameters: str,
+    delta_range: Sequence[float],
+    depth_span_m: Sequence[float] | None,
+) -> TaskResult:
+    """Every draw of the ``cells`` (item key, WOB in N, reference in rad/s, depth in m or
+    ``None``) as the strings of one vector env; draw ``k`` reset with ``seed + k``.
+
+    Records per cell: ``severity`` and ``stuck_fraction`` of each draw over the last
+    ``window_s`` (``None``: diverged).
+    """
+    total_steps = round(duration_s / PLANT_DT_S)
+    chunk = _chunk_steps(total_steps)
+    n = len(cells) * draws
+    options = [
+        {"randomization": _randomization(env_id, wob, speed, depth, delta_range)}
+        for _, wob, speed, depth in cells
+        for _ in range(draws)
+    ]
+    first = cells[0]
+    # The make-time randomisation spans every depth of the sweep (the engine sizes its chain
+    # for the deepest string), the same for every task.
+    depth0 = None if depth_span_m is None else float(depth_span_m[0])
+    make_randomization = _randomization(env_id, first[1], first[2], depth0, delta_range)
+    if isinstance(make_randomization, FieldRandomization) and depth_span_m is not None:
+        make_randomization = FieldRandomization(
+            wob_range_n=make_randomization.wob_range_n,
+            wob_step_probability=0.0,
+            reference_range_rad_s=make_randomization.reference_range_rad_s,
+            measured_depth_range_m=(float(depth_span_m[0]), float(depth_span_m[1])),
+        )
+    venv = gym.make_vec(
+        env_id,
+        num_envs=n,
+        parameters=parameters,
+        randomize=True,
+        randomization=make_randomization,
+        base_controller=controller,
+        control_dt_s=chunk * PLANT_DT_S,
+        episode_s=total_steps * PLANT_DT_S,
+        noise_std_rad_s=float(noise_std_rad_s),
+    )
+    try:
+        reset_each(venv, [seed + k for _ in cells for k in range(draws)], options)
+        window_start = total_steps - round(window_s / PLANT_DT_S)
+        stats = WindowStatistics(n)
+        diverged = np.zeros(n, dtype=bool)
+        actions = np.zeros((n, 1), dtype=np.float32)
+        for k in range(total_steps // chunk):
+            _, _, terminated, _, _ = venv.step(actions)
+            diverged |= terminated
+            start = max(window_start - k * chunk, 0)
+            if start >= chunk:
+                continue
+            samples = venv.unwrapped.plant_samples()  # type: ignore[attr-defined]
+            stats.add(samples.bit_speed_rad_s[:, start:], samples.bit_stuck[:, start:])
+    finally:
+        venv.close()
+    severity = stats.severity()
+    stuck = stats.stuck_fraction()
+    severity[diverged] = np.nan
+    stuck[diverged] = np.nan
+    records = {
+        key: {
+            "severity": severity[c * draws : (c + 1) * draws].tolist(),
+            "stuck_fraction": stuck[c * draws : (c + 1) * draws].tolist(),
+        }
+        for c, (key, _, _, _) in enumerate(cells)
+    }
+    return TaskResult(records)
+
+
+@dataclass(frozen=True)
+class ProbabilityMap:
+    """The probability of stick-slip of one controller over a grid.
+
+    Attributes:
+        controller: Registered controller name.
+        env_id: ``DrillString-v0`` or ``DrillStringField-v0``.
+        row_axis: ``wob`` (rows are WOB, N) or ``depth`` (measured depth, m).
+        rows: Value of each grid row, (n_rows,): N or m.
+        reference_speed_rad_s: Reference bit speed of each column, (n_speed,), rad/s.
+        severity: Severity of every draw, (n_rows, n_speed, draws); NaN: diverged.
+        stuck_fraction: Stuck fraction of every draw, (n_rows, n_speed, draws).
+        wob_n: The fixed WOB with ``depth`` rows, N (``None`` with ``wob`` rows).
+        depth_m: The fixed measured depth with ``wob`` rows on the field string, m (``None``
+            otherwise).
+        draws: Parameter draws per cell.
+        uncertainty: What is drawn, in words.
+        duration_s, window_s, noise_std_rad_s, seed, parameters: The settings.
+        wall_time_s: Wall-clock time of the sweep, s.
+    """
+
+    controller: str
+    env_id: str
+    row_axis: str
+    rows: npt.NDArray[np.float64]
+    reference_speed_rad_s: npt.NDArray[np.float64]
+    severity: npt.NDArray[np.float64]
+    stuck_fraction: npt.NDArray[np.float64]
+    wob_n: float | None
+    depth_m: float | None
+    draws: int
+    uncertainty: str
+    duration_s: float
+    window_s: float
+    noise_std_rad_s: float
+    seed: int
+    parameters: str
+    wall_time_s: float
+
+    @property
+    def unstable(self) -> npt.NDArray[np.bool_]:
+        """Whether each draw is in stick-slip (:func:`stick_slip`), (n_rows, n_speed, draws)."""
+        return stick_slip(self.severity, self.stuck_fraction)
+
+    @property
+    def probability(self) -> npt.NDArray[np.float64]:
+        """Share of the draws in stick-slip per cell, (n_rows, n_speed)."""
+        result: npt.NDArray[np.float64] = self.unstable.mean(axis=2)
+        return result
+
+    def table(self) -> list[dict[str, Any]]:
+        """One CSV row per cell (``CSV_COLUMNS[row_axis]``), row-major."""
+        probability = self.probability
+        out = []
+        for i, row in enumerate(self.rows):
+            for j, speed in enumerate(self.reference_speed_rad_s):
+                sev = self.severity[i, j]
+                ok = ~np.isnan(sev)
+                out.append(
+                    {
+                        ROW_KEYS[self.row_axis]: f"{row:.6g}",
+                        "reference_speed_rad_s": f"{speed:.6g}",
+                        "draws": self.draws,
+                        "stick_slip_probability": f"{probability[i, j]:.6g}",
+                        "mean_severity": f"{sev[ok].mean():.6g}" if ok.any() else None,
+                        "mean_stuck_fraction": (
+                            f"{self.stuck_fraction[i, j][ok].mean():.6g}" if ok.any() else None
+                        ),
+                        "diverged": int((~ok).sum()),
+                    }
+                )
+        return out
+
+
+def write_probability_csv(result: ProbabilityMap, path: str | Path) -> Path:
+    """Write the map as CSV (``CSV_COLUMNS[result.row_axis]``, one row per cell)."""
+    return write_csv(result.table(), Path(path), CSV_COLUMNS[result.row_axis])
+
+
+def _check(condition: bool, message: str) -> None:
+    if not condition:
+        raise ValueError(message)
+
+
+@dataclass(frozen=True)
+class ProbabilityStudy:
+    """Probability maps of ``controllers`` over one grid on the sweep runner.
+
+    Attributes:
+        env_id: ``DrillString-v0`` or ``DrillStringField-v0``.
+        controllers: Registered controller names.
+        row_axis: ``wob`` or ``depth`` (``DrillStringField-v0`` only).
+        rows: WOB of each row (N) or measured depth (m).
+        reference_speed_rad_s: Reference bit speed of each column, rad/s.
+        draws: Parameter draws per cell (>= 1).
+        wob_n: Fixed WOB with depth rows, N.
+        depth_m: Fixed measured depth with WOB rows on the field string, m (``None``: the
+            preset's).
+        duration_s: Length of each run from rest, s (a multiple of 0.1 s).
+        window_s: Analysis window at the end of each run, s.
+        noise_std_rad_s: Measurement noise on the speeds, rad/s.
+        seed: Draw ``k`` of every cell is reset with ``seed + k``.
+        parameters: Plant preset (``None``: the env's default).
+        delta_range: Range of each uncertainty Delta (``DrillString-v0``).
+        task_cells: Cells per task (does not change the numbers).
+    """
+
+    env_id: str
+    controllers: tuple[str, ...]
+    row_axis: str
+    rows: tuple[float, ...]
+    reference_speed_rad_s: tuple[float, ...]
+    draws: int = 32
+    wob_n: float = 100e3
+    depth_m: float | None = None
+    duration_s: float = 100.0
+    window_s: float = DEFAULT_WINDOW_S
+    noise_std_rad_s: float = 0.0
+    seed: int = 0
+    parameters: str | None = None
+    delta_range: tuple[float, float] = DEFAULT_DELTA_RANGE
+    task_cells: int = PROBABILITY_TASK_CELLS
+    name: str = "probability-map"
+
+    def __post_init__(self) -> None:
+        _check(self.env_id in ENVS, f"unknown env {self.env_id!r}: allowed {', '.join(ENVS)}")
+        valid = controller_names()
+        _check(bool(self.controllers), "controllers = [] is empty: allowed one or more names")
+        for name in self.controllers:
+            _check(
+                name in valid, f"unknown controller {name!r}: valid names are {', '.join(valid)}"
+            )
+        _check(self.row_axis in ROW_AXES, f"rows = {self.row_axis!r}: allowed wob, depth")
+        _check(
+            self.row_axis == "wob" or self.field,
+            f"rows = 'depth' needs the distributed string: allowed with {drill_env.FIELD_ENV_ID}",
+        )
+        for label, values in (
+            ("rows", self.rows),
+            ("reference_speed_rad_s", self.reference_speed_rad_s),
+        ):
+            _check(bool(values), f"{label} = [] is empty: the grid needs at least one value")
+        ok = isinstance(self.draws, int) and not isinstance(self.draws, bool) and self.draws >= 1
+        _check(ok, f"draws = {self.draws!r} is out of range: allowed an integer >= 1")
+        ok = isinstance(self.task_cells, int) and self.task_cells >= 1
+        _check(ok, f"task_cells = {self.task_cells!r} is out of range: allowed an integer >= 1")
+        steps = self.duration_s / (100 * PLANT_DT_S)
+        _check(
+            math.isfinite(self.duration_s)
+            and 0 < self.duration_s <= 1e4
+            and abs(steps - round(steps)) < 1e-6,
+            f"duration_s = {self.duration_s!r} is out of range: allowed (0, 10000], a multiple of 0.1 s",
+        )
+        _check(
+            math.isfinite(self.window_s) and 0 < self.window_s <= self.duration_s,
+            f"window_s = {self.window_s!r} is out of range: allowed (0, duration_s = {self.duration_s:g}]",
+        )
+        _check(
+            math.isfinite(self.noise_std_rad_s) and 0 <= self.noise_std_rad_s <= 10,
+            f"noise_std_rad_s = {self.noise_std_rad_s!r} is out of range: allowed [0, 10]",
+        )
+        presets = DISTRIBUTED_PRESETS if self.field else PRESETS
+        _check(
+            self.parameters is None or self.parameters in presets,
+            f"parameters = {self.parameters!r} is not a preset of {self.env_id}: allowed "
+            f"{', '.join(sorted(presets))}",
+        )
+        # The randomisations validate the values of every cell (one line naming the field).
+        for row in self.rows:
+            for speed in self.reference_speed_rad_s:
+                _randomization(self.env_id, *self._cell(row, speed), self.delta_range)
+
+    @property
+    def field(self) -> bool:
+        """Whether the map is of the distributed string."""
+        return self.env_id == drill_env.FIELD_ENV_ID
+
+    @property
+    def preset(self) -> str:
+        """The plant preset used."""
+        if self.parameters is not None:
+            return self.parameters
+        return "field_2500m" if self.field else "zribi2024"
+
+    @property
+    def fixed_depth_m(self) -> float | None:
+        """The measured depth of WOB rows on the field string, m (``None``: not fixed)."""
+        if not self.field or self.row_axis == "depth":
+            return None
+        if self.depth_m is not None:
+            return float(self.depth_m)
+        return float(resolve_distributed_parameters(self.preset).measured_depth_m)
+
+    def _cell(self, row: float, speed: float) -> tuple[float, float, float | None]:
+        """(WOB in N, reference in rad/s, depth in m or ``None``) of a cell."""
+        if self.row_axis == "depth":
+            return float(self.wob_n), float(speed), float(row)
+        return float(row), float(speed), self.fixed_depth_m
+
+    def spec(self) -> dict[str, Any]:
+        """The settings (not the task size)."""
+        return {
+            "env_id": self.env_id,
+            "controllers": list(self.controllers),
+            "row_axis": self.row_axis,
+            "rows": [float(r) for r in self.rows],
+            "reference_speed_rad_s": [float(v) for v in self.reference_speed_rad_s],
+            "draws": self.draws,
+            "wob_n": float(self.wob_n) if self.row_axis == "depth" else None,
+            "depth_m": self.fixed_depth_m,
+            "duration_s": float(self.duration_s),
+            "window_s": float(self.window_s),
+            "noise_std_rad_s": float(self.noise_std_rad_s),
+            "seed": int(self.seed),
+            "parameters": self.preset,
+            "delta_range": None if self.field else [float(d) for d in self.delta_range],
+        }
+
+    def _key(self, controller: str, i: int, j: int) -> str:
+        return f"{controller}/{i}/{j}"
+
+    def items(self) -> list[str]:
+        """One item per (controller, row, column)."""
+        return [
+            self._key(c, i, j)
+            for c in self.controllers
+            for i in range(len(self.rows))
+            for j in range(len(self.reference_speed_rad_s))
+        ]
+
+    def tasks(self, missing: Sequence[str]) -> list[Task]:
+        """``task_cells`` missing cells of one controller per task."""
+        wanted = set(missing)
+        span: tuple[float, float] | None = None
+        if self.field:
+            fixed = self.fixed_depth_m
+            depths = [float(d) for d in self.rows] if fixed is None else [fixed]
+            span = (min(depths), max(depths))
+        tasks = []
+        for controller in self.controllers:
+            cells = [
+                (self._key(controller, i, j), *self._cell(row, speed))
+                for i, row in enumerate(self.rows)
+                for j, speed in enumerate(self.reference_speed_rad_s)
+                if self._key(controller, i, j) in wanted
+            ]
+            for block in chunks(cells, self.task_cells):
+                tasks.append(
+                    Task(
+                        key=f"{block[0][0]}..{block[-1][0]}",
+                        function=probability_cells_task,
+                        kwargs={
+                            "env_id": self.env_id,
+                            "controller": controller,
+                            "cells": block,
+                            "draws": self.draws,
+                            "duration_s": self.duration_s,
+                            "window_s": self.window_s,
+                            "noise_std_rad_s": self.noise_std_rad_s,
+                            "seed": self.seed,
+                            "parameters": self.preset,
+                            "delta_range": self.delta_range,
+                            "depth_span_m": span,
+                        },
+                        items=tuple(cell[0] for cell in block),
+                    )
+                )
+        return tasks
+
+    def uncertainty(self) -> str:
+        """What each draw draws, in words."""
+        if self.field:
+            r = FieldRandomization()
+            return (
+                f"mu_a {r.mu_a_range[0]:g}-{r.mu_a_range[1]:g}, mu_0/mu_a "
+                f"{r.mu_0_ratio_range[0]:g}-{r.mu_0_ratio_range[1]:g}, xi {r.xi_range[0]:g}-"
+                f"{r.xi_range[1]:g} s/rad, mud damping x{r.mud_damping_factor_range[0]:g}-"
+                f"{r.mud_damping_factor_range[1]:g}"
+            )
+        lo, hi = self.delta_range
+        return f"Delta of c_pi, k_pi, c_dt each uniform in [{lo:g}, {hi:g}]"
+
+    def maps(self, outcome: SweepOutcome) -> list[ProbabilityMap]:
+        """One :class:`ProbabilityMap` per controller from the sweep's records."""
+
+        def floats(values: Sequence[Any]) -> list[float]:
+            return [math.nan if v is None else float(v) for v in values]
+
+        shape = (len(self.rows), len(self.reference_speed_rad_s), self.draws)
+        out = []
+        for c in self.controllers:
+            cells = [outcome.records[k] for k in self.items() if k.startswith(f"{c}/")]
+            out.append(
+                ProbabilityMap(
+                    controller=c,
+                    env_id=self.env_id,
+                    row_axis=self.row_axis,
+                    rows=np.asarray(self.rows, dtype=np.float64),
+                    reference_speed_rad_s=np.asarray(self.reference_speed_rad_s, dtype=np.float64),
+                    severity=np.array([floats(r["severity"]) for r in cells]).reshape(shape),
+                    stuck_fraction=np.array([floats(r["stuck_fraction"]) for r in cells]).reshape(
+                        shape
+                    ),
+                    wob_n=float(self.wob_n) if self.row_axis == "depth" else None,
+                    depth_m=self.fixed_depth_m,
+                    draws=self.draws,
+                    uncertainty=self.uncertainty(),
+                    duration_s=float(self.duration_s),
+                    window_s=float(self.window_s),
+                    noise_std_rad_s=float(self.noise_std_rad_s),
+                    seed=int(self.seed),
+                    parameters=self.preset,
+                    wall_time_s=outcome.wall_time_s,
+                )
+            )
+        return out
+
+
+# ---------------------------------------------------------------------------- command line
+DESCRIPTION: Final = """\
+Probability of stick-slip over weight on bit (WOB) x reference bit speed (or measured depth x
+reference speed on the field string) under parametric uncertainty: every cell runs --draws
+times from rest, each on a plant drawn from the env's randomisation (DrillString-v0: the
+uncertainty Deltas of c_pi, k_pi and c_dt, uniform in [--delta-min, --delta-max];
+DrillStringField-v0: bit friction mu_a, mu_0, xi and the mud damping). A draw is in stick-slip
+when its bit sticks in the last --window seconds or its severity exceeds 0.5 (the criterion of
+drill-gym map); a cell's probability is the share of its draws in stick-slip. Draw k of every
+cell uses the reset seed --seed + k (the same plants in every cell).
+
+Writes, per controller, stick_slip_probability_NAME.csv and stick_slip_probability_NAME.png
+(heatmap with contour lines at 0.1, 0.5 and 0.9) into --out. Runs serially, or on Ray with
+--workers N (the scale extra).
+
+examples:
+  drill-gym probability-map --workers 2                  # stiff_pi on the 4-DOF string
+  drill-gym probability-map --env DrillStringField-v0 --rows depth --depth-min 1000 \\
+      --depth-max 5000 --depth-n 5 --wob 100000 --workers 2
+  drill-gym probability-map --wob-n 4 --speed-n 4 --draws 8 --duration 40 --window 20
+"""
+
+
+def _parser() -> ArgumentParser:
+    p = ArgumentParser(prog="drill-gym probability-map", description=DESCRIPTION)
+    p.add_argument(
+        "--env", choices=ENVS, default=drill_env.ENV_ID, help="the environment (plant) mapped"
+    )
+    p.add_argument(
+        "--controllers",
+        nargs="+",
+        default=["stiff_pi"],
+        type=names_type(controller_names, "controller"),
+        metavar="NAME",
+        help=f"controllers to map, by registered name: {', '.join(controller_names())}",
+    )
+    p.add_argument(
+        "--rows",
+        choices=ROW_AXES,
+        default="wob",
+        help="rows of the map: WOB (at --depth on the field string) or measured depth "
+        "(DrillStringField-v0 only, at --wob)",
+    )
+    wob = number_type(0.0, MAX_WOB_N, open_low=True, unit="N")
+    speed = number_type(0.0, MAX_REFERENCE_RAD_S, open_low=True, unit="rad/s")
+    depth = number_type(1.0, 20_000.0, unit="m")
+    count = number_type(1, 1000, integer=True)
+    p.add_argument("--wob-min", type=wob, default=40e3, metavar="NEWTONS", help="lowest WOB, N")
+    p.add_argument("--wob-max", type=wob, default=200e3, metavar="NEWTONS", help="highest WOB, N")
+    p.add_argument("--wob-n", type=count, default=9, metavar="COUNT", help="number of WOB rows")
+    p.add_argument(
+        "--wob", type=wob, default=100e3, metavar="NEWTONS", help="the WOB of --rows depth, N"
+    )
+    p.add_argument(
+        "--depth-min", type=depth, default=1000.0, metavar="M", help="shallowest depth, m"
+    )
+    p.add_argument("--depth-max", type=depth, default=5000.0, metavar="M", help="deepest depth, m")
+    p.add_argument("--depth-n", type=count, default=5, metavar="COUNT", help="number of depths")
+    p.add_argument(
+        "--depth",
+        type=depth,
+        default=None,
+        metavar="M",
+        help="measured depth of --rows wob on the field string, m (default: the preset's)",
+    )
+    p.add_argument(
+        "--speed-min", type=speed, default=1.0, metavar="RAD_S", help="lowest reference, rad/s"
+    )
+    p.add_argument(
+        "--speed-max", type=speed, default=16.0, metavar="RAD_S", help="highest reference, rad/s"
+    )
+    p.add_argument(
+        "--speed-n", type=count, default=8, metavar="COUNT", help="number of reference speeds"
+    )
+    p.add_argument(
+        "--draws",
+        type=number_type(1, 100_000, integer=True),
+        default=32,
+        metavar="N",
+        help="parameter draws per cell",
+    )
+    p.add_argument(
+        "--delta-min",
+        type=number_type(-0.9, 10.0),
+        default=DEFAULT_DELTA_RANGE[0],
+        metavar="X",
+        help="lowest uncertainty Delta (DrillString-v0)",
+    )
+    p.add_argument(
+        "--delta-max",
+        type=number_type(-0.9, 10.0),
+        default=DEFAULT_DELTA_RANGE[1],
+        metavar="X",
+        help="highest uncertainty Delta (DrillString-v0)",
+    )
+    p.add_argument(
+        "--duration",
+        type=number_type(0.0, 1e4, open_low=True, unit="s"),
+        default=100.0,
+        metavar="S",
+        help="length of each run from rest, s (a multiple of 0.1 s)",
+    )
+    p.add_argument(
+        "--window",
+        type=number_type(0.0, 1e4, open_low=True, unit="s"),
+        default=DEFAULT_WINDOW_S,
+        metavar="S",
+        help="analysis window at the end of each run, s (at most --duration)",
+    )
+    p.add_argument(
+        "--noise",
+        type=number_type(0.0, 10.0, unit="rad/s"),
+        default=0.0,
+        metavar="STD",
+        help="measurement noise on the speeds, rad/s",
+    )
+    p.add_argument(
+        "--parameters",
+        default=None,
+        choices=sorted(PRESETS) + sorted(DISTRIBUTED_PRESETS),
+        help="plant preset (default: zribi2024 on DrillString-v0, field_2500m on the field env)",
+    )
+    p.add_argument("--out", type=Path, default=Path("results"), metavar="DIR", help="output folder")
+    p.add_argument(
+        "--seed",
+        type=number_type(0, 2**31 - 1, integer=True),
+        default=0,
+        metavar="N",
+        help="draw k of every cell is reset with seed + k",
+    )
+    p.add_argument("--no-plots", action="store_true", help="write the CSV files only")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_sweep_options(
+        p,
+        f"cells per task, each --draws runs (default: {PROBABILITY_TASK_CELLS}); does not "
+        "change the numbers",
+    )
+    return p
+
+
+def study_from_args(parser: ArgumentParser, args: Any) -> ProbabilityStudy:
+    """The study of parsed options; a bad combination is a one-line parser error."""
+    field = args.env == drill_env.FIELD_ENV_ID
+    if args.rows == "depth" and not field:
+        parser.fail(
+            "--rows", f"depth needs the distributed string: add --env {drill_env.FIELD_ENV_ID}"
+        )
+    if args.depth is not None and not field:
+        parser.fail("--depth", f"is for the distributed string: add --env {drill_env.FIELD_ENV_ID}")
+    if args.parameters is not None:
+        presets = DISTRIBUTED_PRESETS if field else PRESETS
+        if args.parameters not in presets:
+            parser.fail(
+                "--parameters",
+                f"{args.parameters!r} is not a preset of {args.env}: allowed {', '.join(sorted(presets))}",
+            )
+    if args.window > args.duration:
+        parser.fail(
+            "--window",
+            f"{args.window:g} is out of range: allowed (0, --duration = {args.duration:g}] s",
+        )
+    if abs(round(args.duration * 10) - args.duration * 10) > 1e-6:
+        parser.fail("--duration", f"{args.duration:g} is not a multiple of 0.1 s")
+    if args.delta_max < args.delta_min:
+        parser.fail("--delta-max", f"{args.delta_max:g} is below --delta-min = {args.delta_min:g}")
+    try:
+        if args.rows == "depth":
+            rows = grid_values("depth", args.depth_min, args.depth_max, args.depth_n, 20_000.0)
+        else:
+            rows = grid_values("wob", args.wob_min, args.wob_max, args.wob_n, MAX_WOB_N)
+        speeds = grid_values(
+            "speed", args.speed_min, args.speed_max, args.speed_n, MAX_REFERENCE_RAD_S
+        )
+    except ValueError as err:
+        parser.error(f"argument {err}")
+    try:
+        return ProbabilityStudy(
+            env_id=args.env,
+            controllers=tuple(dict.fromkeys(args.controllers)),
+            row_axis=args.rows,
+            rows=tuple(float(r) for r in rows),
+            reference_speed_rad_s=tuple(float(v) for v in speeds),
+            draws=args.draws,
+            wob_n=args.wob,
+            depth_m=args.depth,
+            duration_s=args.duration,
+            window_s=args.window,
+            noise_std_rad_s=args.noise,
+            seed=args.seed,
+            parameters=args.parameters,
+            delta_range=(args.delta_min, args.delta_max),
+            task_cells=args.task_size or PROBABILITY_TASK_CELLS,
+        )
+    except ValueError as err:
+        parser.error(str(err))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``drill-gym probability-map``: compute, write and plot; returns the exit code."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    study = study_from_args(parser, args)
+    backend = backend_from_args(args)
+    path = results_path_from_args(args, Path(args.out) / "stick_slip_probability.jsonl")
+    started = time.perf_counter()
+    outcome = run_sweep(study, backend, path, resume=args.resume, progress=not args.no_progress)
+    print(
+        f"{study.name} on {backend.describe()}: {len(study.items())} cells x {study.draws} draws "
+        f"x {study.duration_s:g} s ({len(outcome.ran)} tasks run, {outcome.loaded} cells read "
+        f"from the results file) in {time.perf_counter() - started:.1f} s"
+        + (f"; results in {path}" if path else "")
+    )
+    for result in study.maps(outcome):
+        name = result.controller
+        written = [write_probability_csv(result, args.out / f"stick_slip_probability_{name}.csv")]
+        if not args.no_plots:
+            from experiments.plots import probability_figure, save_figure
+
+            figure = probability_figure(result)
+            written.append(save_figure(figure, args.out / f"stick_slip_probability_{name}.png"))
+        p = result.probability
+        print(
+            f"{name}: probability of stick-slip {p.min():.2f} to {p.max():.2f} over "
+            f"{p.size} cells ({int((p >= 0.5).sum())} cells at 0.5 or more); wrote "
+            + " and ".join(str(w) for w in written)
+        )
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

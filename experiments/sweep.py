@@ -1,0 +1,552 @@
+"""The sweep runner: a study split into tasks, run in this process or on a Ray cluster.
+
+A study (a stick-slip map, a probability map, a comparison, a held-out evaluation) is a list
+of *items*, the units of its results (a WOB row of a map, one cell of a probability map, one
+run of a comparison), and a way to group the items still missing into *tasks*, the units of
+work (a batch of map rows simulated as the strings of one ``gym.make_vec``, a batch of runs).
+A task is a module-level function and its keyword arguments; it returns a :class:`TaskResult`:
+one JSON record per item, and optional extras (traces for figures) that stay in memory.
+
+:func:`run_sweep` runs the tasks
+
+* **serially** (:class:`Backend` with ``workers=1``): each task function called in this
+  process, one after the other;
+* **on Ray** (``workers > 1``, ``use_ray`` or an ``address``): each task a Ray task of one
+  CPU, on a local cluster that ``ray.init`` starts (``num_cpus=workers``, no dashboard) or on
+  the cluster at ``address`` (or ``$RAY_ADDRESS``). Results stream back as tasks finish; a
+  task whose worker process dies is run again (Ray's ``max_retries``). Workers run with
+  :data:`WORKER_ENV` (one thread for BLAS, OpenMP and numba: one task per CPU); each worker
+  process loads numba's on-disk cache of ``drill_env`` the first time it runs a task (a few
+  seconds; longer when the cache is cold and numba compiles).
+
+Both paths call the same task functions with the same arguments, and every seed is a pure
+function of the study's spec and an item's index, so the numbers do not depend on the
+backend, on the number of workers, on the task size or on the order tasks finish in. Every
+record passes through its JSON encoding (non-finite floats as ``null``; Python's float
+``repr`` round-trips exactly), on every path, so a resumed sweep assembles exactly the tables
+of a clean one.
+
+The results file (JSON lines): a header ``{"sweep": NAME, "spec": SPEC, "spec_hash": H,
+"format": 1}``, then one line ``{"task": KEY, "items": {ITEM: RECORD, ...}}`` per finished
+task, appended (and flushed) as it arrives. With ``resume=True`` the items already in the
+file (written by the same spec; another spec is an error) are not run again; a last line cut
+short by an interruption is ignored. Without it, the file is started anew.
+
+Ray is imported only when a sweep runs on it (the ``[scale]`` extra).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import math
+import os
+import sys
+import time
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Final, NamedTuple, Protocol
+
+from experiments.arguments import number_type
+from experiments.tables import json_clean
+
+if TYPE_CHECKING:  # pragma: no cover
+    import argparse
+
+__all__ = [
+    "ADDRESS_VARIABLE",
+    "COMPARE_TASK_RUNS",
+    "DEFAULT_MAX_RETRIES",
+    "EVALUATE_TASK_SCENARIOS",
+    "MAP_TASK_CELLS",
+    "PROBABILITY_TASK_CELLS",
+    "RESULTS_FORMAT",
+    "WORKER_ENV",
+    "Backend",
+    "Study",
+    "SweepOutcome",
+    "Task",
+    "TaskResult",
+    "add_sweep_options",
+    "backend_from_args",
+    "chunks",
+    "ray_session",
+    "read_results",
+    "results_path_from_args",
+    "run_sweep",
+    "spec_hash",
+    "sweep_requested",
+]
+
+WORKER_ENV: Final[dict[str, str]] = {
+    "OMP_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+    "NUMBA_NUM_THREADS": "1",
+}
+"""Environment of every Ray worker: one thread per task (a task holds one CPU)."""
+ADDRESS_VARIABLE: Final = "RAY_ADDRESS"
+"""Environment variable with the address of a Ray cluster to join (``--address`` wins)."""
+DEFAULT_MAX_RETRIES: Final = 3
+"""Times a task is run again when its worker process dies."""
+RESULTS_FORMAT: Final = 1
+"""Version of the results file's layout."""
+MAP_TASK_CELLS: Final = 80
+"""Default cells per map task (rounded down to whole WOB rows, at least one row): enough
+strings per compiled call to amortise the cost of a task (``benchmarks/sweep_scaling.py``:
+tasks of 16-32 cells of 50 s runs took about 1.8 x as long as tasks of 80 on 2 workers)."""
+PROBABILITY_TASK_CELLS: Final = 2
+"""Default cells per probability-map task (each cell is ``draws`` runs)."""
+COMPARE_TASK_RUNS: Final = 1
+"""Default runs per comparison task (a run is 150 s of plant time: a task of its own)."""
+EVALUATE_TASK_SCENARIOS: Final = 1
+"""Default held-out scenarios per evaluation task (each run by every controller and agent)."""
+
+
+class TaskResult(NamedTuple):
+    """What a task returns.
+
+    Attributes:
+        records: One JSON-able record per item the task produced, by item key.
+        extras: Anything else the driver needs in memory (traces for figures); never written
+            to the results file (``None``: nothing).
+    """
+
+    records: dict[str, dict[str, Any]]
+    extras: Any = None
+
+
+@dataclass(frozen=True)
+class Task:
+    """One unit of work.
+
+    Attributes:
+        key: Unique within the sweep (``stiff_pi/rows/0-3``).
+        function: A module-level function (importable by the workers) called as
+            ``function(**kwargs)``; returns a :class:`TaskResult` with a record for every one
+            of ``items``.
+        kwargs: Its keyword arguments (picklable).
+        items: The item keys it produces.
+    """
+
+    key: str
+    function: Callable[..., TaskResult]
+    kwargs: Mapping[str, Any]
+    items: tuple[str, ...]
+
+
+class Study(Protocol):
+    """A study on the runner."""
+
+    @property
+    def name(self) -> str:
+        """Name of the sweep, in the results file's header and the progress bar."""
+        ...
+
+    def spec(self) -> dict[str, Any]:
+        """Everything the results depend on, as JSON (not the backend nor the task size)."""
+        ...
+
+    def items(self) -> list[str]:
+        """Every item key, in the order of the final tables."""
+        ...
+
+    def tasks(self, missing: Sequence[str]) -> list[Task]:
+        """Tasks that produce exactly the items ``missing`` (in item order)."""
+        ...
+
+
+@dataclass(frozen=True)
+class Backend:
+    """Where the tasks run.
+
+    Attributes:
+        workers: CPUs of the local Ray cluster (tasks at a time); 1 with neither ``use_ray``
+            nor ``address``: serially in this process. On a cluster that Ray is already
+            connected to, or at ``address``: the most tasks in flight (1: no limit).
+        use_ray: Run on Ray even with one worker.
+        address: Address of a running Ray cluster to join (``None``: ``$RAY_ADDRESS`` if set,
+            else a local cluster is started when Ray is used).
+        max_retries: Times a task is run again when its worker dies, >= 0.
+    """
+
+    workers: int = 1
+    use_ray: bool = False
+    address: str | None = None
+    max_retries: int = DEFAULT_MAX_RETRIES
+
+    def __post_init__(self) -> None:
+        for name, low in (("workers", 1), ("max_retries", 0)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                raise ValueError(f"{name} = {value!r} is out of range: allowed an integer >= {low}")
+        if self.address is not None and not str(self.address).strip():
+            raise ValueError("address = '' is not valid: give a Ray address or leave it out")
+
+    @property
+    def distributed(self) -> bool:
+        """Whether the tasks run on Ray."""
+        return self.use_ray or self.workers > 1 or self.address is not None
+
+    def describe(self) -> str:
+        """One line: ``serial`` or ``Ray (2 workers)``/``Ray at ADDRESS``."""
+        if not self.distributed:
+            return "serial"
+        if self.address:
+            return f"Ray at {self.address}"
+        return f"Ray ({self.workers} worker{'s' if self.workers != 1 else ''})"
+
+
+@dataclass
+class SweepOutcome:
+    """The results of a sweep.
+
+    Attributes:
+        records: Item key -> record, for every item, in the study's item order.
+        extras: Task key -> the extras of the tasks run this time (none for loaded items).
+        ran: Keys of the tasks run this time, in the order they finished.
+        loaded: Items read from the results file (resume).
+        wall_time_s: Wall-clock time of the sweep, s.
+        results_path: The results file (``None``: none written).
+    """
+
+    records: dict[str, dict[str, Any]]
+    extras: dict[str, Any] = field(default_factory=dict)
+    ran: list[str] = field(default_factory=list)
+    loaded: int = 0
+    wall_time_s: float = 0.0
+    results_path: Path | None = None
+
+
+def spec_hash(name: str, spec: Mapping[str, Any]) -> str:
+    """SHA-256 of the sweep's name and its JSON spec (keys sorted)."""
+    text = json.dumps({"sweep": name, "spec": json_clean(dict(spec))}, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _encoded(record: Mapping[str, Any]) -> dict[str, Any]:
+    """``record`` as it reads back from JSON (the same on every path)."""
+    decoded: dict[str, Any] = json.loads(json.dumps(json_clean(dict(record)), allow_nan=False))
+    return decoded
+
+
+def read_results(path: Path, name: str, spec: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
+    """The item records in the results file ``path`` of the sweep ``name`` with ``spec``.
+
+    Raises:
+        ValueError: The file is not a results file, or another sweep or spec wrote it.
+    """
+    records: dict[str, dict[str, Any]] = {}
+    text = path.read_text()
+    lines = text.split("\n")
+    try:
+        header = json.loads(lines[0])
+    except ValueError:
+        raise ValueError(
+            f"results file {str(path)!r} does not start with a sweep header: not a results "
+            "file of drill-gym; delete it or choose another --results"
+        ) from None
+    if not isinstance(header, dict) or header.get("format") != RESULTS_FORMAT:
+        raise ValueError(
+            f"results file {str(path)!r}: expected a header with format {RESULTS_FORMAT}, got "
+            f"{str(header)[:80]!r}"
+        )
+    if header.get("spec_hash") != spec_hash(name, spec):
+        raise ValueError(
+            f"results file {str(path)!r} was written by another sweep ({header.get('sweep')!r} "
+            "with other settings): --resume continues only the same sweep; run without "
+            "--resume to start again, or choose another --results"
+        )
+    last = len(lines) - 1
+    for k, line in enumerate(lines[1:], 1):
+        if not line.strip():
+            continue
+        try:
+            entry = json.loads(line)
+        except ValueError:
+            if k == last:  # the last line, cut short by an interruption (no newline yet)
+                break
+            raise ValueError(f"results file {str(path)!r}: line {k + 1} is not JSON") from None
+        items = entry.get("items") if isinstance(entry, dict) else None
+        if not isinstance(items, dict):
+            raise ValueError(f"results file {str(path)!r}: line {k + 1} has no items")
+        records.update(items)
+    return records
+
+
+class _ResultsFile:
+    """The JSON-lines results file, appended to as tasks finish."""
+
+    def __init__(self, path: Path, name: str, spec: Mapping[str, Any], resume: bool) -> None:
+        self.path = path
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if resume and path.is_file() and path.stat().st_size:
+            self.loaded = read_results(path, name, spec)
+            # An interrupted write leaves a partial last line: cut it off, then append.
+            data = path.read_bytes()
+            complete = data.rfind(b"\n") + 1
+            if complete < len(data):
+                with path.open("r+b") as f:
+                    f.truncate(complete)
+            self._file = path.open("a")
+        else:
+            self.loaded = {}
+            self._file = path.open("w")
+            header = {
+                "sweep": name,
+                "spec": json_clean(dict(spec)),
+                "spec_hash": spec_hash(name, spec),
+                "format": RESULTS_FORMAT,
+            }
+            self._file.write(json.dumps(header, allow_nan=False) + "\n")
+        self._file.flush()
+
+    def append(self, task: str, records: Mapping[str, Any]) -> None:
+        line = json.dumps({"task": task, "items": records}, allow_nan=False)
+        self._file.write(line + "\n")
+        self._file.flush()
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def chunks(values: Sequence[Any], size: int) -> Iterator[list[Any]]:
+    """``values`` in consecutive lists of at most ``size`` (>= 1)."""
+    for start in range(0, len(values), max(1, int(size))):
+        yield list(values[start : start + max(1, int(size))])
+
+
+def _execute(function: Callable[..., TaskResult], kwargs: Mapping[str, Any]) -> TaskResult:
+    """Run one task (in a worker or in this process)."""
+    result = function(**kwargs)
+    if not isinstance(result, TaskResult):  # pragma: no cover - a task's own bug
+        raise TypeError(f"task function {function!r} returned {type(result).__name__}")
+    return result
+
+
+def run_sweep(
+    study: Study,
+    backend: Backend | None = None,
+    results_path: Path | None = None,
+    resume: bool = False,
+    progress: bool = True,
+) -> SweepOutcome:
+    """Run the missing items of ``study`` on ``backend`` and collect every record.
+
+    Args:
+        study: The study.
+        backend: Where the tasks run (default: serially in this process).
+        results_path: The JSON-lines results file (``None``: none is written and nothing can
+            be resumed).
+        resume: Keep the items already in ``results_path`` (same spec) and run only the rest.
+        progress: Show a progress bar of finished tasks on standard error.
+
+    Returns:
+        The :class:`SweepOutcome`.
+
+    Raises:
+        ValueError: ``resume`` without ``results_path``, a results file of another spec, a
+            study without items, or tasks that do not produce their items.
+    """
+    backend = backend or Backend()
+    started = time.perf_counter()
+    spec = study.spec()
+    items = list(study.items())
+    if not items:
+        raise ValueError(f"sweep {study.name!r} has no items: the grid is empty")
+    if resume and results_path is None:
+        raise ValueError("resume needs a results file (--results)")
+    if backend.distributed:
+        import ray  # noqa: F401  (a missing scale extra fails here, before any file is written)
+    results = None if results_path is None else _ResultsFile(results_path, study.name, spec, resume)
+    loaded = {} if results is None else {k: v for k, v in results.loaded.items() if k in items}
+    missing = [k for k in items if k not in loaded]
+    tasks = study.tasks(missing) if missing else []
+    produced = [i for t in tasks for i in t.items]
+    if sorted(produced) != sorted(missing):
+        raise ValueError(f"sweep {study.name!r}: its tasks do not produce the missing items")
+    outcome = SweepOutcome(records=dict(loaded), loaded=len(loaded), results_path=results_path)
+
+    from tqdm import tqdm
+
+    bar = tqdm(
+        total=len(tasks),
+        desc=f"{study.name} ({backend.describe()})",
+        unit="task",
+        file=sys.stderr,
+        disable=not progress,
+        leave=False,
+    )
+
+    def finished(task: Task, result: TaskResult) -> None:
+        if set(result.records) != set(task.items):
+            raise ValueError(f"task {task.key!r} returned items other than its own")
+        encoded = {k: _encoded(result.records[k]) for k in task.items}
+        if results is not None:
+            results.append(task.key, encoded)
+        outcome.records.update(encoded)
+        if result.extras is not None:
+            outcome.extras[task.key] = result.extras
+        outcome.ran.append(task.key)
+        bar.set_postfix_str(task.key, refresh=False)
+        bar.update()
+
+    try:
+        with bar:
+            if backend.distributed and tasks:
+                _run_on_ray(tasks, backend, finished)
+            else:
+                for task in tasks:
+                    finished(task, _execute(task.function, task.kwargs))
+    finally:
+        if results is not None:
+            results.close()
+    outcome.records = {k: outcome.records[k] for k in items}
+    outcome.wall_time_s = time.perf_counter() - started
+    return outcome
+
+
+@contextlib.contextmanager
+def ray_session(backend: Backend) -> Iterator[Any]:
+    """The ``ray`` module, connected: to the running session if there is one, else to
+    ``backend.address`` (or ``$RAY_ADDRESS``), else to a new local cluster of
+    ``backend.workers`` CPUs without dashboard; a connection made here is shut down after."""
+    import ray
+
+    if ray.is_initialized():
+        yield ray
+        return
+    runtime_env = {"env_vars": dict(WORKER_ENV)}
+    address = backend.address or os.environ.get(ADDRESS_VARIABLE) or None
+    if address:
+        ray.init(address=address, runtime_env=runtime_env, logging_level="WARNING")
+    else:
+        ray.init(
+            num_cpus=backend.workers,
+            include_dashboard=False,
+            runtime_env=runtime_env,
+            logging_level="WARNING",
+        )
+    try:
+        yield ray
+    finally:
+        ray.shutdown()
+
+
+def _run_on_ray(
+    tasks: Sequence[Task], backend: Backend, finished: Callable[[Task, TaskResult], None]
+) -> None:
+    """Submit ``tasks`` as Ray tasks and hand each result to ``finished`` as it arrives."""
+    with ray_session(backend) as ray:
+        remote = ray.remote(num_cpus=1, max_retries=backend.max_retries, retry_exceptions=False)(
+            _execute
+        )
+        joined = backend.address or os.environ.get(ADDRESS_VARIABLE)
+        limit = backend.workers if (backend.workers > 1 or not joined) else math.inf
+        queue = list(tasks)
+        pending: dict[Any, Task] = {}
+        try:
+            while queue or pending:
+                while queue and len(pending) < limit:
+                    task = queue.pop(0)
+                    pending[remote.remote(task.function, dict(task.kwargs))] = task
+                done, _ = ray.wait(list(pending), num_returns=1)
+                for ref in done:
+                    task = pending.pop(ref)
+                    try:
+                        result = ray.get(ref)
+                    except ray.exceptions.RayTaskError as exc:
+                        cause = exc.cause if isinstance(exc.cause, BaseException) else exc
+                        raise cause from None
+                    finished(task, result)
+        finally:
+            for ref in pending:
+                with contextlib.suppress(Exception):
+                    ray.cancel(ref, force=True)
+
+
+# ---------------------------------------------------------------------------- command line
+def add_sweep_options(parser: argparse.ArgumentParser, task_size_help: str) -> None:
+    """The options of a study on the runner: ``--workers``, ``--ray``, ``--address``,
+    ``--task-size``, ``--results``, ``--resume``, ``--max-retries``."""
+    group = parser.add_argument_group("sweeps (Ray: the scale extra)")
+    group.add_argument(
+        "--workers",
+        type=number_type(1, 4096, integer=True),
+        default=1,
+        metavar="N",
+        help="tasks at a time: 1 runs serially in this process; N > 1 runs on Ray (a local "
+        "cluster of N CPUs, or at most N tasks in flight on the cluster of --address)",
+    )
+    group.add_argument(
+        "--ray", action="store_true", help="run on Ray even with --workers 1 (default: serial)"
+    )
+    group.add_argument(
+        "--address",
+        default=None,
+        metavar="ADDR",
+        help=f"join the running Ray cluster at ADDR (host:port or 'auto'; default: "
+        f"${ADDRESS_VARIABLE}, else a local cluster is started)",
+    )
+    group.add_argument(
+        "--task-size",
+        type=number_type(1, 10**6, integer=True),
+        default=None,
+        metavar="N",
+        help=task_size_help,
+    )
+    group.add_argument(
+        "--results",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="JSON-lines file each finished task is appended to (default: a file in --out "
+        "when the sweep runs on Ray or with --resume; none for a plain serial run)",
+    )
+    group.add_argument(
+        "--resume",
+        action="store_true",
+        help="keep the tasks already in the results file (written by the same settings) and "
+        "run only the missing ones",
+    )
+    group.add_argument(
+        "--max-retries",
+        type=number_type(0, 100, integer=True),
+        default=DEFAULT_MAX_RETRIES,
+        metavar="N",
+        help="times a task is run again when its worker process dies",
+    )
+
+
+def sweep_requested(args: argparse.Namespace) -> bool:
+    """Whether the options ask for the sweep runner (Ray, a results file or a resume)."""
+    return bool(
+        args.workers > 1
+        or args.ray
+        or args.address
+        or args.results is not None
+        or args.resume
+        or args.task_size is not None
+    )
+
+
+def backend_from_args(args: argparse.Namespace) -> Backend:
+    """The :class:`Backend` of parsed :func:`add_sweep_options` options."""
+    return Backend(
+        workers=int(args.workers),
+        use_ray=bool(args.ray),
+        address=args.address or None,
+        max_retries=int(args.max_retries),
+    )
+
+
+def results_path_from_args(args: argparse.Namespace, default: Path) -> Path | None:
+    """The results file: ``--results``, else ``default`` when the sweep is on Ray or resumes,
+    else ``None``."""
+    if args.results is not None:
+        return Path(args.results)
+    if args.resume or backend_from_args(args).distributed:
+        return default
+    return None

@@ -1,0 +1,687 @@
+"""``drill-gym sweep-train``: multi-seed training and hyperparameter search of the residual
+agent on Ray Tune (the ``[rl]`` and ``[scale]`` extras).
+
+Every trial is one ordinary training run (:func:`agents.train.train`) with its own run
+folder, ``OUT/runs/TRIAL__seedS/`` (TensorBoard logs, ``validation.csv``, checkpoints in the
+project's pickle-free format, ``best/`` and ``model/``). Each validation of a run (every
+``validate_every`` decisions and at the end; the ratios of the validation scenarios to the
+base controller) is reported to Tune: ``iae_ratio``, ``rmsd_ratio``, ``severity_ratio``,
+``score`` and ``timesteps``. Tune's scheduler stops trials early on the validation IAE ratio
+(``--scheduler asha``, the default: asynchronous successive halving over the validations,
+reduction factor 2; ``median``: the median stopping rule; ``none``), never before a trial's
+``--grace-period`` validations (default 2).
+
+The trials:
+
+* ``--seeds 1 2 3`` and ``--grid NAME=V1,V2`` (any field of ``drill-gym train``, repeatable):
+  every combination (Tune's grid search);
+* ``--sample NAME=KIND:LOW:HIGH`` (``uniform``, ``loguniform``, ``int``) or
+  ``NAME=choice:A,B``: drawn ``--samples`` times per grid point at random, or by Optuna's
+  TPE sampler with ``--sampler optuna`` (Tune's ``OptunaSearch``; one seed, no ``--grid``).
+
+The fixed settings of every trial are the defaults of ``drill-gym train`` with a small budget
+(:data:`SWEEP_DEFAULTS`), changed with ``--set NAME=VALUE``.
+
+After the sweep: ``OUT/trials.csv`` and ``OUT/trials.md``, one row per trial (seed,
+hyperparameters, the best and the last validation, whether it was stopped early, and the
+held-out ratios); the best trial (lowest validation IAE ratio over its validations) is
+exported in the project's model format to ``OUT/best_model/`` (its ``model/``, the best on its
+validation, or its ``best/`` when the trial was stopped early) and scored on the held-out
+scenarios of ``drill-gym evaluate`` against its base controller (``--heldout best``, the
+default; ``all`` scores every trial's model, ``none`` none). ``OUT/summary.json`` has it all.
+
+Trials run one CPU each, ``--workers`` at a time on a local Ray cluster (or on the cluster of
+``--address``; then ``OUT`` must be on a file system every node shares, since each trial
+writes its run folder where it runs).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import math
+import shutil
+import time
+import typing
+from collections.abc import Iterator, Mapping, Sequence
+from pathlib import Path
+from typing import Any, Final
+
+from experiments.arguments import ArgumentParser, names_type, number_type
+from experiments.sweep import ADDRESS_VARIABLE, Backend, ray_session
+from experiments.tables import Column, markdown_table, write_csv, write_json
+
+__all__ = [
+    "METRIC",
+    "SWEEP_DEFAULTS",
+    "SweepSpec",
+    "main",
+    "parse_grid",
+    "parse_sample",
+    "run_training_sweep",
+    "train_trial",
+]
+
+METRIC: Final = "iae_ratio"
+"""The metric Tune's scheduler and the choice of the best trial use (minimised): the mean
+validation IAE relative to the base controller's."""
+
+SWEEP_DEFAULTS: Final[dict[str, Any]] = {
+    "total_timesteps": 32_000,
+    "num_envs": 8,
+    "n_steps": 500,
+    "batch_size": 500,
+    "episode_s": 50.0,
+    "validate_every": 8_000,
+    "validation_episodes": 4,
+    "checkpoint_every": 16_000,
+}
+"""Fixed settings of every trial unless ``--set`` changes them: a small budget (8 rollouts of
+4,000 decisions, four validations that the scheduler acts on, about a minute per trial)."""
+
+HELDOUT_KEYS: Final = (
+    "heldout_iae_ratio",
+    "heldout_rmsd_ratio",
+    "heldout_severity_prone_ratio",
+    "heldout_goal_met",
+)
+"""Columns of the held-out scores (ratios to the base controller; empty: not scored)."""
+SAMPLE_KINDS: Final = ("uniform", "loguniform", "int", "choice")
+"""Distributions of ``--sample``."""
+FIXED_FIELDS: Final = ("run_dir", "save_dir", "resume", "overwrite", "trust_pickle", "seed")
+"""Fields of the training configuration the sweep sets itself."""
+
+
+def _fields() -> dict[str, Any]:
+    """Field name -> type of :class:`agents.config.TrainConfig` that a sweep may set."""
+    from agents.config import TrainConfig
+
+    hints = typing.get_type_hints(TrainConfig)
+    return {
+        f.name: hints[f.name] for f in dataclasses.fields(TrainConfig) if f.name not in FIXED_FIELDS
+    }
+
+
+def _value(name: str, text: str, kind: Any) -> Any:
+    """``text`` parsed as the field ``name`` of type ``kind``."""
+    text = text.strip()
+    try:
+        if kind is bool:
+            lowered = text.lower()
+            if lowered not in ("true", "false", "1", "0", "yes", "no"):
+                raise ValueError
+            return lowered in ("true", "1", "yes")
+        if kind is int:
+            return int(text)
+        if kind is float:
+            value = float(text)
+            if not math.isfinite(value):
+                raise ValueError
+            return value
+        if typing.get_origin(kind) is list:
+            return [int(v) for v in text.replace("x", " ").split()]
+        return text
+    except ValueError:
+        raise ValueError(
+            f"{name} = {text!r} is not a valid {getattr(kind, '__name__', kind)}"
+        ) from None
+
+
+def _field(text: str, option: str) -> tuple[str, str]:
+    """``NAME=REST`` -> (field name, REST), the name checked (``-`` read as ``_``)."""
+    if "=" not in text:
+        raise ValueError(f"{option} {text!r}: expected NAME=VALUE")
+    name, rest = text.split("=", 1)
+    name = name.strip().replace("-", "_")
+    fields = _fields()
+    if name not in fields:
+        raise ValueError(
+            f"{option} {text!r}: unknown training setting {name!r}: allowed {', '.join(sorted(fields))}"
+        )
+    return name, rest
+
+
+def parse_grid(text: str) -> tuple[str, list[Any]]:
+    """``--grid NAME=V1,V2,...`` -> (field name, values)."""
+    name, rest = _field(text, "--grid")
+    parts = [p for p in rest.split(",") if p.strip()]
+    if not parts:
+        raise ValueError(f"--grid {text!r}: the grid of {name} is empty: give NAME=V1,V2,...")
+    kind = _fields()[name]
+    return name, [_value(name, p, kind) for p in parts]
+
+
+def parse_sample(text: str) -> tuple[str, tuple[str, list[Any]]]:
+    """``--sample NAME=KIND:LOW:HIGH`` or ``NAME=choice:A,B`` -> (field, (kind, arguments))."""
+    name, rest = _field(text, "--sample")
+    kind, _, args = rest.partition(":")
+    kind = kind.strip()
+    if kind not in SAMPLE_KINDS:
+        raise ValueError(
+            f"--sample {text!r}: unknown distribution {kind!r}: allowed {', '.join(SAMPLE_KINDS)}"
+        )
+    field_kind = _fields()[name]
+    if kind == "choice":
+        values = [_value(name, p, field_kind) for p in args.split(",") if p.strip()]
+        if not values:
+            raise ValueError(f"--sample {text!r}: choice needs one or more values: NAME=choice:A,B")
+        return name, (kind, values)
+    ends = args.split(":")
+    if len(ends) != 2:
+        raise ValueError(f"--sample {text!r}: expected NAME={kind}:LOW:HIGH")
+    number = int if kind == "int" else float
+    low, high = (_value(name, e, number) for e in ends)
+    if not low < high or (kind == "loguniform" and low <= 0):
+        raise ValueError(
+            f"--sample {text!r}: allowed LOW < HIGH{' and LOW > 0' if kind == 'loguniform' else ''}"
+        )
+    return name, (kind, [low, high])
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepSpec:
+    """What a training sweep runs.
+
+    Attributes:
+        seeds: Training seeds (a grid axis).
+        grid: Field -> values (grid axes).
+        samples: Field -> (distribution, arguments) drawn per trial.
+        num_samples: Draws per grid point (Tune's ``num_samples``).
+        sampler: ``random`` or ``optuna``.
+        scheduler: ``asha``, ``median`` or ``none``.
+        settings: Fixed training settings (``SWEEP_DEFAULTS`` and ``--set``).
+        grace_period: Validations every trial reports before the scheduler may stop it.
+    """
+
+    seeds: tuple[int, ...]
+    grid: Mapping[str, Sequence[Any]]
+    samples: Mapping[str, tuple[str, Sequence[Any]]]
+    num_samples: int
+    sampler: str
+    scheduler: str
+    settings: Mapping[str, Any]
+    grace_period: int = 2
+
+    def __post_init__(self) -> None:
+        if not self.seeds:
+            raise ValueError("--seeds is empty: give one or more seeds")
+        if self.grace_period < 1:
+            raise ValueError(f"--grace-period {self.grace_period} is out of range: allowed >= 1")
+        if self.num_samples < 1:
+            raise ValueError(f"--samples {self.num_samples} is out of range: allowed >= 1")
+        if self.sampler == "optuna":
+            if not self.samples:
+                raise ValueError("--sampler optuna needs one or more --sample NAME=KIND:LOW:HIGH")
+            if self.grid or len(self.seeds) > 1:
+                raise ValueError(
+                    "--sampler optuna searches --sample settings with one seed: leave out --grid "
+                    "and give one --seeds value (or use the random sampler over the grid)"
+                )
+        clash = set(self.grid) & set(self.samples) | (
+            set(self.settings) & (set(self.grid) | set(self.samples))
+        )
+        if clash:
+            raise ValueError(f"{sorted(clash)[0]} is set more than once (--grid, --sample, --set)")
+        list(self.corner_configs())  # every value checked before anything starts
+
+    def trials(self) -> int:
+        """Number of trials."""
+        grid = len(self.seeds) * math.prod(len(v) for v in self.grid.values())
+        return grid * self.num_samples
+
+    def corner_configs(self) -> Iterator[Any]:
+        """Training configurations at every grid value and at the ends of every sample range
+        (building them validates the values)."""
+        from agents.config import TrainConfig
+
+        def build(**values: Any) -> Any:
+            return TrainConfig(**{**self.settings, "seed": self.seeds[0], **values})
+
+        yield build()
+        for seed in self.seeds:
+            yield build(seed=seed)
+        for name, values in self.grid.items():
+            for v in values:
+                yield build(**{name: v})
+        for name, (_, args) in self.samples.items():
+            for v in args:
+                yield build(**{name: v})
+
+    def validations(self) -> int:
+        """Validations each trial reports (the last one after the final rollout)."""
+        from agents.config import TrainConfig
+        from agents.train import planned_timesteps
+
+        config = TrainConfig(**{**self.settings, "seed": self.seeds[0]})
+        if not config.validate_every:
+            return 1
+        return planned_timesteps(config) // config.validate_every + 1
+
+
+def _space(spec: SweepSpec) -> dict[str, Any]:
+    """Tune's search space of the trials."""
+    from ray import tune
+
+    def sample(kind: str, args: Sequence[Any]) -> Any:
+        if kind == "choice":
+            return tune.choice(list(args))
+        if kind == "int":
+            return tune.randint(int(args[0]), int(args[1]) + 1)
+        return (tune.loguniform if kind == "loguniform" else tune.uniform)(args[0], args[1])
+
+    space: dict[str, Any] = {
+        name: sample(kind, args) for name, (kind, args) in spec.samples.items()
+    }
+    if spec.sampler != "optuna":
+        space["seed"] = tune.grid_search(list(spec.seeds))
+        space.update({name: tune.grid_search(list(v)) for name, v in spec.grid.items()})
+    return space
+
+
+@contextlib.contextmanager
+def _report_validations() -> Iterator[None]:
+    """While training: every validation of :mod:`agents.train` is also reported to Tune (its
+    ratios as the run's ``validation.csv`` records them)."""
+    from ray import tune
+
+    from agents import train as training
+
+    original = training._Validation.run
+
+    def run(self: Any, model: Any, venv: Any) -> float:
+        score = original(self, model, venv)
+        steps, iae, rmsd, severity, _ = self.csv.read_text().splitlines()[-1].split(",")
+        tune.report(
+            {
+                "timesteps": int(steps),
+                METRIC: float(iae),
+                "rmsd_ratio": float(rmsd),
+                "severity_ratio": float(severity),
+                "score": float(score),
+            }
+        )
+        return score
+
+    training._Validation.run = run  # type: ignore[method-assign]
+    try:
+        yield
+    finally:
+        training._Validation.run = original  # type: ignore[method-assign]
+
+
+def train_trial(config: dict[str, Any]) -> None:
+    """One trial (run in a Tune worker): a training run with the trial's settings in its own
+    run folder ``config["runs_dir"]/TRIAL__seedS``, its validations reported to Tune."""
+    from ray import tune
+
+    from agents.config import TrainConfig
+    from agents.train import train
+
+    settings = dict(config["settings"])
+    chosen = {k: v for k, v in config.items() if k not in ("settings", "runs_dir", "seed")}
+    seed = int(config["seed"] if "seed" in config else settings.pop("seed"))
+    settings.pop("seed", None)
+    trial = tune.get_context().get_trial_id()
+    run_dir = Path(config["runs_dir"]) / f"{trial}__seed{seed}"
+    train_config = TrainConfig(**{**settings, **chosen, "seed": seed, "run_dir": str(run_dir)})
+    with _report_validations():
+        train(train_config, progress=False)
+
+
+def _scheduler(spec: SweepSpec) -> Any:
+    if spec.scheduler == "none":
+        return None
+    from ray.tune.schedulers import ASHAScheduler, MedianStoppingRule
+
+    if spec.scheduler == "median":
+        return MedianStoppingRule(
+            time_attr="training_iteration",
+            grace_period=spec.grace_period,
+            min_samples_required=2,
+        )
+    return ASHAScheduler(
+        time_attr="training_iteration",
+        max_t=spec.validations() + 1,  # above the last report: a trial that ends is not stopped
+        grace_period=spec.grace_period,
+        reduction_factor=2,
+    )
+
+
+def _trial_row(result: Any, spec: SweepSpec, runs_dir: Path) -> dict[str, Any]:
+    """One row of the summary table from a Tune result."""
+    config = result.config
+    seed = int(config.get("seed", spec.seeds[0]))
+    history = result.metrics_dataframe
+    records = [] if history is None else history.to_dict("records")
+    trial = str(result.metrics.get("trial_id", "")) if result.metrics else ""
+    folder = next(runs_dir.glob(f"{trial}__seed{seed}"), None) if trial else None
+    row: dict[str, Any] = {"trial": trial, "seed": seed}
+    for name in (*spec.grid, *spec.samples):
+        row[name] = config.get(name)
+    valid = [r for r in records if r.get(METRIC) is not None and math.isfinite(r[METRIC])]
+    best = min(valid, key=lambda r: r[METRIC]) if valid else None
+    last = valid[-1] if valid else None
+    row.update(
+        {
+            "validations": len(valid),
+            "timesteps": None if last is None else int(last["timesteps"]),
+            "best_iae_ratio": None if best is None else float(best[METRIC]),
+            "best_at_timesteps": None if best is None else int(best["timesteps"]),
+            "last_iae_ratio": None if last is None else float(last[METRIC]),
+            "last_rmsd_ratio": None if last is None else float(last["rmsd_ratio"]),
+            "stopped_early": bool(len(valid) < spec.validations()),
+            "error": None if result.error is None else str(result.error).splitlines()[0][:200],
+            "run_dir": None if folder is None else str(folder),
+            **dict.fromkeys(HELDOUT_KEYS),
+        }
+    )
+    return row
+
+
+def _model_folder(run_dir: Path) -> Path | None:
+    """The model of a run: ``model/`` (the best on validation) or, for a run stopped early,
+    ``best/``."""
+    from agents.policy import is_model_folder
+
+    for name in ("model", "best"):
+        if is_model_folder(run_dir / name):
+            return run_dir / name
+    return None
+
+
+def _heldout(model: Path, scenario_ids: Sequence[str] | None) -> dict[str, Any]:
+    """Held-out ratios of the model to its base controller (:mod:`experiments.evaluate`)."""
+    from agents.policy import load_policy
+    from experiments.evaluate import BASE_CONTROLLER, HELD_OUT, evaluate, summarize
+
+    agent = load_policy(model)
+    base = agent.env_kwargs.get("base_controller") or BASE_CONTROLLER
+    scenarios = [s for s in HELD_OUT if scenario_ids is None or s.id in scenario_ids]
+    rows, _ = evaluate([agent], [base], scenarios)
+    goal = summarize(rows, base)["goal"][agent.name]
+    return {
+        "heldout_iae_ratio": goal["iae_ratio"],
+        "heldout_rmsd_ratio": goal["rmsd_ratio"],
+        "heldout_severity_prone_ratio": goal["severity_prone_ratio"],
+        "heldout_goal_met": goal["met"],
+    }
+
+
+def run_training_sweep(
+    spec: SweepSpec,
+    out: Path,
+    backend: Backend,
+    heldout: str = "best",
+    heldout_scenarios: Sequence[str] | None = None,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Run the trials on Ray Tune, then write the summary table and export the best model.
+
+    Returns:
+        The summary (as ``OUT/summary.json``): the trial rows, the best trial, the files.
+    """
+    from ray import tune
+
+    out = out.resolve()
+    runs_dir = out / "runs"
+    runs_dir.mkdir(parents=True, exist_ok=True)
+    started = time.perf_counter()
+    search = None
+    if spec.sampler == "optuna":
+        from ray.tune.search.optuna import OptunaSearch
+
+        search = OptunaSearch(metric=METRIC, mode="min", seed=spec.seeds[0])
+    settings = {**spec.settings}
+    if spec.sampler == "optuna":
+        settings["seed"] = spec.seeds[0]
+    with ray_session(backend):
+        tuner = tune.Tuner(
+            tune.with_resources(train_trial, {"cpu": 1}),
+            param_space={**_space(spec), "settings": settings, "runs_dir": str(runs_dir)},
+            tune_config=tune.TuneConfig(
+                metric=METRIC,
+                mode="min",
+                scheduler=_scheduler(spec),
+                search_alg=search,
+                num_samples=spec.num_samples,
+                max_concurrent_trials=backend.workers,
+            ),
+            run_config=tune.RunConfig(
+                name="tune", storage_path=str(out), verbose=1 if progress else 0
+            ),
+        )
+        grid = tuner.fit()
+        rows = [_trial_row(result, spec, runs_dir) for result in grid]
+    scored = [r for r in rows if r["best_iae_ratio"] is not None and r["run_dir"]]
+    best = min(scored, key=lambda r: r["best_iae_ratio"]) if scored else None
+    summary: dict[str, Any] = {"trials": rows, "best": None, "metric": METRIC}
+    if best is not None:
+        from agents.policy import load_policy
+
+        model = _model_folder(Path(best["run_dir"]))
+        if model is not None:
+            policy = load_policy(model)
+            policy.metadata["source"] = (
+                f"drill-gym sweep-train: trial {best['trial']} (lowest validation {METRIC}), {model}"
+            )
+            target = out / "best_model"
+            if target.exists():
+                shutil.rmtree(target)
+            summary["best"] = {"trial": best["trial"], "model": str(policy.save(target))}
+    for row in rows:
+        evaluate_it = heldout == "all" or (heldout == "best" and best is not None and row is best)
+        model = _model_folder(Path(row["run_dir"])) if row["run_dir"] else None
+        if evaluate_it and model is not None:
+            row.update(_heldout(model, heldout_scenarios))
+    keys = list(dict.fromkeys(k for row in rows for k in row))
+    for row in rows:
+        for key in keys:
+            row.setdefault(key, None)
+    summary["files"] = [
+        str(write_csv(rows, out / "trials.csv", keys)),
+        str(_write_markdown(rows, spec, out / "trials.md")),
+    ]
+    summary["wall_time_s"] = round(time.perf_counter() - started, 1)
+    write_json(summary, out / "summary.json", indent=2)
+    return summary
+
+
+def _write_markdown(rows: Sequence[Mapping[str, Any]], spec: SweepSpec, path: Path) -> Path:
+    columns = [Column("trial", "trial", align="left"), Column("seed", "seed")]
+    columns += [Column(n, n, "{}") for n in (*spec.grid, *spec.samples)]
+    columns += [
+        Column("validations", "validations"),
+        Column("timesteps", "decisions", "{:,}"),
+        Column("best_iae_ratio", "best val. IAE ratio", "{:.3f}"),
+        Column("last_iae_ratio", "last val. IAE ratio", "{:.3f}"),
+        Column("last_rmsd_ratio", "last val. RMSD ratio", "{:.3f}"),
+        Column("stopped_early", "stopped early", "{}"),
+        Column("heldout_iae_ratio", "held-out IAE ratio", "{:.3f}"),
+        Column("heldout_rmsd_ratio", "held-out RMSD ratio", "{:.3f}"),
+    ]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(markdown_table(rows, columns) + "\n")
+    return path
+
+
+# ---------------------------------------------------------------------------- command line
+DESCRIPTION: Final = """\
+Multi-seed training and hyperparameter search of the residual PPO agent on Ray Tune: every
+trial is a drill-gym train run in its own folder OUT/runs/TRIAL__seedS (TensorBoard logs,
+checkpoints without pickle, validation.csv, best/, model/); its validations (IAE, RMSD and
+severity relative to the base controller) are reported to Tune, whose scheduler stops the
+weak trials early on the validation IAE ratio. Afterwards: trials.csv and trials.md (one row
+per trial), best_model/ (the best trial's model, in the project's format) and its held-out
+scores (drill-gym evaluate's scenarios), summary.json. Needs the rl and scale extras.
+
+examples:
+  drill-gym sweep-train --seeds 1 2 3 --workers 2            # three seeds, small budget
+  drill-gym sweep-train --seeds 1 2 --grid learning_rate=1e-4,3e-4 --workers 2
+  drill-gym sweep-train --sampler optuna --samples 8 \\
+      --sample learning_rate=loguniform:1e-5:1e-3 --sample ent_coef=uniform:0:0.01
+  drill-gym sweep-train --seeds 1 2 3 --set total_timesteps=400000 validate_every=50000
+"""
+
+
+def _parser() -> ArgumentParser:
+    p = ArgumentParser(prog="drill-gym sweep-train", description=DESCRIPTION)
+    p.add_argument(
+        "--seeds",
+        nargs="+",
+        type=number_type(0, 2**32 - 1, integer=True),
+        default=[1],
+        metavar="S",
+        help="training seeds, one trial (per grid point and sample) each",
+    )
+    p.add_argument(
+        "--grid",
+        action="append",
+        default=[],
+        metavar="NAME=V1,V2",
+        help="a training setting's values, every combination a trial (repeatable)",
+    )
+    p.add_argument(
+        "--sample",
+        action="append",
+        default=[],
+        metavar="NAME=KIND:LOW:HIGH",
+        help="a training setting drawn per trial: uniform, loguniform or int with LOW:HIGH, or "
+        "choice:A,B (repeatable)",
+    )
+    p.add_argument(
+        "--samples",
+        type=number_type(1, 10_000, integer=True),
+        default=1,
+        metavar="N",
+        help="draws of the --sample settings per grid point (Tune's num_samples)",
+    )
+    p.add_argument(
+        "--sampler",
+        choices=("random", "optuna"),
+        default="random",
+        help="how --sample settings are drawn: at random, or by Optuna (TPE) through Tune's "
+        "OptunaSearch",
+    )
+    p.add_argument(
+        "--scheduler",
+        choices=("asha", "median", "none"),
+        default="asha",
+        help="early stopping on the validation IAE ratio: ASHA, the median stopping rule, none",
+    )
+    p.add_argument(
+        "--grace-period",
+        type=number_type(1, 10_000, integer=True),
+        default=2,
+        metavar="N",
+        help="validations every trial reports before the scheduler may stop it (the first "
+        "ones of a residual agent are close to the base controller's and say little)",
+    )
+    p.add_argument(
+        "--set",
+        nargs="+",
+        default=[],
+        metavar="NAME=VALUE",
+        help="fixed training settings of every trial (defaults: "
+        + ", ".join(f"{k}={v}" for k, v in SWEEP_DEFAULTS.items())
+        + ", the rest as drill-gym train)",
+    )
+    p.add_argument(
+        "--heldout",
+        choices=("best", "all", "none"),
+        default="best",
+        help="score the best trial's model, every trial's or none on the held-out scenarios",
+    )
+    from experiments.evaluate import HELD_OUT
+
+    ids = [s.id for s in HELD_OUT]
+    p.add_argument(
+        "--heldout-scenarios",
+        nargs="+",
+        default=None,
+        type=names_type(lambda: ids, "scenario"),
+        metavar="ID",
+        help=f"only these held-out scenarios, {ids[0]} to {ids[-1]} (default: all 20)",
+    )
+    p.add_argument(
+        "--workers",
+        type=number_type(1, 4096, integer=True),
+        default=2,
+        metavar="N",
+        help="trials at a time (CPUs of the local Ray cluster)",
+    )
+    p.add_argument(
+        "--address",
+        default=None,
+        metavar="ADDR",
+        help=f"join the Ray cluster at ADDR (default: ${ADDRESS_VARIABLE}, else a local one)",
+    )
+    p.add_argument(
+        "--out", type=Path, default=Path("results/sweep-train"), metavar="DIR", help="output folder"
+    )
+    p.add_argument("--no-progress", action="store_true", help="no Tune progress output")
+    return p
+
+
+def spec_from_args(parser: ArgumentParser, args: Any) -> SweepSpec:
+    """The :class:`SweepSpec` of parsed options; a bad one is a one-line parser error."""
+    try:
+        grid = dict(parse_grid(g) for g in args.grid)
+        samples = dict(parse_sample(s) for s in args.sample)
+        fields = _fields()
+        explicit: dict[str, Any] = {}
+        for text in args.set:
+            name, value = _field(text, "--set")
+            explicit[name] = _value(name, value, fields[name])
+        settings = {k: v for k, v in SWEEP_DEFAULTS.items() if k not in (*grid, *samples)}
+        settings.update(explicit)
+        return SweepSpec(
+            seeds=tuple(dict.fromkeys(args.seeds)),
+            grid=grid,
+            samples=samples,
+            num_samples=args.samples,
+            sampler=args.sampler,
+            scheduler=args.scheduler,
+            settings=settings,
+            grace_period=args.grace_period,
+        )
+    except (ValueError, TypeError) as err:
+        parser.error(str(err))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``drill-gym sweep-train``; returns the exit code."""
+    parser = _parser()
+    args = parser.parse_args(list(argv) if argv is not None else None)
+    spec = spec_from_args(parser, args)
+    backend = Backend(workers=args.workers, use_ray=True, address=args.address)
+    print(
+        f"sweep-train: {spec.trials()} trials ({len(spec.seeds)} seeds"
+        + "".join(f" x {len(v)} {k}" for k, v in spec.grid.items())
+        + (f" x {spec.num_samples} {spec.sampler} samples" if spec.num_samples > 1 else "")
+        + f"), {spec.validations()} validations each, scheduler {spec.scheduler}, on "
+        f"{backend.describe()}",
+        flush=True,
+    )
+    summary = run_training_sweep(
+        spec,
+        args.out,
+        backend,
+        heldout=args.heldout,
+        heldout_scenarios=args.heldout_scenarios,
+        progress=not args.no_progress,
+    )
+    print((Path(args.out) / "trials.md").read_text())
+    best = summary["best"]
+    print(
+        (
+            f"best trial {best['trial']}: model exported to {best['model']}; "
+            if best
+            else "no trial reported a validation; "
+        )
+        + f"summary in {Path(args.out) / 'summary.json'} ({summary['wall_time_s']} s)"
+    )
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

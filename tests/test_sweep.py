@@ -1,0 +1,314 @@
+"""The sweep runner on its serial path (no Ray needed): tasks and items, the results file,
+resuming an interrupted sweep, and bad sweep specs failing on one line before anything runs."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from experiments.cli import main as cli_main
+from experiments.stick_slip_map import compute_map
+from experiments.sweep import Backend, Task, TaskResult, read_results, run_sweep, spec_hash
+from experiments.sweep_studies import CompareStudy, EvaluateStudy, MapStudy
+
+WOBS = (60e3, 110e3, 160e3)
+SPEEDS = (3.0, 7.0)
+SHORT: dict[str, Any] = {"duration_s": 4.0, "window_s": 2.0, "noise_std_rad_s": 0.1, "seed": 5}
+
+
+def small_map(task_cells: int = 2, controllers: tuple[str, ...] = ("stiff_pi",)) -> MapStudy:
+    return MapStudy(controllers, WOBS, SPEEDS, task_cells=task_cells, **SHORT)
+
+
+# ----------------------------------------------------------------------- tasks and items
+def test_map_study_splits_rows_into_tasks_and_covers_every_item() -> None:
+    study = small_map(task_cells=4, controllers=("stiff_pi", "soft_speed"))
+    assert study.items() == [f"{c}/row{r}" for c in ("stiff_pi", "soft_speed") for r in range(3)]
+    tasks = study.tasks(study.items())
+    assert [t.items for t in tasks] == [
+        ("stiff_pi/row0", "stiff_pi/row1"),
+        ("stiff_pi/row2",),
+        ("soft_speed/row0", "soft_speed/row1"),
+        ("soft_speed/row2",),
+    ]
+    # Missing rows that are not consecutive make separate tasks (a task is one compute_map).
+    gaps = study.tasks(["stiff_pi/row0", "stiff_pi/row2"])
+    assert [t.kwargs["rows"] for t in gaps] == [[0], [2]]
+
+
+def test_serial_sweep_equals_one_map_over_the_whole_grid() -> None:
+    """Row blocks keep every cell's reset seed (seed + cell index): the map is the same as one
+    compute_map over the grid, whatever the task size."""
+    whole = compute_map("stiff_pi", list(WOBS), list(SPEEDS), progress=False, **SHORT)
+    for task_cells in (1, 2, 6):
+        study = small_map(task_cells)
+        result = study.maps(run_sweep(study, progress=False))[0]
+        np.testing.assert_array_equal(result.severity, whole.severity)
+        np.testing.assert_array_equal(result.stuck_fraction, whole.stuck_fraction)
+        assert result.window_s == whole.window_s and result.duration_s == whole.duration_s
+
+
+# --------------------------------------------------------------------------- results file
+def test_results_file_has_a_header_and_one_line_per_task(tmp_path: Path) -> None:
+    study = small_map(task_cells=2)
+    path = tmp_path / "map.jsonl"
+    outcome = run_sweep(study, results_path=path, progress=False)
+    lines = [json.loads(line) for line in path.read_text().splitlines()]
+    assert lines[0]["sweep"] == "map" and lines[0]["format"] == 1
+    assert lines[0]["spec_hash"] == spec_hash("map", study.spec())
+    assert [entry["task"] for entry in lines[1:]] == outcome.ran
+    items = [k for entry in lines[1:] for k in entry["items"]]
+    assert sorted(items) == sorted(study.items())  # every item once
+    assert read_results(path, "map", study.spec()) == outcome.records
+
+
+def test_resume_runs_only_the_missing_items_and_gives_the_clean_table(tmp_path: Path) -> None:
+    """An interrupted sweep (two of three rows written, the third cut mid-line) resumes: only
+    the missing row runs, with another task size even, and the map equals a clean run."""
+    clean_study = small_map(task_cells=2)
+    clean = clean_study.maps(run_sweep(clean_study, progress=False))[0]
+    one_row = small_map(task_cells=1)
+    path = tmp_path / "map.jsonl"
+    run_sweep(one_row, results_path=path, progress=False)
+    lines = path.read_text().splitlines(keepends=True)
+    assert len(lines) == 4  # header + one line per row
+    path.write_text("".join(lines[:3]) + lines[3][:25])  # the last line cut short
+    resumed = run_sweep(small_map(task_cells=6), results_path=path, resume=True, progress=False)
+    assert resumed.loaded == 2 and resumed.ran == ["stiff_pi/rows2-2"]
+    result = small_map().maps(resumed)[0]
+    np.testing.assert_array_equal(result.severity, clean.severity)
+    np.testing.assert_array_equal(result.stuck_fraction, clean.stuck_fraction)
+    # The file is whole again: the cut line was dropped, the new one appended.
+    entries = [json.loads(line) for line in path.read_text().splitlines()]
+    assert [e["task"] for e in entries[1:]] == [
+        "stiff_pi/rows0-0",
+        "stiff_pi/rows1-1",
+        "stiff_pi/rows2-2",
+    ]
+    # Nothing left to run: a second resume runs no task and gives the same map.
+    again = run_sweep(small_map(), results_path=path, resume=True, progress=False)
+    assert again.ran == [] and again.loaded == 3
+    np.testing.assert_array_equal(small_map().maps(again)[0].severity, clean.severity)
+
+
+def test_resume_refuses_the_results_of_another_spec(tmp_path: Path) -> None:
+    path = tmp_path / "map.jsonl"
+    run_sweep(small_map(), results_path=path, progress=False)
+    other = MapStudy(("stiff_pi",), WOBS, SPEEDS, **{**SHORT, "seed": 6})
+    with pytest.raises(
+        ValueError, match=r"was written by another sweep \('map' with other settings\)"
+    ):
+        run_sweep(other, results_path=path, resume=True, progress=False)
+    path.write_text("not json\n")
+    with pytest.raises(ValueError, match=r"does not start with a sweep header"):
+        run_sweep(small_map(), results_path=path, resume=True, progress=False)
+
+
+def test_without_resume_the_results_file_starts_again(tmp_path: Path) -> None:
+    path = tmp_path / "map.jsonl"
+    run_sweep(small_map(), results_path=path, progress=False)
+    outcome = run_sweep(small_map(task_cells=6), results_path=path, progress=False)
+    assert outcome.loaded == 0 and len(path.read_text().splitlines()) == 2
+
+
+def echo_task(keys: list[str], value: float) -> TaskResult:
+    return TaskResult({k: {"value": value, "nan": float("nan")} for k in keys})
+
+
+class EchoStudy:
+    name = "echo"
+
+    def spec(self) -> dict[str, Any]:
+        return {"n": 3}
+
+    def items(self) -> list[str]:
+        return ["a", "b", "c"]
+
+    def tasks(self, missing: list[str]) -> list[Task]:
+        return [
+            Task(k, echo_task, {"keys": [k], "value": 0.1 + i}, (k,)) for i, k in enumerate(missing)
+        ]
+
+
+def test_records_read_back_as_from_json_on_every_path(tmp_path: Path) -> None:
+    """A record is what its JSON says (NaN as null), written or not, so a resumed sweep
+    assembles the same numbers as a fresh one."""
+    fresh = run_sweep(EchoStudy(), progress=False)
+    assert fresh.records["a"] == {"value": 0.1, "nan": None}
+    written = run_sweep(EchoStudy(), results_path=tmp_path / "e.jsonl", progress=False)
+    assert written.records == fresh.records
+
+
+# -------------------------------------------------------------------------- bad sweep specs
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"controllers": ()}, r"controllers = \[\] is empty"),
+        ({"controllers": ("pid",)}, r"unknown controller 'pid': valid names are .*stiff_pi"),
+        ({"wob_n": ()}, r"wob_n = \[\] is empty: the grid needs at least one value"),
+        ({"task_cells": 0}, r"task_cells = 0 is out of range: allowed an integer >= 1"),
+    ],
+)
+def test_bad_map_study(kwargs: dict[str, Any], message: str) -> None:
+    args: dict[str, Any] = {
+        "controllers": ("stiff_pi",),
+        "wob_n": WOBS,
+        "reference_speed_rad_s": SPEEDS,
+    }
+    args.update(kwargs)
+    with pytest.raises(ValueError, match=message):
+        MapStudy(**args)
+
+
+def test_bad_compare_and_evaluate_studies() -> None:
+    with pytest.raises(ValueError, match=r"conditions = \[\] is empty"):
+        CompareStudy(("csmc",), (), (0.0,), duration_s=2.0)
+    with pytest.raises(ValueError, match=r"unknown controller 'pid'"):
+        CompareStudy(("pid",), ("nominal",), (0.0,), duration_s=2.0)
+    with pytest.raises(ValueError, match=r"scenarios = \[\] is empty"):
+        EvaluateStudy((), ("proposed",), ())
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"workers": 0}, r"workers = 0 is out of range: allowed an integer >= 1"),
+        ({"workers": 1.5}, r"workers = 1.5 is out of range"),
+        ({"max_retries": -1}, r"max_retries = -1 is out of range: allowed an integer >= 0"),
+        ({"address": " "}, r"address = '' is not valid"),
+    ],
+)
+def test_bad_backend(kwargs: dict[str, Any], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        Backend(**kwargs)
+
+
+def test_resume_needs_a_results_file() -> None:
+    with pytest.raises(ValueError, match=r"resume needs a results file \(--results\)"):
+        run_sweep(small_map(), resume=True, progress=False)
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["map", "--workers", "0"], r"drill-gym map: error: argument --workers: 0 is out of range: allowed \[1, 4096\]"),
+        (["map", "--task-size", "0"], r"argument --task-size: 0 is out of range"),
+        (["map", "--max-retries", "-1"], r"argument --max-retries: -1 is out of range"),
+        (["map", "--controllers", "pid", "--workers", "2"], r"argument --controllers: unknown controller 'pid'"),
+        (["map", "--wob-n", "0", "--workers", "2"], r"argument --wob-n: 0 is out of range"),
+        (["compare", "--workers", "0"], r"drill-gym compare: error: argument --workers: 0 is out of range"),
+        (["compare", "--controllers", "nope", "--ray"], r"argument --controllers: unknown controller 'nope'"),
+        (["evaluate", "--workers", "-2"], r"drill-gym evaluate: error: argument --workers: -2 is out of range"),
+        (["probability-map", "--draws", "-3"], r"drill-gym probability-map: error: argument --draws: -3 is out of range: allowed \[1, 100000\]"),
+        (["probability-map", "--draws", "0"], r"argument --draws: 0 is out of range"),
+        (["probability-map", "--controllers", "pid"], r"argument --controllers: unknown controller 'pid'"),
+        (["probability-map", "--workers", "0"], r"argument --workers: 0 is out of range"),
+        (["probability-map", "--speed-min", "5", "--speed-max", "5"], r"--speed-min = --speed-max = 5.0: the range is empty"),
+        (["probability-map", "--rows", "depth"], r"argument --rows: depth needs the distributed string: add --env DrillStringField-v0"),
+        (["probability-map", "--parameters", "field_2500m"], r"argument --parameters: 'field_2500m' is not a preset of DrillString-v0"),
+        (["probability-map", "--delta-min", "0.5", "--delta-max", "0.1"], r"argument --delta-max: 0.1 is below --delta-min = 0.5"),
+        (["probability-map", "--env", "CartPole-v1"], r"argument --env: invalid choice: 'CartPole-v1'"),
+    ],
+)  # fmt: skip
+def test_bad_sweep_spec_is_one_line_and_exit_code_2(
+    argv: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert cli_main([*argv, "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.endswith("--help)\n"), err
+    assert re.search(message, err), err
+    assert not (tmp_path / "out").exists()  # nothing started
+
+
+def test_resume_of_another_spec_on_the_command_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    base = ["map", "--wob-n", "2", "--speed-n", "2", "--duration", "2", "--window", "1"]
+    base += ["--no-plots", "--no-progress", "--out", str(tmp_path)]
+    assert cli_main([*base, "--results", str(tmp_path / "r.jsonl")]) == 0
+    capsys.readouterr()
+    assert cli_main([*base, "--seed", "3", "--resume", "--results", str(tmp_path / "r.jsonl")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "was written by another sweep ('map'" in err, err
+
+
+def test_map_command_resumes_to_the_same_csv(tmp_path: Path) -> None:
+    base = ["map", "--controllers", "soft_speed", "--wob-n", "3", "--speed-n", "2"]
+    base += ["--duration", "2", "--window", "1", "--noise", "0.1", "--no-plots", "--no-progress"]
+    assert cli_main([*base, "--out", str(tmp_path / "plain")]) == 0
+    path = tmp_path / "swept" / "stick_slip_map.jsonl"
+    assert cli_main([*base, "--out", str(tmp_path / "swept"), "--task-size", "2", "--resume"]) == 0
+    lines = path.read_text().splitlines(keepends=True)
+    path.write_text("".join(lines[:2]))  # the first task only
+    assert cli_main([*base, "--out", str(tmp_path / "swept"), "--resume"]) == 0
+    name = "stick_slip_map_soft_speed.csv"
+    assert (tmp_path / "swept" / name).read_text() == (tmp_path / "plain" / name).read_text()
+
+
+def test_bad_map_durations_fail_before_anything_runs() -> None:
+    with pytest.raises(
+        ValueError, match=r"window_s = 40.0 is out of range: allowed \(0, duration_s = 1\]"
+    ):
+        MapStudy(("stiff_pi",), WOBS, SPEEDS, duration_s=1.0)
+    with pytest.raises(ValueError, match=r"duration_s = 1.25 is out of range"):
+        MapStudy(("stiff_pi",), WOBS, SPEEDS, duration_s=1.25, window_s=1.0)
+
+
+def test_a_sweep_on_ray_without_the_scale_extra_is_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Without Ray installed (simulated: its import fails), --workers 2 says which extra."""
+    import builtins
+
+    real_import = builtins.__import__
+
+    def no_ray(name: str, *args: Any, **kwargs: Any) -> Any:
+        if name == "ray" or name.startswith("ray."):
+            raise ModuleNotFoundError("No module named 'ray'", name="ray")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_ray)
+    argv = ["map", "--wob-n", "1", "--speed-n", "1", "--duration", "1", "--window", "1"]
+    assert cli_main([*argv, "--workers", "2", "--no-progress", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err == (
+        "drill-gym map: error: needs the package 'ray', which is not installed (the scale "
+        "extra has Ray and Optuna: pip install -e '.[scale]')\n"
+    )
+    assert not tmp_path.exists() or not any(tmp_path.iterdir())  # nothing written
+
+
+def test_ray_is_imported_only_when_a_sweep_runs_on_it() -> None:
+    """The core, the controllers and the agents never import Ray; the studies import it only
+    inside the functions that run on it."""
+    import ast
+    import subprocess
+    import sys
+    import tempfile
+
+    root = Path(__file__).resolve().parents[1]
+    for package in ("drill_env", "baselines", "agents"):
+        for path in (root / package).rglob("*.py"):
+            tree = ast.parse(path.read_text())
+            names = [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]
+            names += [n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)]
+            assert not [n for n in names if n.split(".")[0] in ("ray", "optuna")], path
+    code = (
+        "import sys\n"
+        "import experiments.cli, experiments.sweep, experiments.sweep_studies\n"
+        "import experiments.probability_map, experiments.sweep_train, experiments.stick_slip_map\n"
+        "from experiments.stick_slip_map import main\n"
+        "main(['--wob-n', '1', '--speed-n', '1', '--duration', '1', '--window', '1', '--no-plots',"
+        " '--no-progress', '--out', sys.argv[1], '--resume'])\n"
+        "print(sorted(m for m in ('ray', 'optuna') if m in sys.modules))\n"
+    )
+    with tempfile.TemporaryDirectory() as out:
+        result = subprocess.run(
+            [sys.executable, "-c", code, out], cwd=root, capture_output=True, text=True, check=True
+        )
+    assert result.stdout.strip().splitlines()[-1] == "[]"
