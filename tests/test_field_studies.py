@@ -244,15 +244,39 @@ def test_field_evaluate_tiny() -> None:
         ("f09", "proposed (state)"),
     ]
     # deep_5000m's pipe impedance (296 N m s/rad) is below the drive's own damping (425):
-    # soft_speed cannot be matched there, and its row says so instead of holding metrics.
-    assert rows[2]["iae"] is None and "impedance_factor" in rows[2]["note"]
-    assert rows[0]["note"] == "" and rows[0]["iae"] > 0
+    # soft_speed runs there with kp = 0, its closest match.
+    assert all(r["note"] == "" and r["iae"] > 0 for r in rows)
     assert set(traces) == {("f01", "proposed (state)"), ("f09", "proposed (state)")}
     summary = evaluate.summarize(rows, "proposed (state)")
-    assert summary["means"]["soft_speed (surface)"]["runs"] == 1.0
-    assert summary["means"]["soft_speed (surface)"]["iae"] == rows[0]["iae"]
+    assert "runs" not in summary["means"]["soft_speed (surface)"]  # every scenario ran
     table = evaluate.per_scenario_table(rows, list(summary["means"]))
-    assert "| n/a | n/a |" in table and "deep_5000m at 3,800 m" in table
+    assert "deep_5000m at 3,800 m" in table and "n/a" not in table
+
+
+def test_field_evaluate_keeps_a_row_for_a_controller_that_cannot_be_made(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A controller whose tuning has no solution on a string gets a row without metrics that
+    says why, and the tables show n/a for it."""
+    run = evaluate.run_scenario
+
+    def refuse_on_f09(scenario, policy, kwargs, env_id=evaluate.PAPER_ENV):  # type: ignore[no-untyped-def]
+        if scenario.id == "f09" and kwargs.get("base_controller") == "soft_speed":
+            raise ValueError("impedance_factor = 1.0 is out of range for this model")
+        return run(scenario, policy, kwargs, env_id)
+
+    monkeypatch.setattr(evaluate, "run_scenario", refuse_on_f09)
+    scenarios = [s for s in evaluate.FIELD_HELD_OUT if s.id in ("f01", "f09")]
+    rows, _ = evaluate.evaluate(
+        [], ["soft_speed"], scenarios, env_id=FIELD, observations=["surface"]
+    )
+    mine = {r["scenario"]: r for r in rows if r["controller"] == "soft_speed"}
+    assert mine["f09"]["iae"] is None and "impedance_factor" in mine["f09"]["note"]
+    assert mine["f01"]["note"] == "" and mine["f01"]["iae"] > 0
+    summary = evaluate.summarize(rows, "proposed (state)")
+    assert summary["means"]["soft_speed (surface)"]["runs"] == 1.0
+    assert summary["means"]["soft_speed (surface)"]["iae"] == mine["f01"]["iae"]
+    assert "| n/a | n/a |" in evaluate.per_scenario_table(rows, list(summary["means"]))
 
 
 def test_field_evaluate_command_leaves_out_models_of_the_other_env(
