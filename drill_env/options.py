@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any, ClassVar, Final
 
 import numpy as np
@@ -59,9 +59,12 @@ from drill_env.validation import (
 __all__ = [
     "FIELD_MAX_TORQUE_NM",
     "PER_EPISODE_KEYWORDS",
+    "REALISM_KEYWORDS",
+    "REALISM_LEVELS",
     "EnvConfig",
     "FieldEnvConfig",
     "episode_config",
+    "realism_keywords",
     "steps_of",
 ]
 
@@ -92,6 +95,23 @@ FIELD_ONLY: Final = ("measured_depth_m", "controller_parameters")
 """Keywords of ``DrillStringField-v0`` only."""
 LUMPED_ONLY: Final = ("uncertainty", "uncertainty_reading")
 """Keywords of ``DrillString-v0`` only (the paper's parametric uncertainty of the 4-DOF plant)."""
+
+REALISM_KEYWORDS: Final = (
+    "observation",
+    "torque_noise_std_nm",
+    "sensor_period_s",
+    "telemetry_period_s",
+    "telemetry_delay_s",
+    "telemetry_noise_std_rad_s",
+    "actuator_dead_time_s",
+    "actuator_lag_s",
+    "torque_rate_limit_nm_per_s",
+)
+"""The keywords of the measurement channel and the actuator: what a controller can see of the
+string and how the top drive responds."""
+
+REALISM_LEVELS: Final = ("ideal", "wired_pipe", "field", "surface_only")
+"""Named settings of :data:`REALISM_KEYWORDS` (:func:`realism_keywords`)."""
 
 MAX_DEAD_TIME_S: Final = 2.0
 """Longest accepted actuator dead time, s."""
@@ -425,3 +445,30 @@ class FieldEnvConfig(EnvConfig):
             )
         super().__post_init__()
         check_step_bound(self.string(), PLANT_DT_S)
+
+
+def realism_keywords(level: str) -> dict[str, Any]:
+    """The :data:`REALISM_KEYWORDS` of a named level of realism, for either env.
+
+    * ``ideal``: the full state at every plant step and an ideal actuator (the defaults of
+      ``DrillString-v0``);
+    * ``field``: surface signals, mud-pulse telemetry and a rig's top drive (the defaults of
+      ``DrillStringField-v0``, docs/specification.md section 18);
+    * ``wired_pipe``: ``field`` with wired-drill-pipe telemetry (a value every 0.05 s, 0.02 s
+      late);
+    * ``surface_only``: ``field`` with no downhole data.
+
+    Raises:
+        ValueError: for an unknown level.
+    """
+    if level not in REALISM_LEVELS:
+        raise ValueError(
+            f"realism = {level!r} is not a known level: allowed {list(REALISM_LEVELS)}"
+        )
+    source = EnvConfig if level == "ideal" else FieldEnvConfig
+    defaults = {f.name: f.default for f in fields(source) if f.name in REALISM_KEYWORDS}
+    if level == "wired_pipe":
+        defaults.update(telemetry_period_s=0.05, telemetry_delay_s=0.02)
+    elif level == "surface_only":
+        defaults["telemetry_period_s"] = None
+    return {k: defaults[k] for k in REALISM_KEYWORDS}

@@ -62,3 +62,26 @@ def test_per_episode_options() -> None:
 def test_unknown_keywords_list_the_valid_ones() -> None:
     with pytest.raises(TypeError, match=r"unrecognized keyword\(s\): dt; valid keywords: "):
         EnvConfig.from_kwargs({"dt": 0.1})
+
+
+def test_realism_levels_are_the_defaults_of_the_two_envs() -> None:
+    from drill_env.options import (
+        REALISM_KEYWORDS,
+        REALISM_LEVELS,
+        EnvConfig,
+        FieldEnvConfig,
+        realism_keywords,
+    )
+
+    ideal, field_level = realism_keywords("ideal"), realism_keywords("field")
+    assert list(ideal) == list(REALISM_KEYWORDS) == list(field_level)
+    assert all(ideal[k] == getattr(EnvConfig(), k) for k in REALISM_KEYWORDS)
+    assert all(field_level[k] == getattr(FieldEnvConfig(), k) for k in REALISM_KEYWORDS)
+    assert realism_keywords("surface_only")["telemetry_period_s"] is None
+    wired = realism_keywords("wired_pipe")
+    assert wired["telemetry_period_s"] < 0.1 and wired["observation"] == "surface"
+    for level in REALISM_LEVELS:  # every level makes a valid env of either kind
+        EnvConfig(**realism_keywords(level))
+        FieldEnvConfig(**realism_keywords(level))
+    with pytest.raises(ValueError, match=r"realism = 'lab' is not a known level: allowed"):
+        realism_keywords("lab")
