@@ -40,6 +40,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import logging
 import math
 import os
 import sys
@@ -421,13 +422,13 @@ def ray_session(backend: Backend) -> Iterator[Any]:
     runtime_env = {"env_vars": dict(WORKER_ENV)}
     address = backend.address or os.environ.get(ADDRESS_VARIABLE) or None
     if address:
-        ray.init(address=address, runtime_env=runtime_env, logging_level="WARNING")
+        ray.init(address=address, runtime_env=runtime_env, logging_level=logging.WARNING)
     else:
         ray.init(
             num_cpus=backend.workers,
             include_dashboard=False,
             runtime_env=runtime_env,
-            logging_level="WARNING",
+            logging_level=logging.WARNING,
         )
     try:
         yield ray

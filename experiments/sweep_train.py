@@ -451,7 +451,7 @@ def run_training_sweep(
             ),
         )
         grid = tuner.fit()
-        rows = [_trial_row(result, spec, runs_dir) for result in grid]
+        rows = [_trial_row(grid[i], spec, runs_dir) for i in range(len(grid))]
     scored = [r for r in rows if r["best_iae_ratio"] is not None and r["run_dir"]]
     best = min(scored, key=lambda r: r["best_iae_ratio"]) if scored else None
     summary: dict[str, Any] = {"trials": rows, "best": None, "metric": METRIC}
