@@ -1,7 +1,10 @@
 """The training configuration of the residual PPO agent, CleanRL style: one flat dataclass,
 a docstring under every field, parsed from the command line by :func:`parse_config`.
 
-The defaults are the shipped agent's settings (``agents/models/residual_ppo``).
+The defaults are the shipped ``DrillString-v0`` agent's settings (``agents/models/residual_ppo``).
+Another env has its own defaults in :data:`ENV_DEFAULTS` (the shipped field agent's,
+``agents/models/field_agent``): :meth:`TrainConfig.for_env` and the command line apply them to
+every field the caller does not set; ``TrainConfig(...)`` itself takes every value as given.
 """
 
 from __future__ import annotations
@@ -18,9 +21,14 @@ import typing
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 __all__ = [
+    "ENV_DEFAULTS",
+    "ENV_IDS",
+    "FIELD_ENV_ID",
+    "MAX_FRAME_STACK",
+    "PAPER_ENV_ID",
     "TrainConfig",
     "config_from_namespace",
     "config_parser",
@@ -28,6 +36,39 @@ __all__ = [
     "parse_config",
     "plain_text",
 ]
+
+
+PAPER_ENV_ID: Final = "DrillString-v0"
+"""The paper's 4-DOF string: the env of the dataclass defaults."""
+FIELD_ENV_ID: Final = "DrillStringField-v0"
+"""The distributed field string with surface sensors, telemetry and a rig's top drive."""
+ENV_IDS: Final = (PAPER_ENV_ID, FIELD_ENV_ID)
+"""The envs ``drill-gym train`` trains on (``--env-id``)."""
+MAX_FRAME_STACK: Final = 256
+"""Most past observations a policy may stack (``--frame-stack``)."""
+
+ENV_DEFAULTS: Final[dict[str, dict[str, Any]]] = {
+    PAPER_ENV_ID: {},
+    FIELD_ENV_ID: {
+        "exp_name": "field_agent",
+        "base_controller": "soft_speed",
+        "observation": "surface",
+        "frame_stack": 16,
+        "control_dt_s": 0.2,
+        "residual_scale_nm": 10_000.0,
+        "noise_std_rad_s": 0.05,
+        "n_steps": 500,
+        "batch_size": 1000,
+        "gamma": 0.99,
+        "total_timesteps": 1_000_000,
+        "validate_every": 100_000,
+        "validation_episodes": 32,
+        "checkpoint_every": 250_000,
+    },
+}
+"""Per-env training defaults: for each env id, the fields whose default differs from the
+dataclass's (``DrillString-v0``'s). Applied by :meth:`TrainConfig.for_env` and the command line
+to the fields the caller did not set."""
 
 
 @dataclass
@@ -85,6 +126,18 @@ class TrainConfig:
     held-out set of ``drill-gym evaluate`` does not use)."""
 
     # ----------------------------------------------------------------- environment
+    env_id: str = PAPER_ENV_ID
+    """The env to train on: ``DrillString-v0`` (the paper's 4-DOF string) or
+    ``DrillStringField-v0`` (the field string: surface signals, mud-pulse telemetry, a rig's top
+    drive). On the command line the settings not given then take that env's defaults."""
+    observation: str = ""
+    """Observation mode of ``DrillStringField-v0`` (``surface``: what a rig measures;
+    ``state``: every node measured); empty: the env's own default. ``DrillString-v0`` models
+    take the empty value."""
+    frame_stack: int = 1
+    """The policy sees its last this many observations, oldest first (zeros before the start
+    of an episode, the history reset at every reset): memory for a partially observed string.
+    1: the current observation only."""
     base_controller: str = "proposed"
     """Base controller under the residual (a registered name); ``none`` trains a from-scratch
     policy that sets the whole top-drive torque."""
@@ -174,6 +227,21 @@ class TrainConfig:
         """The folder of the final model."""
         return Path(self.save_dir) if self.save_dir else self.resolved_run_dir() / "model"
 
+    @classmethod
+    def for_env(cls, env_id: str = PAPER_ENV_ID, **values: Any) -> TrainConfig:
+        """A config for ``env_id``: ``values`` as given, every other field the env's default
+        (:data:`ENV_DEFAULTS`, else the dataclass default).
+
+        Raises:
+            ValueError: an unknown env id or a value out of range.
+            TypeError: an unknown field.
+        """
+        if env_id not in ENV_DEFAULTS:
+            raise ValueError(
+                f"{_option('env_id')} = {env_id!r} is not valid: allowed {', '.join(ENV_IDS)}"
+            )
+        return cls.from_dict({**ENV_DEFAULTS[env_id], **values, "env_id": env_id})
+
     def to_json(self) -> str:
         """The settings as JSON (every field)."""
         return json.dumps(dataclasses.asdict(self), indent=2)
@@ -222,6 +290,22 @@ class TrainConfig:
         _check_number("control_dt_s", self.control_dt_s, 0.0, 10.0, open_low=True)
         _check_number("episode_s", self.episode_s, 0.0, 1e5, open_low=True)
         _check_number("noise_std_rad_s", self.noise_std_rad_s, 0.0, 10.0)
+        _check_int("frame_stack", self.frame_stack, 1, MAX_FRAME_STACK)
+        if self.env_id not in ENV_IDS:
+            raise ValueError(
+                f"{_option('env_id')} = {self.env_id!r} is not valid: allowed {', '.join(ENV_IDS)}"
+            )
+        if self.env_id == PAPER_ENV_ID and self.observation:
+            raise ValueError(
+                f"{_option('observation')} = {self.observation!r} is not valid with "
+                f"{_option('env_id')} {PAPER_ENV_ID}: allowed empty (the observation is set "
+                f"on {FIELD_ENV_ID} only)"
+            )
+        if self.observation not in ("", "state", "surface"):
+            raise ValueError(
+                f"{_option('observation')} = {self.observation!r} is not valid: allowed "
+                "surface, state or empty (the env's default)"
+            )
         if not self.net_arch or any(
             isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 1024
             for n in self.net_arch
@@ -332,7 +416,11 @@ def config_parser(
 ) -> argparse.ArgumentParser:
     """The command-line parser of :class:`TrainConfig`: one ``--field value`` per field
     (``--flag`` alone sets a boolean to true, ``--no-flag`` to false; ``--net-arch 64 64`` for
-    lists), its help the field's docstring in plain text with its default.
+    lists), its help the field's docstring in plain text with its default (and the default of
+    each env that has its own, :data:`ENV_DEFAULTS`).
+
+    The parsed namespace holds only the options given (argparse's ``SUPPRESS`` default), so
+    that :func:`config_from_namespace` can fill in the defaults of the chosen env.
 
     Args:
         prog: The command as typed, for the usage line and messages.
@@ -349,9 +437,18 @@ def config_parser(
         description=plain_text(description, names),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    unset = argparse.SUPPRESS  # an option not given leaves no attribute
     docs = field_docs()
     hints = typing.get_type_hints(TrainConfig)
     defaults = TrainConfig()
+
+    def shown(name: str, value: Any) -> str:
+        text = _show_default(value)
+        for env_id, values in ENV_DEFAULTS.items():
+            if name in values:
+                text += f"; {env_id}: {_show_default(values[name])}"
+        return text
+
     for f in dataclasses.fields(TrainConfig):
         flag = _option(f.name)
         default = getattr(defaults, f.name)
@@ -360,20 +457,22 @@ def config_parser(
         if hint is bool:
             off = "--no-" + flag[2:]
             switch = f"; {off} turns it off" if default else ""
-            help_text = f"{doc} (default: {_show_default(default)}{switch})"
+            help_text = f"{doc} (default: {shown(f.name, default)}{switch})"
             parser.add_argument(
                 flag,
                 dest=f.name,
                 nargs="?",
                 const=True,
-                default=default,
+                default=unset,
                 type=_parse_bool,
                 metavar="true|false",
                 help=help_text.replace("%", "%%"),
             )
-            parser.add_argument(off, dest=f.name, action="store_false", help=argparse.SUPPRESS)
+            parser.add_argument(
+                off, dest=f.name, action="store_false", default=unset, help=argparse.SUPPRESS
+            )
             continue
-        help_text = f"{doc} (default: {_show_default(default)})".replace("%", "%%")
+        help_text = f"{doc} (default: {shown(f.name, default)})".replace("%", "%%")
         metavar = {int: "N", float: "X"}.get(hint, "TEXT")
         if typing.get_origin(hint) is list:
             parser.add_argument(
@@ -381,25 +480,31 @@ def config_parser(
                 dest=f.name,
                 nargs="+",
                 type=int,
-                default=default,
+                default=unset,
                 metavar="SIZE",
                 help=help_text,
             )
+        elif f.name == "env_id":
+            parser.add_argument(  # --env: the name of the studies' option
+                flag, "--env", dest=f.name, choices=ENV_IDS, default=unset, help=help_text
+            )
         else:
             parser.add_argument(
-                flag, dest=f.name, type=hint, default=default, metavar=metavar, help=help_text
+                flag, dest=f.name, type=hint, default=unset, metavar=metavar, help=help_text
             )
     return parser
 
 
 def config_from_namespace(args: argparse.Namespace) -> TrainConfig:
-    """The :class:`TrainConfig` of parsed arguments (other attributes are ignored).
+    """The :class:`TrainConfig` of parsed arguments (other attributes are ignored): the
+    options given, the others the defaults of the chosen env (:meth:`TrainConfig.for_env`).
 
     Raises:
         ValueError: A value out of range (one line naming the option and the allowed range).
     """
     names = {f.name for f in dataclasses.fields(TrainConfig)}
-    return TrainConfig(**{k: v for k, v in vars(args).items() if k in names})
+    given = {k: v for k, v in vars(args).items() if k in names}
+    return TrainConfig.for_env(given.pop("env_id", PAPER_ENV_ID), **given)
 
 
 def parse_config(

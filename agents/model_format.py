@@ -40,6 +40,8 @@ __all__ = [
     "DEFAULT_ENV_ID",
     "ENV_IDS",
     "FIELD_ENV_KEYWORDS",
+    "MAX_FRAME_STACK",
+    "MAX_INPUT_SIZE",
     "NOISE_TYPES",
     "NORM_FILE",
     "POLICY_ENV_KEYWORDS",
@@ -52,6 +54,7 @@ __all__ = [
     "read_npz",
     "read_model_files",
     "split_env_id",
+    "stack_frames",
     "validate_config",
     "write_model_files",
 ]
@@ -88,6 +91,10 @@ observation besides the base controller (default: the env's)."""
 
 MAX_JSON_BYTES: Final = 1_000_000
 MAX_OBSERVATION_SIZE: Final = 1024
+MAX_FRAME_STACK: Final = 256
+"""Most observations a policy may stack (``policy.frame_stack``)."""
+MAX_INPUT_SIZE: Final = 4096
+"""Largest network input, ``observation_size * frame_stack``."""
 MAX_ACTION_SIZE: Final = 16
 MAX_HIDDEN_LAYERS: Final = 8
 MAX_HIDDEN_SIZE: Final = 1024
@@ -294,7 +301,9 @@ class PolicySpec:
     """The architecture of a Gaussian MLP policy (``config.json``, field ``policy``).
 
     The action mean is ``W_k act(... act(W_0 z + b_0) ...) + b_k``, clipped to
-    ``[action_low, action_high]``; ``z`` is the normalised observation.
+    ``[action_low, action_high]``; ``z`` is the normalised network input: the observation, or
+    with ``frame_stack = k > 1`` the last ``k`` observations concatenated, oldest first
+    (:func:`stack_frames`), ``observation_size * k`` numbers.
 
     Attributes:
         observation_size: Length of the observation.
@@ -304,6 +313,7 @@ class PolicySpec:
         action_low: Lower clipping bound per action entry.
         action_high: Upper clipping bound per action entry.
         noise: ``"diagonal"`` or ``"state_dependent"`` (:data:`NOISE_TYPES`).
+        frame_stack: Observations in the network input (1 to :data:`MAX_FRAME_STACK`).
     """
 
     observation_size: int
@@ -313,14 +323,21 @@ class PolicySpec:
     action_low: tuple[float, ...] = (-1.0,)
     action_high: tuple[float, ...] = (1.0,)
     noise: str = "diagonal"
+    frame_stack: int = 1
 
     def __post_init__(self) -> None:
         # The same checks as a config.json (programming errors surface the same way).
         validate_policy_spec(self.to_json(), "PolicySpec", self.observation_size)
 
+    @property
+    def input_size(self) -> int:
+        """Length of the network input: ``observation_size * frame_stack`` (also the length
+        of the normalisation statistics)."""
+        return self.observation_size * self.frame_stack
+
     def layer_sizes(self) -> list[int]:
         """Input, hidden and output sizes."""
-        return [self.observation_size, *self.hidden_sizes, self.action_size]
+        return [self.input_size, *self.hidden_sizes, self.action_size]
 
     def weight_shapes(self) -> dict[str, tuple[int, ...]]:
         """The arrays of ``policy.npz`` and their shapes.
@@ -343,8 +360,9 @@ class PolicySpec:
         return shapes
 
     def to_json(self) -> dict[str, Any]:
-        """The ``policy`` field of config.json."""
-        return {
+        """The ``policy`` field of config.json (``frame_stack`` only when above 1, so a
+        memoryless policy's file is as before)."""
+        out: dict[str, Any] = {
             "type": "gaussian_mlp",
             "hidden_sizes": list(self.hidden_sizes),
             "activation": self.activation,
@@ -353,6 +371,9 @@ class PolicySpec:
             "action_high": [float(x) for x in self.action_high],
             "noise": self.noise,
         }
+        if self.frame_stack != 1:
+            out["frame_stack"] = self.frame_stack
+        return out
 
 
 def validate_policy_spec(data: Any, where: str, observation_size: int) -> PolicySpec:
@@ -361,7 +382,7 @@ def validate_policy_spec(data: Any, where: str, observation_size: int) -> Policy
     f = _Fields(where, data, "policy.")
     f.known(
         ("type", "hidden_sizes", "activation", "action_size", "action_low", "action_high"),
-        ("noise",),
+        ("noise", "frame_stack"),
     )
     f.choice("type", ("gaussian_mlp",))
     hidden = f.data["hidden_sizes"]
@@ -381,6 +402,14 @@ def validate_policy_spec(data: Any, where: str, observation_size: int) -> Policy
     noise = f.choice("noise", NOISE_TYPES) if "noise" in f.data else "diagonal"
     if noise == "state_dependent" and not hidden_sizes:
         f.fail("policy.noise", "= 'state_dependent' needs at least one hidden layer")
+    frame_stack = f.integer("frame_stack", 1, MAX_FRAME_STACK) if "frame_stack" in f.data else 1
+    if observation_size * frame_stack > MAX_INPUT_SIZE:
+        f.fail(
+            "policy.frame_stack",
+            f"= {frame_stack} is out of range: observation_size {observation_size} x "
+            f"frame_stack {frame_stack} = {observation_size * frame_stack} network inputs, "
+            f"allowed at most {MAX_INPUT_SIZE}",
+        )
     spec = object.__new__(PolicySpec)  # skip __post_init__: these values are checked
     for name, value in (
         ("observation_size", observation_size),
@@ -390,6 +419,7 @@ def validate_policy_spec(data: Any, where: str, observation_size: int) -> Policy
         ("action_low", low),
         ("action_high", high),
         ("noise", noise),
+        ("frame_stack", frame_stack),
     ):
         object.__setattr__(spec, name, value)
     return spec
@@ -705,6 +735,56 @@ class ObsNorm:
         }
 
 
+# --------------------------------------------------------------------------- frame stacking
+def stack_frames(
+    history: npt.ArrayLike | None,
+    observation: npt.ArrayLike,
+    episode_start: npt.ArrayLike | None,
+    frame_stack: int,
+) -> npt.NDArray[np.float32]:
+    """The network input after one more observation: the last ``frame_stack`` observations
+    concatenated, oldest first, zeros for the instants before the episode's start.
+
+    This is Stable-Baselines3's ``VecFrameStack`` on a vector of observations (the history
+    shifted left by one observation, the rows that start an episode cleared, the new
+    observation written at the end), so a policy trained behind that wrapper sees at inference
+    exactly what it saw in training.
+
+    Args:
+        history: The previous input, shape ``(n, m * frame_stack)``; ``None`` at the start.
+        observation: The new observations, shape ``(n, m)``.
+        episode_start: Per row, whether the observation is the first of an episode (its
+            history is then cleared), shape ``(n,)``; ``None``: no row starts.
+        frame_stack: Observations kept, ``k >= 1``.
+
+    Returns:
+        The new input, float32, shape ``(n, m * frame_stack)``.
+
+    Raises:
+        ValueError: ``history`` or ``episode_start`` of another shape.
+    """
+    obs = np.asarray(observation, dtype=np.float32)
+    n, m = obs.shape
+    width = m * frame_stack
+    if history is None:
+        stacked = np.zeros((n, width), dtype=np.float32)
+    else:
+        stacked = np.array(history, dtype=np.float32)
+        if stacked.shape != (n, width):
+            raise ValueError(
+                f"state has shape {stacked.shape}: expected ({n}, {width}), the history of "
+                f"{frame_stack} observations of {m} (pass None at the start of an episode)"
+            )
+    stacked = np.roll(stacked, -m, axis=1)
+    if episode_start is not None:
+        start = np.asarray(episode_start, dtype=bool).reshape(-1)
+        if start.shape != (n,):
+            raise ValueError(f"episode_start has {start.size} entries: expected {n}")
+        stacked[start] = 0.0
+    stacked[:, width - m :] = obs
+    return stacked
+
+
 # ------------------------------------------------------------------------------- the network
 class GaussianMlp:
     """The actor of a Gaussian MLP policy in NumPy (float64 arithmetic).
@@ -787,7 +867,7 @@ def read_model_files(folder: Path) -> ModelFiles:
         ValueError: A file breaks the schema (one line naming the file and the field).
     """
     config = validate_config(read_json(folder / CONFIG_FILE), str(folder / CONFIG_FILE))
-    size = config.spec.observation_size
+    size = config.spec.input_size
     norm_file = folder / NORM_FILE
     stats = read_npz(norm_file, ObsNorm.shapes(size), "observation normalisation statistics")
     obs_norm = ObsNorm(

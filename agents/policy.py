@@ -6,7 +6,8 @@ A model folder holds three files that can be read without running any code
 * ``config.json``: ``name``, ``env_kwargs`` (the ``DrillString-v0`` keywords the policy needs:
   base controller, decision period, residual scale, torque limits; optionally ``env_id``,
   ``DrillStringField-v0`` for a model of the field string, with its ``observation``),
-  ``observation_size``, the architecture (``policy``) and the training record;
+  ``observation_size``, the architecture (``policy``, with ``frame_stack`` for a policy that
+  sees its last observations) and the training record;
 * ``policy.npz``: the actor's weights, biases and log standard deviation;
 * ``obs_norm.npz``: the observation normalisation (``mean``, ``var``, ``clip_obs``,
   ``epsilon``: VecNormalize's statistics at the end of training).
@@ -40,6 +41,7 @@ from agents.model_format import (
     read_json,
     read_npz,
     split_env_id,
+    stack_frames,
     validate_config,
     validate_env_kwargs,
     write_model_files,
@@ -88,7 +90,12 @@ class ResidualPolicy:
     """A trained agent: observation normalisation, then a Gaussian MLP, all in NumPy.
 
     ``predict`` follows SB3 (one observation ``(obs_size,)`` or a batch ``(n, obs_size)``;
-    actions ``(1,)`` or ``(n, 1)`` clipped to the action bounds, [-1, 1]). The deterministic
+    actions ``(1,)`` or ``(n, 1)`` clipped to the action bounds, [-1, 1]). A policy with
+    ``spec.frame_stack = k > 1`` sees its last ``k`` observations: the history is the
+    ``state`` of ``predict`` (as for SB3's recurrent policies: pass back the state it returned,
+    ``None`` or ``episode_start=True`` at the start of an episode; ``rollout`` does), built by
+    :func:`agents.model_format.stack_frames` as SB3's ``VecFrameStack`` built it in training.
+    The deterministic
     action is the Gaussian's mean, computed in float64 from the stored weights (the same
     arithmetic as SB3's forward pass, equal to float32 rounding). A stochastic action adds
     Gaussian noise drawn from the policy's own ``np.random.Generator`` (:meth:`seed`), not
@@ -129,9 +136,9 @@ class ResidualPolicy:
         rng: np.random.Generator | None = None,
         env_id: str = DEFAULT_ENV_ID,
     ) -> None:
-        if obs_norm.mean.shape != (spec.observation_size,):
+        if obs_norm.mean.shape != (spec.input_size,):
             raise ValueError(
-                f"obs_norm has shape {obs_norm.mean.shape}: expected ({spec.observation_size},)"
+                f"obs_norm has shape {obs_norm.mean.shape}: expected ({spec.input_size},)"
             )
         self.spec = spec
         self.network = GaussianMlp(spec, weights)
@@ -145,15 +152,20 @@ class ResidualPolicy:
             "observation_size": spec.observation_size,
             "policy": spec.to_json(),
         }
-        self.obs_mean = np.asarray(obs_norm.mean, dtype=np.float64)
+        self.obs_mean = np.asarray(obs_norm.mean, dtype=np.float64)  # (spec.input_size,)
         self.obs_std = np.sqrt(np.asarray(obs_norm.var, dtype=np.float64) + obs_norm.epsilon)
         self.clip_obs = float(obs_norm.clip_obs)
         self._rng = rng if rng is not None else np.random.default_rng()
 
     @property
     def observation_size(self) -> int:
-        """Length of the observations the policy takes."""
+        """Length of the observations the policy takes (one instant's)."""
         return self.spec.observation_size
+
+    @property
+    def frame_stack(self) -> int:
+        """Observations the network sees at once (1: no memory)."""
+        return self.spec.frame_stack
 
     @property
     def weights(self) -> dict[str, npt.NDArray[np.float64]]:
@@ -165,7 +177,8 @@ class ResidualPolicy:
         self._rng = np.random.default_rng(seed)
 
     def normalize(self, observation: npt.ArrayLike) -> npt.NDArray[np.float32]:
-        """Observation(s) as the network sees them: standardised and clipped."""
+        """Network input(s) (the observation, or the stacked history of :meth:`predict`'s
+        state) as the network sees them: standardised and clipped."""
         obs = np.asarray(observation, dtype=np.float64)
         z = np.clip((obs - self.obs_mean) / self.obs_std, -self.clip_obs, self.clip_obs)
         return z.astype(np.float32)
@@ -181,13 +194,16 @@ class ResidualPolicy:
 
         Args:
             observation: Shape ``(observation_size,)`` or ``(n, observation_size)``.
-            state: Returned unchanged (the policy has no memory).
-            episode_start: Ignored.
+            state: Without frame stacking returned unchanged (the policy has no memory); with
+                it the history returned by the previous call, ``(n, input_size)`` float32
+                (``None`` at the start).
+            episode_start: Without frame stacking ignored; with it, per observation whether
+                it starts an episode (its history is cleared), shape ``(n,)``.
             deterministic: The Gaussian's mean; else a sample from the policy's generator.
 
         Returns:
             The action(s), float32, shape ``(action_size,)`` or ``(n, action_size)``, and
-            ``state``.
+            ``state`` (with frame stacking the new history).
         """
         obs = np.asarray(observation, dtype=np.float32)
         if obs.ndim not in (1, 2) or obs.shape[-1] != self.observation_size:
@@ -195,7 +211,13 @@ class ResidualPolicy:
                 f"{self.name} takes observations of shape ({self.observation_size},) or "
                 f"(n, {self.observation_size}), got shape {obs.shape}"
             )
-        z = self.normalize(obs).astype(np.float64)
+        if self.frame_stack > 1:
+            state = stack_frames(
+                state, obs.reshape(-1, obs.shape[-1]), episode_start, self.frame_stack
+            )
+            z = self.normalize(state if obs.ndim == 2 else state[0]).astype(np.float64)
+        else:
+            z = self.normalize(obs).astype(np.float64)
         latent = self.network.latent(z)
         action = self.network.mean_action(latent)
         if not deterministic:
@@ -238,21 +260,31 @@ def policy_from_sb3(
     clip_obs: float = 10.0,
     epsilon: float = 1e-8,
     metadata: Mapping[str, Any] | None = None,
+    frame_stack: int = 1,
+    env_id: str = DEFAULT_ENV_ID,
 ) -> ResidualPolicy:
     """Convert a Stable-Baselines3 PPO model (and VecNormalize statistics) to a
     :class:`ResidualPolicy`: the one conversion from SB3 to the portable format.
 
     The actor must be SB3's plain MLP (``FlattenExtractor``, Linear layers with one tanh or
     ReLU activation, no squashing); the weights are copied as float32. Without normalisation
-    statistics the identity is stored (mean 0, variance 1, epsilon 0, no clipping).
+    statistics the identity is stored (mean 0, variance 1, epsilon 0, no clipping). A model
+    trained behind ``VecFrameStack(n_stack=k)`` (and then ``VecNormalize``) takes
+    ``frame_stack=k``: its input is ``k`` observations of the env.
 
     Raises:
-        ValueError: Another architecture (custom extractor, squashed output, ...).
+        ValueError: Another architecture (custom extractor, squashed output, ...), or an
+            input that is not ``frame_stack`` whole observations.
     """
     import torch as th
 
     policy = model.policy
     size = int(model.observation_space.shape[0])  # type: ignore[index]
+    if frame_stack < 1 or size % frame_stack:
+        raise ValueError(
+            f"frame_stack = {frame_stack!r}: the model takes {size} inputs, not a whole number "
+            "of stacked observations"
+        )
     where = f"cannot convert {type(policy).__name__} of {type(model).__name__}"
     extractor = getattr(
         policy, "pi_features_extractor", getattr(policy, "features_extractor", None)
@@ -301,20 +333,21 @@ def policy_from_sb3(
         weights["log_std"] = array(log_std)
     space = model.action_space
     spec = PolicySpec(
-        observation_size=size,
+        observation_size=size // frame_stack,
         hidden_sizes=tuple(hidden),
         activation=activations.pop() if activations else "tanh",
         action_size=int(action_net.out_features),
         action_low=tuple(float(x) for x in np.asarray(space.low).ravel()),  # type: ignore[attr-defined]
         action_high=tuple(float(x) for x in np.asarray(space.high).ravel()),  # type: ignore[attr-defined]
         noise="state_dependent" if use_sde else "diagonal",
+        frame_stack=frame_stack,
     )
     if obs_mean is None:
         norm = ObsNorm.identity(size)
     else:
         var = np.ones(size) if obs_var is None else np.asarray(obs_var, dtype=np.float64)
         norm = ObsNorm(np.asarray(obs_mean, dtype=np.float64), var, float(clip_obs), float(epsilon))
-    return ResidualPolicy(spec, weights, norm, env_kwargs, name, metadata)
+    return ResidualPolicy(spec, weights, norm, env_kwargs, name, metadata, env_id=env_id)
 
 
 def export_policy(
@@ -328,6 +361,8 @@ def export_policy(
     clip_obs: float = 10.0,
     epsilon: float = 1e-8,
     metadata: Mapping[str, Any] | None = None,
+    frame_stack: int = 1,
+    env_id: str = DEFAULT_ENV_ID,
 ) -> Path:
     """Write an SB3 PPO model and its normalisation statistics as a portable model folder
     (:func:`policy_from_sb3`, then :meth:`ResidualPolicy.save`).
@@ -343,6 +378,8 @@ def export_policy(
         epsilon: Added to the variance.
         metadata: Training-record fields of config.json (``train_config``, ``timesteps``,
             ``selected``, ...; ``docs/model-files.md`` lists them).
+        frame_stack: Observations stacked in the model's input (``VecFrameStack``).
+        env_id: The env the policy is for.
 
     Returns:
         The folder.
@@ -356,6 +393,8 @@ def export_policy(
         clip_obs=clip_obs,
         epsilon=epsilon,
         metadata=metadata,
+        frame_stack=frame_stack,
+        env_id=env_id,
     )
     return policy.save(folder)
 
@@ -482,7 +521,7 @@ def _read_arrays(
 ) -> tuple[ObsNorm, dict[str, npt.NDArray[np.float64]]]:
     norm_file = folder / NORM_FILE
     stats = read_npz(
-        norm_file, ObsNorm.shapes(spec.observation_size), "observation normalisation statistics"
+        norm_file, ObsNorm.shapes(spec.input_size), "observation normalisation statistics"
     )
     norm = ObsNorm(stats["mean"], stats["var"], float(stats["clip_obs"]), float(stats["epsilon"]))
     norm.check(str(norm_file))

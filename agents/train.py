@@ -36,20 +36,22 @@ import shutil
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 import gymnasium as gym
 import numpy as np
 
 import drill_env  # noqa: F401  (registers DrillString-v0)
 from agents.checkpoints import CHECKPOINT_DIR, PREFIX, Checkpoint, find_last_checkpoint
-from agents.config import TrainConfig
+from agents.config import FIELD_ENV_ID, PAPER_ENV_ID, TrainConfig
 from agents.policy import ResidualPolicy, is_model_folder, load_policy, policy_from_sb3
 from drill_env import RewardWeights
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout
 from drill_env.limits import DEFAULT_TORQUE_LIMITS
+from drill_env.options import FIELD_MAX_TORQUE_NM, FieldEnvConfig
 
 __all__ = [
+    "REFERENCE_CONTROLLER",
     "VALIDATION_SEED",
     "env_kwargs",
     "find_last_checkpoint",
@@ -70,23 +72,35 @@ RMSD_TARGET = 0.99
 over this (a 1 % margin below the base controller's RMSD)."""
 
 
+REFERENCE_CONTROLLER: Final = {PAPER_ENV_ID: "proposed", FIELD_ENV_ID: "soft_speed"}
+"""The controller a from-scratch agent (``--base-controller none``) is validated against, per
+env (a residual agent is validated against its own base controller)."""
+
+
 def policy_env_kwargs(config: TrainConfig) -> dict[str, Any]:
-    """The ``DrillString-v0`` keywords the trained policy needs at evaluation time."""
+    """The keywords of ``config.env_id`` the trained policy needs at evaluation time: base
+    controller, decision period, residual scale, the env's torque limits and, on
+    ``DrillStringField-v0``, the observation mode (``env_id`` itself is kept apart)."""
     base = None if config.base_controller.lower() == "none" else config.base_controller
-    return {
+    field = config.env_id == FIELD_ENV_ID
+    kwargs: dict[str, Any] = {
         "base_controller": base,
         "control_dt_s": config.control_dt_s,
         "residual_scale_nm": config.residual_scale_nm,
         "min_torque_nm": DEFAULT_TORQUE_LIMITS.min_nm,
-        "max_torque_nm": DEFAULT_TORQUE_LIMITS.max_nm,
+        "max_torque_nm": FIELD_MAX_TORQUE_NM if field else DEFAULT_TORQUE_LIMITS.max_nm,
     }
+    if field:
+        kwargs["observation"] = config.observation or FieldEnvConfig.observation
+    return kwargs
 
 
 def env_kwargs(config: TrainConfig) -> dict[str, Any]:
-    """The ``DrillString-v0`` keywords of training: randomised scenarios (the env's default
-    ranges: WOB 60-200 kN with a 50 % chance of a step, V_ref 4-16 rad/s, Delta 0-0.75) and the
-    reward weights of the configuration (the torque and residual penalties are terms of the
-    env's reward, :mod:`drill_env.rewards`)."""
+    """The keywords of training on ``config.env_id``: randomised scenarios (the env's default
+    ranges; ``DrillString-v0``: WOB 60-200 kN with a 50 % chance of a step, V_ref 4-16 rad/s,
+    Delta 0-0.75; ``DrillStringField-v0``: docs/specification.md section 18) and the reward
+    weights of the configuration (the torque and residual penalties are terms of the env's
+    reward, :mod:`drill_env.rewards`)."""
     kwargs = policy_env_kwargs(config)
     residual = kwargs["base_controller"] is not None
     return {
@@ -128,22 +142,25 @@ def _learning_rate(config: TrainConfig) -> Any:
 
 
 def make_training_env(config: TrainConfig, vecnormalize_file: Path | None = None) -> Any:
-    """The training environment: ``num_envs`` randomised strings in one native vector env,
-    seen through SB3's API, with episode statistics and observation (and reward)
-    normalisation. ``vecnormalize_file``: an older run's pickled VecNormalize statistics
-    (resume with ``--trust-pickle`` only; checkpoints of this version are loaded by
-    :func:`agents.checkpoints.load_checkpoint`)."""
-    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+    """The training environment: ``num_envs`` randomised strings of ``config.env_id`` in one
+    native vector env, seen through SB3's API, with episode statistics, the last
+    ``frame_stack`` observations stacked (``VecFrameStack``, when above 1) and observation
+    (and reward) normalisation of the stacked vector. ``vecnormalize_file``: an older run's
+    pickled VecNormalize statistics (resume with ``--trust-pickle`` only; checkpoints of this
+    version are loaded by :func:`agents.checkpoints.load_checkpoint`)."""
+    from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor, VecNormalize
 
     from agents.vec_env import GymnasiumVecEnv
 
     vector_env = gym.make_vec(
-        "DrillString-v0",
+        config.env_id,
         num_envs=config.num_envs,
         max_episode_steps=round(config.episode_s / config.control_dt_s),
         **env_kwargs(config),
     )
     venv: Any = VecMonitor(GymnasiumVecEnv(vector_env))
+    if config.frame_stack > 1:
+        venv = VecFrameStack(venv, n_stack=config.frame_stack)
     if vecnormalize_file is not None:
         venv = VecNormalize.load(str(vecnormalize_file), venv)
         venv.training = True
@@ -213,6 +230,8 @@ def _snapshot(
         env_kwargs=policy_env_kwargs(config),
         **_norm_stats(model, venv),
         metadata=metadata,
+        frame_stack=config.frame_stack,
+        env_id=config.env_id,
     )
 
 
@@ -318,6 +337,8 @@ def _save_checkpoint(model: Any, venv: Any, config: TrainConfig, run_dir: Path) 
         "env_kwargs": policy_env_kwargs(config),
         **_norm_stats(model, venv),
         "metadata": _record(config, {"timesteps": steps, "selected": "checkpoint"}),
+        "frame_stack": config.frame_stack,
+        "env_id": config.env_id,
     }
     return save_checkpoint(model, venv, folder, policy=policy)
 
@@ -511,10 +532,10 @@ class _Validation:
             "episode_s": config.episode_s,
             "noise_std_rad_s": config.noise_std_rad_s,
         }
-        self.env = gym.make("DrillString-v0", max_episode_steps=-1, **kwargs)
-        base = kwargs["base_controller"] or "proposed"
+        self.env = gym.make(config.env_id, max_episode_steps=-1, **kwargs)
+        base = kwargs["base_controller"] or REFERENCE_CONTROLLER[config.env_id]
         base_env = gym.make(
-            "DrillString-v0", max_episode_steps=-1, **{**kwargs, "base_controller": base}
+            config.env_id, max_episode_steps=-1, **{**kwargs, "base_controller": base}
         )
         self.seeds = [VALIDATION_SEED + k for k in range(config.validation_episodes)]
         self.reference = [episode_metrics(rollout(base_env, ZeroAction(), s)) for s in self.seeds]

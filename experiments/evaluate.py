@@ -79,6 +79,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "BASE_CONTROLLER",
+    "RIG_LOOPS",
     "EPISODE_S",
     "FIELD_HELD_OUT",
     "HELD_OUT",
@@ -97,6 +98,9 @@ BASE_CONTROLLER: Final = "proposed"
 """The controller the goal is measured against."""
 NOISE_STD_RAD_S: Final = 0.1
 """Measurement noise on the speeds, rad/s."""
+RIG_LOOPS: Final = ("soft_speed", "z_torque", "soft_speed_tuned", "z_torque_tuned")
+"""The industry speed loops an agent of the field string is compared with (on surface signals,
+as on a rig), those of them that are registered: :func:`versus_rig_loops`."""
 
 
 @dataclass(frozen=True)
@@ -358,6 +362,36 @@ def summarize(rows: Sequence[Mapping[str, Any]], base: str = BASE_CONTROLLER) ->
                 "met": bool(iae_ratio <= 0.7 and rmsd_ratio <= 1.0 and sev_ratio < 1.0),
             }
     return summary
+
+
+def versus_rig_loops(summary: Mapping[str, Any], agents: Sequence[str]) -> dict[str, Any]:
+    """Each agent against each rig loop of :data:`RIG_LOOPS` on surface signals that the
+    summary has: the ratios of mean IAE, mean RMSD and mean severity over the prone
+    scenarios, and whether the agent beats the loop (lower IAE and prone severity at no more
+    RMSD). Controllers that could not run everywhere are left out (their means cover fewer
+    scenarios)."""
+    means = summary["means"]
+    out: dict[str, Any] = {}
+    for agent in agents:
+        if agent not in means:
+            continue
+        mine = means[agent]
+        out[agent] = {}
+        for loop in RIG_LOOPS:
+            label = run_label({"controller": loop, "observation": "surface"})
+            ref = means.get(label)
+            if ref is None or "runs" in ref:
+                continue
+            iae = mine["iae"] / ref["iae"]
+            rmsd = mine["rmsd_nm"] / ref["rmsd_nm"]
+            severity = mine["severity_prone"] / ref["severity_prone"]
+            out[agent][label] = {
+                "iae_ratio": iae,
+                "rmsd_ratio": rmsd,
+                "severity_prone_ratio": severity,
+                "beats": bool(iae < 1.0 and severity < 1.0 and rmsd <= 1.0),
+            }
+    return out
 
 
 def markdown_table(summary: Mapping[str, Any]) -> str:
@@ -728,6 +762,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             observations=list(dict.fromkeys(args.observations)),
         )
     summary = summarize(rows, base_label)
+    agent_labels = labels  # the agents' rows as the tables label them
+    if field:
+        agent_labels = [
+            run_label(
+                {"controller": a.name, "observation": a.env_kwargs.get("observation", "surface")}
+            )
+            for a in agents
+        ]
+        summary["versus_rig_loops"] = versus_rig_loops(summary, agent_labels)
     summary["seconds"] = round(time.perf_counter() - t0, 1)
     summary["models"] = {a.name: str(p) for a, p in zip(agents, paths, strict=True)}
     written = write_outputs(rows, summary, out)
@@ -739,12 +782,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(per_scenario_table(rows, list(summary["means"]) if field else keep))
     print()
     for label, g in summary["goal"].items():
-        if label in labels:
+        if label in agent_labels:
             print(
                 f"{label}: IAE {(g['iae_ratio'] - 1) * 100:+.1f} %, RMSD "
                 f"{(g['rmsd_ratio'] - 1) * 100:+.1f} %, severity (prone) "
                 f"{(g['severity_prone_ratio'] - 1) * 100:+.1f} % vs {summary['base_controller']}: "
                 f"goal {'met' if g['met'] else 'NOT met'}"
+            )
+    for agent, loops in summary.get("versus_rig_loops", {}).items():
+        for loop, v in loops.items():
+            print(
+                f"{agent}: IAE {(v['iae_ratio'] - 1) * 100:+.1f} %, RMSD "
+                f"{(v['rmsd_ratio'] - 1) * 100:+.1f} %, severity (prone) "
+                f"{(v['severity_prone_ratio'] - 1) * 100:+.1f} % vs {loop}: "
+                + ("beats it" if v["beats"] else "does NOT beat it")
+                + " (lower IAE and prone severity at no more RMSD)"
             )
     print(
         f"\n{len(rows)} runs simulated in {summary['seconds']} s ({total:.1f} s with output); "

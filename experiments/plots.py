@@ -1312,19 +1312,34 @@ def read_csv_columns(path: str | Path) -> dict[str, list[float]]:
     return columns
 
 
-def learning_curves_figure(runs: Mapping[str, str | Path], title: str = "") -> Figure:
-    """Validation mean IAE and RMSD relative to the proposed SMC, and the training return,
-    against decisions, for each run folder.
+def learning_curves_figure(
+    runs: Mapping[str, str | Path],
+    title: str = "",
+    *,
+    reference: str = "proposed SMC",
+    short: str = "proposed",
+    goal: float | None = 0.7,
+    severity: bool = False,
+) -> Figure:
+    """Validation mean IAE and RMSD relative to the base controller (the proposed SMC by
+    default), and the training return, against decisions, for each run folder.
 
     Args:
         runs: Label -> run folder (with ``validation.csv`` and ``progress*.csv``).
         title: Figure title.
+        reference: The controller the ratios are to, in the legend.
+        short: Its name in the axis labels.
+        goal: The IAE ratio drawn as the goal (``None``: none).
+        severity: Also a panel of the mean stick-slip severity ratio.
 
     Returns:
         The figure.
     """
-    fig = _figure(8.0, 6.4)
-    ax_iae, ax_rmsd, ax_ret = fig.subplots(3, 1, sharex=True)
+    fig = _figure(8.0, 8.2 if severity else 6.4)
+    axes = fig.subplots(4 if severity else 3, 1, sharex=True)
+    ax_iae, ax_rmsd = axes[0], axes[1]
+    ax_sev = axes[2] if severity else None
+    ax_ret = axes[-1]
     for k, (label, folder) in enumerate(runs.items()):
         color = color_of(label, k)
         run = Path(folder)
@@ -1334,6 +1349,8 @@ def learning_curves_figure(runs: Mapping[str, str | Path], title: str = "") -> F
             steps = [s / 1e6 for s in v["timesteps"]]
             ax_iae.plot(steps, v["iae_ratio"], marker="o", ms=3, color=color, label=label)
             ax_rmsd.plot(steps, v["rmsd_ratio"], marker="o", ms=3, color=color, label=label)
+            if ax_sev is not None:
+                ax_sev.plot(steps, v["severity_ratio"], marker="o", ms=3, color=color)
         xs: list[float] = []
         ys: list[float] = []
         for progress in sorted(run.glob("progress*.csv")):
@@ -1344,24 +1361,31 @@ def learning_curves_figure(runs: Mapping[str, str | Path], title: str = "") -> F
         if xs:
             pairs = sorted(zip(xs, ys, strict=True))
             ax_ret.plot([a for a, _ in pairs], [b for _, b in pairs], lw=1.0, color=color)
-    ax_iae.axhline(1.0, color="k", lw=0.8, ls="--", label="proposed SMC (1.0)")
-    ax_iae.axhline(0.7, color="tab:red", lw=0.8, ls=":", label="goal (0.7)")
-    ax_iae.set_ylabel("mean IAE / proposed")
+    ax_iae.axhline(1.0, color="k", lw=0.8, ls="--", label=f"{reference} (1.0)")
+    if goal is not None:
+        ax_iae.axhline(goal, color="tab:red", lw=0.8, ls=":", label=f"goal ({goal:g})")
+    ax_iae.set_ylabel(f"mean IAE / {short}")
     ax_iae.set_yscale("log")
     ax_rmsd.axhline(1.0, color="k", lw=0.8, ls="--")
-    ax_rmsd.set_ylabel("mean RMSD / proposed")
+    ax_rmsd.set_ylabel(f"mean RMSD / {short}")
+    if ax_sev is not None:
+        ax_sev.axhline(1.0, color="k", lw=0.8, ls="--")
+        ax_sev.set_ylabel(f"mean severity / {short}")
     ax_ret.set_ylabel("training return\n(each run's reward)")
     ax_ret.set_xlabel("decisions (millions)")
-    for ax in (ax_iae, ax_rmsd, ax_ret):
+    for ax in axes:
         ax.grid(True, alpha=0.3)
     fig.legend(*ax_iae.get_legend_handles_labels(), loc="outside right upper", fontsize=10)
     _suptitle(fig, title)
     return fig
 
 
-def plot_learning_curves(runs: Mapping[str, str | Path], path: str | Path, title: str = "") -> Path:
-    """:func:`learning_curves_figure` written as PNG to ``path``; returns the path."""
-    return save_figure(learning_curves_figure(runs, title), path)
+def plot_learning_curves(
+    runs: Mapping[str, str | Path], path: str | Path, title: str = "", **options: Any
+) -> Path:
+    """:func:`learning_curves_figure` (with its keyword ``options``) written as PNG to
+    ``path``; returns the path."""
+    return save_figure(learning_curves_figure(runs, title, **options), path)
 
 
 # ------------------------------------------------------------- probability of stick-slip

@@ -19,16 +19,19 @@ The trials:
   ``NAME=choice:A,B``: drawn ``--samples`` times per grid point at random, or by Optuna's
   TPE sampler with ``--sampler optuna`` (Tune's ``OptunaSearch``; one seed, no ``--grid``).
 
-The fixed settings of every trial are the defaults of ``drill-gym train`` with a small budget
-(:data:`SWEEP_DEFAULTS`), changed with ``--set NAME=VALUE``.
+The fixed settings of every trial are the defaults of ``drill-gym train`` for the env of
+``--env`` (``DrillString-v0`` by default; ``DrillStringField-v0`` takes the field agent's
+defaults, :data:`agents.config.ENV_DEFAULTS`) with a small budget (:data:`SWEEP_DEFAULTS`;
+``--train-budget`` keeps the budget of ``drill-gym train`` instead), changed with
+``--set NAME=VALUE``.
 
 After the sweep: ``OUT/trials.csv`` and ``OUT/trials.md``, one row per trial (seed,
 hyperparameters, the best and the last validation, whether it was stopped early, and the
 held-out ratios); the best trial (lowest validation IAE ratio over its validations) is
 exported in the project's model format to ``OUT/best_model/`` (its ``model/``, the best on its
 validation, or its ``best/`` when the trial was stopped early) and scored on the held-out
-scenarios of ``drill-gym evaluate`` against its base controller (``--heldout best``, the
-default; ``all`` scores every trial's model, ``none`` none). ``OUT/summary.json`` has it all.
+scenarios of ``drill-gym evaluate`` for its env against its base controller (``--heldout
+best``, the default; ``all`` scores every trial's model, ``none`` none). ``OUT/summary.json`` has it all.
 
 Trials run one CPU each, ``--workers`` at a time on a local Ray cluster (or on the cluster of
 ``--address``; then ``OUT`` must be on a file system every node shares, since each trial
@@ -88,8 +91,19 @@ HELDOUT_KEYS: Final = (
 """Columns of the held-out scores (ratios to the base controller; empty: not scored)."""
 SAMPLE_KINDS: Final = ("uniform", "loguniform", "int", "choice")
 """Distributions of ``--sample``."""
-FIXED_FIELDS: Final = ("run_dir", "save_dir", "resume", "overwrite", "trust_pickle", "seed")
-"""Fields of the training configuration the sweep sets itself."""
+FIXED_FIELDS: Final = (
+    "run_dir",
+    "save_dir",
+    "resume",
+    "overwrite",
+    "trust_pickle",
+    "seed",
+    "env_id",
+)
+"""Fields of the training configuration the sweep sets itself (``env_id`` by ``--env``)."""
+BUDGET_FIELDS: Final = tuple(SWEEP_DEFAULTS)
+"""The fields of :data:`SWEEP_DEFAULTS`: the budget that ``--train-budget`` leaves at the
+defaults of ``drill-gym train``."""
 
 
 def _fields() -> dict[str, Any]:
@@ -191,6 +205,8 @@ class SweepSpec:
         scheduler: ``asha``, ``median`` or ``none``.
         settings: Fixed training settings (``SWEEP_DEFAULTS`` and ``--set``).
         grace_period: Validations every trial reports before the scheduler may stop it.
+        env_id: The env of every trial; the settings not given take its training defaults
+            (:meth:`agents.config.TrainConfig.for_env`).
     """
 
     seeds: tuple[int, ...]
@@ -201,6 +217,7 @@ class SweepSpec:
     scheduler: str
     settings: Mapping[str, Any]
     grace_period: int = 2
+    env_id: str = "DrillString-v0"
 
     def __post_init__(self) -> None:
         if not self.seeds:
@@ -235,7 +252,9 @@ class SweepSpec:
         from agents.config import TrainConfig
 
         def build(**values: Any) -> Any:
-            return TrainConfig(**{**self.settings, "seed": self.seeds[0], **values})
+            return TrainConfig.for_env(
+                self.env_id, **{**self.settings, "seed": self.seeds[0], **values}
+            )
 
         yield build()
         for seed in self.seeds:
@@ -252,7 +271,7 @@ class SweepSpec:
         from agents.config import TrainConfig
         from agents.train import planned_timesteps
 
-        config = TrainConfig(**{**self.settings, "seed": self.seeds[0]})
+        config = TrainConfig.for_env(self.env_id, **{**self.settings, "seed": self.seeds[0]})
         if not config.validate_every:
             return 1
         return planned_timesteps(config) // config.validate_every + 1
@@ -318,12 +337,16 @@ def train_trial(config: dict[str, Any]) -> None:
     from agents.train import train
 
     settings = dict(config["settings"])
-    chosen = {k: v for k, v in config.items() if k not in ("settings", "runs_dir", "seed")}
+    keys = ("settings", "runs_dir", "seed", "env_id")
+    chosen = {k: v for k, v in config.items() if k not in keys}
     seed = int(config["seed"] if "seed" in config else settings.pop("seed"))
     settings.pop("seed", None)
     trial = tune.get_context().get_trial_id()
     run_dir = Path(config["runs_dir"]) / f"{trial}__seed{seed}"
-    train_config = TrainConfig(**{**settings, **chosen, "seed": seed, "run_dir": str(run_dir)})
+    train_config = TrainConfig.for_env(
+        config.get("env_id", "DrillString-v0"),
+        **{**settings, **chosen, "seed": seed, "run_dir": str(run_dir)},
+    )
     with _report_validations():
         train(train_config, progress=False)
 
@@ -390,15 +413,29 @@ def _model_folder(run_dir: Path) -> Path | None:
 
 
 def _heldout(model: Path, scenario_ids: Sequence[str] | None) -> dict[str, Any]:
-    """Held-out ratios of the model to its base controller (:mod:`experiments.evaluate`)."""
+    """Held-out ratios of the model to its base controller on the held-out set of its env
+    (:mod:`experiments.evaluate`; on the field string the base controller with the agent's
+    observation mode)."""
     from agents.policy import load_policy
-    from experiments.evaluate import BASE_CONTROLLER, HELD_OUT, evaluate, summarize
+    from experiments.evaluate import BASE_CONTROLLER, evaluate, held_out_set, summarize
+    from experiments.field import is_field, run_label
 
     agent = load_policy(model)
-    base = agent.env_kwargs.get("base_controller") or BASE_CONTROLLER
-    scenarios = [s for s in HELD_OUT if scenario_ids is None or s.id in scenario_ids]
-    rows, _ = evaluate([agent], [base], scenarios)
-    goal = summarize(rows, base)["goal"][agent.name]
+    field = is_field(agent.env_id)
+    fallback = "soft_speed" if field else BASE_CONTROLLER
+    base = agent.env_kwargs.get("base_controller") or fallback
+    observation = agent.env_kwargs.get("observation", "surface") if field else None
+    held_out = held_out_set(agent.env_id)
+    scenarios = [s for s in held_out if scenario_ids is None or s.id in scenario_ids]
+    rows, _ = evaluate(
+        [agent],
+        [base],
+        scenarios,
+        env_id=agent.env_id,
+        observations=[observation] if observation else ["surface"],
+    )
+    label = run_label({"controller": base, "observation": observation})
+    goal = summarize(rows, label)["goal"][agent.name]
     return {
         "heldout_iae_ratio": goal["iae_ratio"],
         "heldout_rmsd_ratio": goal["rmsd_ratio"],
@@ -437,7 +474,12 @@ def run_training_sweep(
     with ray_session(backend):
         tuner = tune.Tuner(
             tune.with_resources(train_trial, {"cpu": 1}),
-            param_space={**_space(spec), "settings": settings, "runs_dir": str(runs_dir)},
+            param_space={
+                **_space(spec),
+                "settings": settings,
+                "runs_dir": str(runs_dir),
+                "env_id": spec.env_id,
+            },
             tune_config=tune.TuneConfig(
                 metric=METRIC,
                 mode="min",
@@ -520,6 +562,7 @@ examples:
   drill-gym sweep-train --sampler optuna --samples 8 \\
       --sample learning_rate=loguniform:1e-5:1e-3 --sample ent_coef=uniform:0:0.01
   drill-gym sweep-train --seeds 1 2 3 --set total_timesteps=400000 validate_every=50000
+  drill-gym sweep-train --env DrillStringField-v0 --train-budget --seeds 1 2 3 --scheduler none
 """
 
 
@@ -586,21 +629,37 @@ def _parser() -> ArgumentParser:
         + ", the rest as drill-gym train)",
     )
     p.add_argument(
+        "--env",
+        choices=("DrillString-v0", "DrillStringField-v0"),
+        default="DrillString-v0",
+        help="the env of every trial; the settings not given take its drill-gym train "
+        "defaults (DrillStringField-v0: the field agent's)",
+    )
+    p.add_argument(
+        "--train-budget",
+        action="store_true",
+        help="keep the budget of drill-gym train for the env ("
+        + ", ".join(BUDGET_FIELDS)
+        + ") instead of the small one above: trials of the shipped configuration",
+    )
+    p.add_argument(
         "--heldout",
         choices=("best", "all", "none"),
         default="best",
         help="score the best trial's model, every trial's or none on the held-out scenarios",
     )
-    from experiments.evaluate import HELD_OUT
+    from experiments.evaluate import FIELD_HELD_OUT, HELD_OUT
 
     ids = [s.id for s in HELD_OUT]
+    field_ids = [s.id for s in FIELD_HELD_OUT]
     p.add_argument(
         "--heldout-scenarios",
         nargs="+",
         default=None,
-        type=names_type(lambda: ids, "scenario"),
+        type=names_type(lambda: ids + field_ids, "scenario"),
         metavar="ID",
-        help=f"only these held-out scenarios, {ids[0]} to {ids[-1]} (default: all 20)",
+        help=f"only these held-out scenarios, {ids[0]} to {ids[-1]} (default: all 20; with "
+        f"--env DrillStringField-v0 {field_ids[0]} to {field_ids[-1]}, all 16)",
     )
     p.add_argument(
         "--workers",
@@ -632,8 +691,19 @@ def spec_from_args(parser: ArgumentParser, args: Any) -> SweepSpec:
         for text in args.set:
             name, value = _field(text, "--set")
             explicit[name] = _value(name, value, fields[name])
-        settings = {k: v for k, v in SWEEP_DEFAULTS.items() if k not in (*grid, *samples)}
+        budget = {} if args.train_budget else SWEEP_DEFAULTS
+        settings = {k: v for k, v in budget.items() if k not in (*grid, *samples)}
         settings.update(explicit)
+        if args.heldout_scenarios:
+            from experiments.evaluate import held_out_set
+
+            allowed = [s.id for s in held_out_set(args.env)]
+            wrong = [i for i in args.heldout_scenarios if i not in allowed]
+            if wrong:
+                raise ValueError(
+                    f"--heldout-scenarios {', '.join(wrong)}: not a held-out scenario of "
+                    f"{args.env}: allowed {allowed[0]} to {allowed[-1]}"
+                )
         return SweepSpec(
             seeds=tuple(dict.fromkeys(args.seeds)),
             grid=grid,
@@ -643,6 +713,7 @@ def spec_from_args(parser: ArgumentParser, args: Any) -> SweepSpec:
             scheduler=args.scheduler,
             settings=settings,
             grace_period=args.grace_period,
+            env_id=args.env,
         )
     except (ValueError, TypeError) as err:
         parser.error(str(err))
@@ -659,7 +730,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         + "".join(f" x {len(v)} {k}" for k, v in spec.grid.items())
         + (f" x {spec.num_samples} {spec.sampler} samples" if spec.num_samples > 1 else "")
         + f"), {spec.validations()} validations each, scheduler {spec.scheduler}, on "
-        f"{backend.describe()}",
+        f"{backend.describe()}; env {spec.env_id}",
         flush=True,
     )
     summary = run_training_sweep(

@@ -126,7 +126,9 @@ def test_help_is_plain_text_and_shows_every_default(capsys: pytest.CaptureFixtur
     flat = " ".join(text.split())
     assert flat.count("(default: ") == len(dataclasses.fields(TrainConfig))
     assert (
-        "(default: 4000000)" in flat and "(default: false)" in flat and "(default: 64 64)" in flat
+        "(default: 4000000; DrillStringField-v0: " in flat
+        and "(default: false)" in flat
+        and "(default: 64 64)" in flat
     )
     assert "--no-tensorboard turns it off" in flat
 

@@ -334,6 +334,69 @@ CASES: dict[str, tuple[Callable[[Path, bytes], None], type[Exception], str]] = {
         ValueError,
         r"config.json': 2000002 bytes is too large: allowed at most 1000000",
     ),
+    # ------------------------------------------------- config.json: frame stacking (memory)
+    "config frame_stack zero": (
+        _edit_config(_set(("policy", "frame_stack"), 0)),
+        ValueError,
+        H + r"policy\.frame_stack = 0 is out of range: allowed an integer in \[1, 256\]",
+    ),
+    "config frame_stack huge": (
+        _edit_config(_set(("policy", "frame_stack"), 10**12)),
+        ValueError,
+        H + r"policy\.frame_stack = 1000000000000 is out of range: allowed an integer in "
+        r"\[1, 256\]",
+    ),
+    "config frame_stack as text": (
+        _edit_config(_set(("policy", "frame_stack"), "4")),
+        ValueError,
+        H + r"policy\.frame_stack = '4' is out of range: allowed an integer",
+    ),
+    "config frame_stack as float": (
+        _edit_config(_set(("policy", "frame_stack"), 4.0)),
+        ValueError,
+        H + r"policy\.frame_stack = 4\.0 is out of range: allowed an integer",
+    ),
+    "config frame_stack as boolean": (
+        _edit_config(_set(("policy", "frame_stack"), True)),
+        ValueError,
+        H + r"policy\.frame_stack = True is out of range: allowed an integer",
+    ),
+    "config frame_stack null": (
+        _edit_config(_set(("policy", "frame_stack"), None)),
+        ValueError,
+        H + r"policy\.frame_stack = None is out of range: allowed an integer",
+    ),
+    "config frame_stack as code": (
+        _edit_config(_set(("policy", "frame_stack"), "__import__('os').system('touch MARKER')")),
+        ValueError,
+        H + r"policy\.frame_stack = .* is out of range: allowed an integer",
+    ),
+    "config frame_stack beyond the input limit": (
+        _edit_config(
+            lambda r: (
+                r.__setitem__("observation_size", 1000),
+                r["policy"].__setitem__("frame_stack", 5),
+            )
+        ),
+        ValueError,
+        H + r"policy\.frame_stack = 5 is out of range: observation_size 1000 x frame_stack 5 = "
+        r"5000 network inputs, allowed at most 4096",
+    ),
+    "config frame_stack does not match the arrays": (
+        _edit_config(_set(("policy", "frame_stack"), 2)),
+        ValueError,
+        N + r": array mean has shape \(11,\): expected \(22,\)",
+    ),
+    "config frame_stack outside the policy": (
+        _edit_config(_set(("frame_stack",), 4)),
+        ValueError,
+        H + r"frame_stack is not known: allowed fields are format, name, env_kwargs",
+    ),
+    "config frame_stack as an env keyword": (
+        _edit_config(_set(("env_kwargs", "frame_stack"), 4)),
+        ValueError,
+        H + r"env_kwargs\.frame_stack is not known: allowed fields are base_controller",
+    ),
     "config missing": (
         lambda folder, evil: (folder / "config.json").unlink(),
         FileNotFoundError,
