@@ -736,7 +736,15 @@ def main(argv: Sequence[str] | None = None) -> int:
                 for a in agents
             )
         ) or [base_label]
-    keep = [*bases, *labels]
+    agent_labels = labels  # the agents' rows as the tables label them
+    if field:
+        agent_labels = [
+            run_label(
+                {"controller": a.name, "observation": a.env_kwargs.get("observation", "surface")}
+            )
+            for a in agents
+        ]
+    keep = [*bases, *agent_labels]
     figures = not args.no_plots
     if sweep_requested(args):  # on the sweep runner: Ray, a results file, a resume
         if field:
@@ -762,14 +770,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             observations=list(dict.fromkeys(args.observations)),
         )
     summary = summarize(rows, base_label)
-    agent_labels = labels  # the agents' rows as the tables label them
     if field:
-        agent_labels = [
-            run_label(
-                {"controller": a.name, "observation": a.env_kwargs.get("observation", "surface")}
-            )
-            for a in agents
-        ]
         summary["versus_rig_loops"] = versus_rig_loops(summary, agent_labels)
     summary["seconds"] = round(time.perf_counter() - t0, 1)
     summary["models"] = {a.name: str(p) for a, p in zip(agents, paths, strict=True)}

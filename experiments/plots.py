@@ -73,6 +73,7 @@ __all__ = [
     "text_overlaps",
     "text_problems",
     "time_window",
+    "trace_response_figure",
     "value_label",
 ]
 
@@ -1207,6 +1208,68 @@ def string_response_figure(
     fig.legend(
         handles=[Line2D([], [], color="k", ls=(0, (4, 2)), lw=1.0, label="reference bit speed")],
         loc="outside lower center",
+        fontsize=10,
+    )
+    _suptitle(fig, title)
+    return fig
+
+
+def trace_response_figure(
+    traces: Mapping[str, Trace],
+    title: str = "",
+    *,
+    window_s: tuple[float, float] | None = None,
+    every: int = 20,
+) -> Figure:
+    """Bit speed (with the reference), top-drive speed and top-drive torque of several runs of
+    one scenario against time, overlaid in three panels sharing the time axis (one colour per
+    run, one legend under the panels).
+
+    Args:
+        traces: Run label -> trace (the same scenario).
+        title: Figure title.
+        window_s: Show only ``[t0, t1]`` seconds; the whole run when ``None``.
+        every: Plant steps per plotted sample (:func:`downsample`: the torque keeps each bin's
+            extremes).
+
+    Raises:
+        ValueError: if ``traces`` is empty.
+    """
+    if not traces:
+        raise ValueError("traces is empty: nothing to plot")
+    fig = _figure(8.5, 7.4)
+    ax_bit, ax_top, ax_torque = fig.subplots(3, 1, sharex=True)
+    handles: list[Line2D] = [
+        Line2D([], [], color="k", ls=(0, (4, 2)), lw=1.0, label="reference bit speed")
+    ]
+    first = True
+    for k, (label, full) in enumerate(traces.items()):
+        trace = downsample(full, every)
+        t = trace.time_s
+        shown = np.ones(t.shape, bool)
+        if window_s is not None:
+            shown = (t >= window_s[0]) & (t <= window_s[1])
+        color = color_of(label, k)
+        if first:
+            for ax in (ax_bit, ax_top):
+                ax.plot(t[shown], trace.reference_rad_s[shown], color="k", ls=(0, (4, 2)), lw=1.0)
+            first = False
+        ax_bit.plot(t[shown], trace.bit_speed_rad_s[shown], color=color, lw=1.2)
+        ax_top.plot(t[shown], trace.top_drive_speed_rad_s[shown], color=color, lw=1.2)
+        ax_torque.plot(t[shown], trace.torque_nm[shown] / 1e3, color=color, lw=0.9)
+        handles.append(Line2D([], [], color=color, lw=1.6, label=label))
+    ax_bit.set_ylabel("bit speed (rad/s)")
+    ax_top.set_ylabel("top-drive speed (rad/s)")
+    ax_torque.set_ylabel("top-drive torque (kN m)")
+    ax_torque.set_xlabel("time (s)")
+    for ax in (ax_bit, ax_top, ax_torque):
+        ax.grid(True, alpha=0.3)
+        ax.ticklabel_format(axis="x", useOffset=False)
+    labels = [h.get_label() for h in handles]
+    fig.legend(
+        handles=handles,
+        loc="outside lower center",
+        ncol=_legend_columns(fig, [str(x) for x in labels], 10.0, most=4),
         fontsize=10,
     )
     _suptitle(fig, title)
