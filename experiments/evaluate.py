@@ -590,12 +590,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     keep = [*bases, *labels]
     figures = not args.no_plots
     if sweep_requested(args):  # on the sweep runner: Ray, a results file, a resume
-        if field:
-            parser.fail(
-                "--workers",
-                f"the sweep runner runs the held-out evaluation on {PAPER_ENV}: run the "
-                f"{args.env} evaluation without --workers, --ray, --address or --resume",
-            )
         from experiments.sweep_studies import run_evaluate_sweep
 
         rows, traces, figures = run_evaluate_sweep(args, agents, controllers, scenarios, keep)
