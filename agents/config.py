@@ -53,21 +53,22 @@ ENV_DEFAULTS: Final[dict[str, dict[str, Any]]] = {
         "exp_name": "field_agent",
         "base_controller": "soft_speed",
         "observation": "surface",
-        "frame_stack": 16,
+        "frame_stack": 1,
         "control_dt_s": 0.2,
         "residual_scale_nm": 10_000.0,
         "noise_std_rad_s": 0.05,
         "n_steps": 500,
         "batch_size": 1000,
         "gamma": 0.99,
-        "total_timesteps": 1_000_000,
+        "total_timesteps": 400_000,
         "validate_every": 100_000,
         "validation_episodes": 32,
-        "checkpoint_every": 250_000,
+        "checkpoint_every": 100_000,
     },
 }
 """Per-env training defaults: for each env id, the fields whose default differs from the
-dataclass's (``DrillString-v0``'s). Applied by :meth:`TrainConfig.for_env` and the command line
+dataclass's (``DrillString-v0``'s), and ``frame_stack`` named for the field string (1: frame
+stacking of 16 or 48 observations did not train better, docs/field-agent.md). Applied by :meth:`TrainConfig.for_env` and the command line
 to the fields the caller did not set."""
 
 

@@ -2,7 +2,8 @@
 
 ``drill-gym train --env DrillStringField-v0`` with every other setting at the field defaults
 (:data:`agents.config.ENV_DEFAULTS`): a residual PPO policy on top of ``soft_speed`` that sees
-the rig's surface signals and the mud-pulse telemetry, with its last observations stacked.
+the rig's surface signals and the mud-pulse telemetry (``frame_stack`` 1: the current
+observation only).
 Prints the wall time (the whole run: simulation, PPO updates, validations, checkpoints) and
 the selected model; ``--ship`` copies the model to ``agents/models/field_agent/`` (recording
 the command that retrains it) and the learning curves to ``docs/figures/``. Then
@@ -13,6 +14,12 @@ the tries of docs/field-agent.md) into ``--figure``. ``--figures [MODEL]`` only 
 hardest held-out scenarios (:data:`FIGURE_SCENARIOS`: bit speed, top-drive speed and torque
 of the agent against ``soft_speed`` and ``z_torque`` on surface signals, the same noise
 samples) into ``docs/figures/field_agent_<id>.png``, from the shipped model by default.
+``--groups HELDOUT_CSV`` prints the means of a field ``heldout.csv`` (written by ``drill-gym
+evaluate --env DrillStringField-v0``) by group (:data:`GROUPS`: within the training ranges, the
+deep string, outside the ranges, all): IAE, RMSD and the stick-slip severity of the prone
+scenarios. ``--ship-model MODEL --wall-s S`` ships the model of a finished run of the default command
+(``drill-gym train --env DrillStringField-v0 --run-dir ... --save-dir ...``) with the command
+and its wall time recorded in its ``source``.
 
 Run from the repository root::
 
@@ -22,10 +29,13 @@ Run from the repository root::
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import shutil
 import time
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 from agents.config import FIELD_ENV_ID, TrainConfig
 from agents.policy import DEFAULT_MODEL_DIR, load_policy
@@ -40,6 +50,64 @@ FIGURE_SCENARIOS = ("f02", "f04", "f10", "f15")
 (f04), the deep string (f10) and the point outside every range (f15)."""
 LOOPS = ("soft_speed", "z_torque")
 """The rig loops drawn beside the agent (on surface signals)."""
+GROUPS: dict[str, Callable[[Mapping[str, str]], bool]] = {
+    "in the training ranges (f01-f08)": lambda r: r["in_range"] == "True",
+    "deep string deep_5000m (f09-f12)": lambda r: r["parameters"] == "deep_5000m",
+    "outside the ranges (f13-f16)": lambda r: (
+        r["in_range"] != "True" and r["parameters"] != "deep_5000m"
+    ),
+    "all (f01-f16)": lambda r: True,
+}
+"""Groups of the field held-out set, by the columns of its rows."""
+
+
+def group_means(rows: Sequence[Mapping[str, str]]) -> list[dict[str, Any]]:
+    """Per group of :data:`GROUPS` and controller (with its observation mode): the number of
+    scenarios, the mean IAE, the mean RMSD (kN m) and the mean stick-slip severity over the
+    group's prone scenarios (``None`` without one), from the rows of a field ``heldout.csv``
+    (a row without an IAE, a controller that could not run there, is left out)."""
+    labels = list(dict.fromkeys(f"{r['controller']} ({r['observation']})" for r in rows))
+    out: list[dict[str, Any]] = []
+    for group, member in GROUPS.items():
+        for label in labels:
+            mine = [
+                r
+                for r in rows
+                if f"{r['controller']} ({r['observation']})" == label and r["iae"] and member(r)
+            ]
+            if not mine:
+                continue
+            prone = [float(r["stick_slip_severity"]) for r in mine if r["prone"] == "True"]
+            out.append(
+                {
+                    "group": group,
+                    "controller": label,
+                    "n": len(mine),
+                    "iae": sum(float(r["iae"]) for r in mine) / len(mine),
+                    "rmsd_knm": sum(float(r["rmsd_nm"]) for r in mine) / len(mine) / 1e3,
+                    "severity_prone": sum(prone) / len(prone) if prone else None,
+                    "n_prone": len(prone),
+                }
+            )
+    return out
+
+
+def group_table(heldout_csv: Path) -> str:
+    """:func:`group_means` of ``heldout_csv`` as a markdown table."""
+    from experiments.tables import Column, markdown_table
+
+    with heldout_csv.open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    columns = [
+        Column("group", "held-out group", align="left"),
+        Column("controller", "controller", align="left"),
+        Column("n", "scenarios"),
+        Column("iae", "mean IAE", "{:.1f}"),
+        Column("rmsd_knm", "mean RMSD (kN m)", "{:.2f}"),
+        Column("severity_prone", "mean severity, prone", "{:.3f}"),
+        Column("n_prone", "prone scenarios"),
+    ]
+    return markdown_table(group_means(rows), columns)
 
 
 def scenario_figures(model: Path, out: Path) -> list[Path]:
@@ -76,6 +144,17 @@ def scenario_figures(model: Path, out: Path) -> list[Path]:
             raise RuntimeError(f"figure of {held_out.id}: {problems}")
         written.append(save_figure(fig, out / f"{NAME}_{held_out.id}.png"))
     return written
+
+
+def ship(model: Path, source: str) -> Path:
+    """Copy the model folder ``model`` to ``agents/models/field_agent/`` with ``source`` (the
+    command that retrains it) in its record; ``model`` may be that folder itself."""
+    policy = load_policy(model)  # read before the target is cleared
+    policy.metadata["source"] = source
+    target = DEFAULT_MODEL_DIR / NAME
+    if target.exists():
+        shutil.rmtree(target)
+    return policy.save(target)
 
 
 def curves(runs: dict[str, Path], figure: Path) -> Path:
@@ -117,7 +196,33 @@ def main() -> None:
         help="only draw the hardest held-out scenarios with this model (default: the shipped "
         "one) into docs/figures/",
     )
+    parser.add_argument(
+        "--groups",
+        type=Path,
+        default=None,
+        metavar="HELDOUT_CSV",
+        help="only print the group means of a field heldout.csv",
+    )
+    parser.add_argument(
+        "--ship-model",
+        type=Path,
+        default=None,
+        metavar="MODEL",
+        help="only ship this model of a finished run of the default command",
+    )
+    parser.add_argument(
+        "--wall-s", type=float, default=None, help="wall time of that run, s (with --ship-model)"
+    )
     args = parser.parse_args()
+    if args.groups:
+        print(group_table(args.groups))
+        return
+    if args.ship_model:
+        seed = load_policy(args.ship_model).metadata["train_config"]["seed"]
+        wall = "" if args.wall_s is None else f", {args.wall_s:.0f} s wall"
+        source = f"{RETRAIN} --seed {seed} (the selected model: best on validation{wall})"
+        print(f"shipped to {ship(args.ship_model, source)}")
+        return
     if args.figures:
         for path in scenario_figures(args.figures, FIGURE.parent):
             print(f"figure: {path}")
@@ -141,15 +246,10 @@ def main() -> None:
         f"{record['run_timesteps']} decisions; model at {record['timesteps']} ({record['selected']})"
     )
     if args.ship:
-        policy = load_policy(model_dir)
-        policy.metadata["source"] = (
+        source = (
             f"{RETRAIN} --seed {args.seed} (benchmarks/field_agent.py --ship: {wall:.0f} s wall)"
         )
-        target = DEFAULT_MODEL_DIR / NAME
-        if target.exists():
-            shutil.rmtree(target)
-        policy.save(target)
-        print(f"  shipped to {target}")
+        print(f"  shipped to {ship(model_dir, source)}")
     figure = FIGURE if args.ship else Path(args.out) / FIGURE.name
     print(f"learning curves: {curves({NAME: run_dir}, figure)}")
 

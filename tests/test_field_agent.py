@@ -9,6 +9,9 @@ Tiny budgets only; the real training is timed by ``benchmarks/field_agent.py``.
 from __future__ import annotations
 
 import dataclasses
+import json
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +27,7 @@ from drill_env.evaluation import rollout
 
 FIELD = FIELD_ENV_ID
 SHIPPED = DEFAULT_MODEL_DIR / "field_agent"
+ROOT = Path(__file__).resolve().parents[1]
 
 
 # ------------------------------------------------------------------------- per-env defaults
@@ -312,6 +316,55 @@ def test_shipped_field_model_names_its_env_and_how_to_retrain_it() -> None:
     assert "drill-gym train --env DrillStringField-v0" in policy.metadata["source"]
 
 
+_NUMPY_ONLY = """
+import json, sys
+class _Block:
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] in ("torch", "stable_baselines3"):
+            raise ImportError(f"{name} is blocked in this test")
+        return None
+sys.meta_path.insert(0, _Block())
+sys.modules["torch"] = None
+sys.modules["stable_baselines3"] = None
+import gymnasium as gym, numpy as np
+import drill_env
+from agents.policy import load_policy
+policy = load_policy(sys.argv[1])
+env = gym.make(policy.env_id, randomize=False, episode_s=4.0, **policy.env_kwargs)
+obs, _ = env.reset(seed=7)
+state, start, actions, torques = None, np.array([True]), [], []
+for _ in range(10):
+    action, state = policy.predict(obs, state, start)
+    obs, _, terminated, truncated, info = env.step(action)
+    start = np.array([terminated or truncated])
+    actions.append(float(action[0]))
+loaded = [m for m in sys.modules if sys.modules[m] is not None]
+assert not any(m.split(".")[0] in ("torch", "stable_baselines3") for m in loaded)
+print(json.dumps(actions))
+"""
+
+
+@pytest.mark.skipif(not is_model_folder(SHIPPED), reason="no shipped field model")
+def test_shipped_field_model_runs_the_field_env_with_numpy_only() -> None:
+    """The shipped field agent loads and drives ``DrillStringField-v0`` for a few decisions in
+    a process where torch and Stable-Baselines3 cannot be imported, and acts as the same model
+    does in this process (with its own frame history)."""
+    result = subprocess.run(
+        [sys.executable, "-c", _NUMPY_ONLY, str(SHIPPED)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert result.returncode == 0, result.stderr
+    actions = np.array(json.loads(result.stdout.strip().splitlines()[-1]))
+    policy = load_policy(SHIPPED)
+    env = gym.make(FIELD, randomize=False, episode_s=4.0, **policy.env_kwargs)
+    trace = rollout(env, policy, seed=7)
+    np.testing.assert_allclose(actions, trace.actions[:10].ravel(), rtol=1e-6, atol=1e-7)
+    assert np.abs(actions).max() > 1e-3  # a trained residual, not the zero-initialised one
+
+
 @pytest.mark.skipif(not is_model_folder(SHIPPED), reason="no shipped field model")
 def test_evaluate_picks_the_field_model_only_on_its_env(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
@@ -334,3 +387,52 @@ def test_evaluate_picks_the_field_model_only_on_its_env(
     captured = capsys.readouterr()
     assert "field_agent is for DrillStringField-v0: left out" in captured.err
     assert "field_agent" not in captured.out
+
+
+# --------------------------------------------------------------- the group table of the doc
+def _benchmark() -> Any:
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "field_agent_bench", ROOT / "benchmarks" / "field_agent.py"
+    )
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_group_means_by_hand(tmp_path: Path) -> None:
+    def row(k: int, controller: str, iae: str, sev: float, prone: bool) -> dict[str, str]:
+        deep = k in (9, 10)
+        return {
+            "scenario": f"f{k:02d}",
+            "controller": controller,
+            "observation": "surface",
+            "parameters": "deep_5000m" if deep else "field_2500m",
+            "in_range": str(k < 9),
+            "prone": str(prone),
+            "iae": iae,
+            "rmsd_nm": "12000" if k % 2 else "14000",
+            "stick_slip_severity": str(sev),
+        }
+
+    rows = [
+        row(1, "a", "100", 0.5, True),
+        row(2, "a", "300", 0.1, False),
+        row(9, "a", "500", 1.0, True),
+        row(10, "a", "700", 2.0, True),
+        row(13, "a", "50", 0.2, False),
+        row(13, "b", "", 0.0, False),  # b could not run there: left out
+    ]
+    means = {(m["group"].split()[0], m["controller"]): m for m in _benchmark().group_means(rows)}
+    assert set(means) == {("in", "a (surface)"), ("deep", "a (surface)"),
+                          ("outside", "a (surface)"), ("all", "a (surface)")}  # fmt: skip
+    inside = means[("in", "a (surface)")]
+    assert (inside["n"], inside["iae"], inside["rmsd_knm"]) == (2, 200.0, 13.0)
+    assert (inside["severity_prone"], inside["n_prone"]) == (0.5, 1)
+    assert means[("deep", "a (surface)")]["severity_prone"] == pytest.approx(1.5)
+    assert means[("outside", "a (surface)")]["severity_prone"] is None
+    everything = means[("all", "a (surface)")]
+    assert (everything["n"], everything["iae"]) == (5, 330.0)
+    assert everything["severity_prone"] == pytest.approx(3.5 / 3)
