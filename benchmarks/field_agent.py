@@ -17,7 +17,11 @@ samples) into ``docs/figures/field_agent_<id>.png``, from the shipped model by d
 ``--groups HELDOUT_CSV`` prints the means of a field ``heldout.csv`` (written by ``drill-gym
 evaluate --env DrillStringField-v0``) by group (:data:`GROUPS`: within the training ranges, the
 deep string, outside the ranges, all): IAE, RMSD and the stick-slip severity of the prone
-scenarios. ``--ship-model MODEL --wall-s S`` ships the model of a finished run of the default command
+scenarios. ``--depth-validation LOW HIGH N MODEL ...`` scores models as the validation does (ratios of
+the mean IAE, RMSD and severity to ``soft_speed`` on N scenarios of the training
+randomisation, the validation's reset seeds) with the depth drawn from LOW-HIGH m only: does a
+deeper validation set rank checkpoints as the deep held-out strings do? ``--ship-model MODEL
+--wall-s S`` ships the model of a finished run of the default command
 (``drill-gym train --env DrillStringField-v0 --run-dir ... --save-dir ...``) with the command
 and its wall time recorded in its ``source``.
 
@@ -40,7 +44,7 @@ from typing import Any
 from agents.config import FIELD_ENV_ID, TrainConfig
 from agents.policy import DEFAULT_MODEL_DIR, load_policy
 from drill_env.evaluation import ZeroAction
-from experiments.plots import plot_learning_curves, save_figure, text_problems
+from experiments.plots import save_figure, text_problems
 
 NAME = "field_agent"
 FIGURE = Path("docs/figures/field_agent_learning_curve.png")
@@ -89,6 +93,48 @@ def group_means(rows: Sequence[Mapping[str, str]]) -> list[dict[str, Any]]:
                     "n_prone": len(prone),
                 }
             )
+    return out
+
+
+def depth_validation(
+    models: Sequence[Path], depth_range_m: tuple[float, float], episodes: int
+) -> list[dict[str, Any]]:
+    """Per model: its mean IAE, RMSD and stick-slip severity relative to its base controller
+    alone on ``episodes`` scenarios of the field randomisation with the measured depth drawn
+    from ``depth_range_m`` (m), at the validation's reset seeds and noise."""
+    import gymnasium as gym
+    import numpy as np
+
+    import drill_env  # noqa: F401  (registers the envs)
+    from agents.train import VALIDATION_SEED
+    from drill_env.evaluation import episode_metrics, rollout
+
+    seeds = [VALIDATION_SEED + k for k in range(episodes)]
+    out: list[dict[str, Any]] = []
+    reference: dict[str, list[dict[str, float]]] = {}
+    for model in models:
+        policy = load_policy(model)
+        record = policy.metadata.get("train_config", {})
+        common = {
+            "randomize": True,
+            "max_episode_steps": -1,
+            "episode_s": record.get("episode_s", 100.0),
+            "noise_std_rad_s": record.get("noise_std_rad_s", 0.05),
+            "randomization": {"measured_depth_range_m": depth_range_m},
+        }
+        base = policy.env_kwargs["base_controller"]
+        if base not in reference:
+            env = gym.make(policy.env_id, **common, **policy.env_kwargs)
+            reference[base] = [episode_metrics(rollout(env, ZeroAction(), s)) for s in seeds]
+        env = gym.make(policy.env_id, **common, **policy.env_kwargs)
+        metrics = [episode_metrics(rollout(env, policy, s)) for s in seeds]
+        ratios = {
+            key: float(
+                np.mean([m[key] for m in metrics]) / np.mean([m[key] for m in reference[base]])
+            )
+            for key in ("iae", "rmsd_nm", "stick_slip_severity")
+        }
+        out.append({"model": str(model), **ratios})
     return out
 
 
@@ -160,15 +206,20 @@ def ship(model: Path, source: str) -> Path:
 def curves(runs: dict[str, Path], figure: Path) -> Path:
     """The validation ratios to the base controller (IAE, RMSD, severity) and the training
     return of ``runs``, as one figure."""
-    return plot_learning_curves(
+    from experiments.plots import learning_curves_figure
+
+    fig = learning_curves_figure(
         runs,
-        figure,
-        "residual PPO on soft_speed, field string (validation set)",
+        "field agent on the validation set",
         reference="soft_speed alone",
         short="soft_speed",
         goal=None,
         severity=True,
     )
+    problems = text_problems(fig)
+    if problems:
+        raise RuntimeError(f"learning curves: {problems}")
+    return save_figure(fig, figure)
 
 
 def main() -> None:
@@ -204,6 +255,13 @@ def main() -> None:
         help="only print the group means of a field heldout.csv",
     )
     parser.add_argument(
+        "--depth-validation",
+        nargs="+",
+        default=None,
+        metavar="ARG",
+        help="LOW HIGH N MODEL ...: validation ratios on depths LOW-HIGH m only",
+    )
+    parser.add_argument(
         "--ship-model",
         type=Path,
         default=None,
@@ -217,6 +275,15 @@ def main() -> None:
     if args.groups:
         print(group_table(args.groups))
         return
+    if args.depth_validation:
+        low, high, n, *models = args.depth_validation
+        rows = depth_validation([Path(m) for m in models], (float(low), float(high)), int(n))
+        for row in rows:
+            print(
+                f"{row['model']}: IAE ratio {row['iae']:.3f}, RMSD ratio {row['rmsd_nm']:.3f}, "
+                f"severity ratio {row['stick_slip_severity']:.3f}"
+            )
+        return
     if args.ship_model:
         seed = load_policy(args.ship_model).metadata["train_config"]["seed"]
         wall = "" if args.wall_s is None else f", {args.wall_s:.0f} s wall"
@@ -229,7 +296,7 @@ def main() -> None:
         return
     if args.curves:
         runs = dict(
-            (label, Path(folder)) for label, folder in (c.split("=", 1) for c in args.curves)
+            (label, Path(folder)) for label, folder in (c.rsplit("=", 1) for c in args.curves)
         )
         print(f"learning curves: {curves(runs, args.figure or FIGURE)}")
         return
