@@ -60,7 +60,7 @@ ENV_DEFAULTS: Final[dict[str, dict[str, Any]]] = {
         "n_steps": 500,
         "batch_size": 1000,
         "gamma": 0.99,
-        "total_timesteps": 400_000,
+        "total_timesteps": 200_000,
         "validate_every": 100_000,
         "validation_episodes": 32,
         "checkpoint_every": 100_000,
