@@ -17,11 +17,11 @@ samples) into ``docs/figures/field_agent_<id>.png``, from the shipped model by d
 ``--groups HELDOUT_CSV`` prints the means of a field ``heldout.csv`` (written by ``drill-gym
 evaluate --env DrillStringField-v0``) by group (:data:`GROUPS`: within the training ranges, the
 deep string, outside the ranges, all): IAE, RMSD and the stick-slip severity of the prone
-scenarios. ``--depth-validation LOW HIGH N MODEL ...`` scores models as the validation does (ratios of
-the mean IAE, RMSD and severity to ``soft_speed`` on N scenarios of the training
-randomisation, the validation's reset seeds) with the depth drawn from LOW-HIGH m only: does a
-deeper validation set rank checkpoints as the deep held-out strings do? ``--ship-model MODEL
---wall-s S`` ships the model of a finished run of the default command
+scenarios. ``--depth-validation LOW HIGH N MODEL ...`` scores models as the validation does
+(ratios of the mean IAE, RMSD and severity to ``soft_speed`` on N scenarios of the training
+randomisation, the validation's reset seeds) with the depth drawn from LOW-HIGH m only: does
+a deeper validation set rank checkpoints as the deep held-out strings do? ``--ship-model
+MODEL --wall-s S`` ships the model of a finished run of the default command
 (``drill-gym train --env DrillStringField-v0 --run-dir ... --save-dir ...``) with the command
 and its wall time recorded in its ``source``.
 
