@@ -32,10 +32,10 @@ from __future__ import annotations
 import argparse
 import math
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Final, NamedTuple
+from typing import Any, Final, NamedTuple, Protocol
 
 import gymnasium as gym
 import numpy as np
@@ -65,6 +65,7 @@ from experiments.tables import write_csv
 
 __all__ = [
     "CSV_COLUMNS",
+    "MapPolicy",
     "StickSlipMap",
     "compute_map",
     "grid_values",
@@ -231,8 +232,27 @@ def _chunk_steps(total_steps: int) -> int:
     return 1  # pragma: no cover - d = 1 always divides
 
 
+class MapPolicy(Protocol):
+    """A learned controller on the map (:class:`agents.policy.ResidualPolicy` is one): its
+    name, the env keywords it was trained with and an SB3-style deterministic ``predict``."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def env_kwargs(self) -> Mapping[str, Any]: ...
+
+    def predict(
+        self,
+        observation: npt.ArrayLike,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> tuple[npt.NDArray[np.float32], Any]: ...
+
+
 def compute_map(
-    controller: str,
+    controller: str | MapPolicy,
     wob_n: npt.ArrayLike,
     reference_speed_rad_s: npt.ArrayLike,
     duration_s: float = 100.0,
@@ -249,7 +269,9 @@ def compute_map(
     """Run every (WOB, reference speed) cell from rest and measure its stick-slip.
 
     Args:
-        controller: Registered controller name (:func:`baselines.controller_names`).
+        controller: Registered controller name (:func:`baselines.controller_names`), or a
+            learned policy (:class:`MapPolicy`, e.g. ``agents.load_policy(path)``): the cells
+            then run with its env keywords and its deterministic action at every decision.
         wob_n: WOB values of the rows, N (each > 0).
         reference_speed_rad_s: Reference bit speeds of the columns, rad/s (each > 0).
         duration_s: Length of each run, s (a multiple of 0.1 s, at most 10,000 s).
@@ -272,9 +294,17 @@ def compute_map(
     Raises:
         ValueError: naming the argument that is out of range or unknown.
     """
-    names = controller_names()
-    if controller not in names:
-        raise ValueError(f"unknown controller {controller!r}: valid names are {', '.join(names)}")
+    policy = None if isinstance(controller, str) else controller
+    policy_kwargs = _policy_env_kwargs(policy, env_id) if policy is not None else {}
+    if policy is not None:
+        controller = policy.name
+    else:
+        names = controller_names()
+        if controller not in names:
+            raise ValueError(
+                f"unknown controller {controller!r}: valid names are {', '.join(names)}"
+            )
+    assert isinstance(controller, str)
     field = is_field(env_id)
     presets = DISTRIBUTED_PRESETS if field else PRESETS
     if parameters is None:
@@ -285,7 +315,8 @@ def compute_map(
         )
     extra: dict[str, Any] = {}
     if field:
-        observation = observation or "state"
+        trained_observation = policy_kwargs.pop("observation", None)
+        observation = observation or trained_observation or "state"
         if observation not in OBSERVATIONS:
             raise ValueError(
                 f"observation = {observation!r} is not valid: allowed {', '.join(OBSERVATIONS)}"
@@ -327,6 +358,13 @@ def compute_map(
         raise ValueError(f"noise_std_rad_s = {noise_std_rad_s!r} is out of range: allowed [0, 10]")
 
     chunk = _chunk_steps(total_steps)
+    if policy is not None:  # one chunk per decision of the policy
+        chunk = round(float(policy_kwargs.pop("control_dt_s", 0.1)) / PLANT_DT_S)
+        if total_steps % chunk:
+            raise ValueError(
+                f"duration_s = {duration_s!r} is out of range: allowed a multiple of the "
+                f"policy's decision period {chunk * PLANT_DT_S:g} s"
+            )
     cells = [(float(w), float(v)) for w in wobs for v in speeds]
     n = len(cells)
     started = time.perf_counter()
@@ -335,13 +373,13 @@ def compute_map(
         num_envs=n,
         parameters=parameters,
         randomize=False,
-        base_controller=controller,
+        **({"base_controller": controller} if policy is None else policy_kwargs),
         control_dt_s=chunk * PLANT_DT_S,
         episode_s=total_steps * PLANT_DT_S,
         noise_std_rad_s=float(noise_std_rad_s),
         **extra,
     )
-    reset_each(
+    observations = reset_each(
         venv,
         [seed + i for i in range(n)],
         [{"wob_n": w, "reference_speed_rad_s": v} for w, v in cells],
@@ -350,6 +388,7 @@ def compute_map(
     stats = WindowStatistics(n)
     diverged = np.zeros(n, dtype=bool)
     actions = np.zeros((n, 1), dtype=np.float32)
+    policy_state: Any = None
     n_chunks = total_steps // chunk
     bar = tqdm(
         total=n_chunks,
@@ -360,7 +399,11 @@ def compute_map(
     )
     with bar:
         for k in range(n_chunks):
-            _, _, terminated, _, _ = venv.step(actions)
+            if policy is not None:
+                actions, policy_state = policy.predict(
+                    observations, policy_state, np.full(n, k == 0), deterministic=True
+                )
+            observations, _, terminated, _, _ = venv.step(actions)
             diverged |= terminated
             bar.update()
             first = max(window_start - k * chunk, 0)
@@ -393,6 +436,26 @@ def compute_map(
     )
 
 
+_MAP_OWN_KEYWORDS: Final = frozenset(
+    {"parameters", "randomize", "episode_s", "noise_std_rad_s", "measured_depth_m", "env_id"}
+)
+"""Env keywords that the map sets itself, whatever a policy was trained with."""
+
+
+def _policy_env_kwargs(policy: MapPolicy, env_id: str) -> dict[str, Any]:
+    """The env keywords of a policy's cells: its own (decision period, base controller,
+    residual scale, observation mode, ...) without those the map sets; a policy trained on
+    another env is refused."""
+    kwargs = dict(policy.env_kwargs)
+    trained_on = kwargs.get("env_id", PAPER_ENV)
+    if trained_on != env_id:
+        raise ValueError(
+            f"policy {policy.name!r} was trained on {trained_on}: map it with env_id {trained_on}"
+            f", not {env_id}"
+        )
+    return {k: v for k, v in kwargs.items() if k not in _MAP_OWN_KEYWORDS}
+
+
 def write_map_csv(result: StickSlipMap, path: str | Path) -> Path:
     """Write the map as CSV (``CSV_COLUMNS``, one row per cell, 6 significant digits)."""
     rows = [{k: f"{v:.6g}" for k, v in zip(CSV_COLUMNS, row, strict=True)} for row in result.rows()]
@@ -422,6 +485,7 @@ examples:
   drill-gym map                                         # stiff_pi on the default grid
   drill-gym map --controllers stiff_pi soft_speed z_torque proposed --out results/maps
   drill-gym map --wob-n 5 --speed-n 4 --duration 40 --window 20   # a quick coarse map
+  drill-gym map --controllers z_torque proposed --models agents/models/residual_ppo
   drill-gym map --env DrillStringField-v0 --controllers soft_speed --depths 1500 2500 4000
 """
 
@@ -458,10 +522,20 @@ def _parser() -> ArgumentParser:
     parser.add_argument(
         "--controllers",
         nargs="+",
-        default=["stiff_pi"],
+        default=None,
         type=controllers,
         metavar="NAME",
-        help=f"controllers to map, by registered name: {', '.join(controller_names())}",
+        help=f"controllers to map, by registered name: {', '.join(controller_names())} "
+        "(default: stiff_pi, or none when --models are given)",
+    )
+    parser.add_argument(
+        "--models",
+        nargs="+",
+        default=[],
+        metavar="PATH",
+        help="learned controllers to map too: model folders in the project's format (e.g. "
+        "agents/models/residual_ppo), each run with its own env keywords and its deterministic "
+        "action at every decision (maps of models run serially)",
     )
     parser.add_argument(  # the earlier name, still accepted
         "--controller", dest="controllers", nargs="+", type=controllers, help=argparse.SUPPRESS
@@ -599,7 +673,26 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     if abs(round(args.duration * 10) - args.duration * 10) > 1e-6:
         parser.fail("--duration", f"{args.duration:g} is not a multiple of 0.1 s")
-    runs: list[tuple[str, str | None, float | None]] = []
+    if args.controllers is None:
+        args.controllers = [] if args.models else ["stiff_pi"]
+    policies: list[MapPolicy] = []
+    if args.models:
+        if sweep_requested(args):
+            parser.fail(
+                "--models",
+                "maps of models run serially: without --workers, --ray, "
+                "--address, --results and --resume",
+            )
+        from agents.policy import load_policy
+
+        for path in args.models:
+            try:
+                policy = load_policy(path)
+                _policy_env_kwargs(policy, args.env)
+            except (OSError, ValueError) as err:
+                parser.fail("--models", f"{path}: {err}")
+            policies.append(policy)
+    runs: list[tuple[str | MapPolicy, str | None, float | None]] = []
     if field:
         string = DISTRIBUTED_PRESETS[args.parameters]
         depths = list(dict.fromkeys(args.depths or [string.measured_depth_m]))
@@ -612,13 +705,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         for name in dict.fromkeys(args.controllers):
             modes = observations_of(name, args.observations)
             runs += [(name, obs, depth) for depth in depths for obs in modes]
+        runs += [(policy, None, depth) for depth in depths for policy in policies]
     else:
         runs = [(name, None, None) for name in dict.fromkeys(args.controllers)]
+        runs += [(policy, None, None) for policy in policies]
     computed: Iterable[tuple[StickSlipMap, float | None]]
     if sweep_requested(args):  # on the sweep runner: Ray, a results file, a resume
         from experiments.sweep_studies import run_map_sweep
 
-        computed = ((m, m.measured_depth_m) for m in run_map_sweep(args, runs, wobs, speeds))
+        named = [(name, obs, depth) for name, obs, depth in runs if isinstance(name, str)]
+        computed = ((m, m.measured_depth_m) for m in run_map_sweep(args, named, wobs, speeds))
     else:
         computed = (
             (
