@@ -398,7 +398,7 @@ def _heldout(model: Path, scenario_ids: Sequence[str] | None) -> dict[str, Any]:
     base = agent.env_kwargs.get("base_controller") or BASE_CONTROLLER
     scenarios = [s for s in HELD_OUT if scenario_ids is None or s.id in scenario_ids]
     rows, _ = evaluate([agent], [base], scenarios)
-    goal = summarize(rows, base)["goal"][agent.name]
+    goal = summarize(rows, base, agents=[agent.name])["goal"][agent.name]
     return {
         "heldout_iae_ratio": goal["iae_ratio"],
         "heldout_rmsd_ratio": goal["rmsd_ratio"],
