@@ -40,17 +40,20 @@ per run), ``breakpoints.csv`` and ``breakpoints.json``, ``summary.json`` and
 
 from __future__ import annotations
 
+import functools
 import math
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final, NamedTuple
 
 import numpy as np
+import numpy.typing as npt
 
 import baselines  # noqa: F401  (registers the built-in controllers, in their order)
 from drill_env.control import controller_names
+from drill_env.distributed import Chain, chain_from_parameters
 from drill_env.evaluation import ZeroAction, episode_metrics
 from drill_env.options import REALISM_KEYWORDS, EnvConfig, FieldEnvConfig, realism_keywords
 from experiments.arguments import ArgumentParser, names_type, number_type
@@ -79,6 +82,7 @@ __all__ = [
     "IDEAL",
     "LIMIT_BAND",
     "LIMIT_RISE",
+    "LoopMargins",
     "MEAN_KEYS",
     "SCENARIOS",
     "SEVERITY_LIMIT",
@@ -89,7 +93,10 @@ __all__ = [
     "Step",
     "break_points",
     "broken",
+    "chain_impedance",
     "factor_settings",
+    "loop_margins",
+    "loop_numbers",
     "main",
     "mean_rows",
     "run_realism",
@@ -606,6 +613,123 @@ def break_points(means: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     return rows
 
 
+# ------------------------------------------------------------- what the breaks meet
+class LoopMargins(NamedTuple):
+    """The margins of a speed loop ``u = (kp + ki / s) (w_ref - w)`` on the top drive.
+
+    Attributes:
+        crossover_rad_s: The highest frequency where the open loop's gain is 1, rad/s.
+        phase_margin_deg: Its phase margin there, degrees.
+        dead_time_margin_s: The smallest dead time that makes the loop unstable, s (the
+            smallest phase margin over the gain crossings divided by their frequency).
+        lag_margin_s: The smallest first-order lag that takes every phase margin to zero,
+            s (``inf``: none up to 10 s).
+    """
+
+    crossover_rad_s: float
+    phase_margin_deg: float
+    dead_time_margin_s: float
+    lag_margin_s: float
+
+
+def chain_impedance(chain: Chain, omega_rad_s: npt.ArrayLike) -> npt.NDArray[np.complex128]:
+    """The impedance the string presents to its top drive's torque, N m s/rad: torque over
+    top-drive speed at each frequency, the top drive's own inertia and bearing damping
+    included, the bit sliding (the friction, the one nonlinearity, left out).
+
+    Args:
+        chain: The linear chain (``drill_env.distributed.chain_from_parameters``).
+        omega_rad_s: Frequencies, rad/s (> 0), any shape.
+
+    Returns:
+        The complex impedance at each frequency, the shape of ``omega_rad_s``.
+    """
+    w = np.asarray(omega_rad_s, dtype=np.float64)
+    jw = 1j * w
+    inertia, ground = chain.node_inertia_kg_m2, chain.node_damping_nm_s_rad
+    z = jw * inertia[-1] + ground[-1]
+    for e in range(len(chain.element_stiffness_nm_rad) - 1, -1, -1):
+        spring = chain.element_stiffness_nm_rad[e] / jw + chain.element_damping_nm_s_rad[e]
+        z = jw * inertia[e] + ground[e] + 1.0 / (1.0 / spring + 1.0 / z)
+    result: npt.NDArray[np.complex128] = z
+    return result
+
+
+def loop_margins(
+    kp: float, ki: float, impedance: Callable[[npt.NDArray[np.float64]], Any]
+) -> LoopMargins:
+    """The margins of the PI speed loop ``kp + ki / s`` on a top drive whose load has the
+    ``impedance`` (torque over speed, a function of the frequency in rad/s; for example
+    :func:`chain_impedance`), on a grid of 20,000 frequencies from 0.01 to 10,000 rad/s.
+
+    Args:
+        kp: Proportional gain, N m s/rad (> 0).
+        ki: Integral gain, N m/rad (>= 0).
+        impedance: The load's impedance at an array of frequencies, N m s/rad.
+
+    Returns:
+        The :class:`LoopMargins`.
+    """
+    w = np.logspace(-2, 4, 20_000)
+    base = (kp + ki / (1j * w)) / np.asarray(impedance(w))
+
+    def margins(
+        loop: npt.NDArray[np.complex128],
+    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
+        gain = np.abs(loop)
+        cross = np.flatnonzero((gain[:-1] >= 1.0) & (gain[1:] < 1.0))
+        return cross, np.mod(np.pi + np.angle(loop[cross]), 2.0 * np.pi)
+
+    cross, pm = margins(base)
+    if cross.size == 0:
+        return LoopMargins(math.nan, math.nan, math.inf, math.inf)
+    delay = float(np.min(pm / w[cross]))
+
+    def stable(lag_s: float) -> bool:
+        c, m = margins(base / (1.0 + 1j * w * lag_s))
+        return bool(c.size and np.all((m > 1e-9) & (m < np.pi)))
+
+    lag = math.inf
+    if not stable(10.0):
+        low, high = 0.0, 10.0
+        for _ in range(60):
+            mid = 0.5 * (low + high)
+            low, high = (mid, high) if stable(mid) else (low, mid)
+        lag = high
+    return LoopMargins(float(w[cross[-1]]), float(np.degrees(pm[-1])), delay, lag)
+
+
+def loop_numbers(envs: Sequence[str] = ENV_IDS) -> list[dict[str, Any]]:
+    """What the break points are measured against, per env: the stiff speed loop's margins
+    (``stiff_pi``, and ``z_torque``'s inner loop, which has the same gains) on the env's nominal
+    string (``zribi2024``; ``field_2500m`` at 2,500 m) with the bit sliding, and the memory of
+    the sliding-mode controllers' observer on the surface setting (:data:`SURFACE`): the
+    slowest time constant of its one-step transition ``F``, s."""
+    from baselines.observer import ObserverGains, design_observer
+    from drill_env.control import make_controller
+    from drill_env.parameters import PLANT_DT_S, PRESETS
+
+    rows = []
+    for env_id in envs:
+        config = FieldEnvConfig(**SURFACE) if env_id == FIELD_ENV else EnvConfig(**SURFACE)
+        model = config.string() if isinstance(config, FieldEnvConfig) else PRESETS["zribi2024"]
+        tuning = make_controller("stiff_pi").tuning(model)  # type: ignore[attr-defined]
+        chain = chain_from_parameters(model)
+        margins = loop_margins(tuning.kp, tuning.ki, functools.partial(chain_impedance, chain))
+        design = design_observer(model, config.measurement_channel(), ObserverGains())
+        slowest = float(np.max(np.abs(np.linalg.eigvals(design.F))))
+        rows.append(
+            {
+                "env": env_id,
+                "kp": tuning.kp,
+                "ki": tuning.ki,
+                **margins._asdict(),
+                "observer_memory_s": -PLANT_DT_S / math.log(slowest),
+            }
+        )
+    return rows
+
+
 # ------------------------------------------------------------------------------ outputs
 def means_table(means: Sequence[Mapping[str, Any]], env_id: str) -> str:
     """IAE and severity of every controller at every setting of ``env_id`` (markdown)."""
@@ -641,6 +765,27 @@ def breaks_table(breaks: Sequence[Mapping[str, Any]], env_id: str) -> str:
         Column(f, f"{f} ({units[f]})" if units.get(f) else f, align="left") for f in factors
     ]
     return markdown_table(lines, columns)
+
+
+def loops_table(loops: Sequence[Mapping[str, Any]]) -> str:
+    """:func:`loop_numbers` as a markdown table."""
+    columns = [
+        Column("env", "env", align="left"),
+        Column("crossover_rad_s", "stiff loop: crossover (rad/s)", "{:.1f}"),
+        Column("phase_margin_deg", "phase margin (deg)", "{:.1f}"),
+        Column("dead_time_margin_s", "dead-time margin (ms)", "{:.1f}"),
+        Column("lag_margin_s", "lag margin (ms)", "{:.0f}"),
+        Column("observer_memory_s", "observer memory (s)", "{:.2f}"),
+    ]
+    shown = [
+        {
+            **r,
+            "dead_time_margin_s": 1e3 * r["dead_time_margin_s"],
+            "lag_margin_s": 1e3 * r["lag_margin_s"],
+        }
+        for r in loops
+    ]
+    return markdown_table(shown, columns)
 
 
 def realism_figures(
@@ -878,6 +1023,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             "limit_rise": LIMIT_RISE,
         },
     }
+    loops = loop_numbers(envs)
+    summary["loops"] = loops
     written = write_outputs(means, runs, breaks, summary, out)
     if not args.no_plots:
         from experiments.plots import save_figure
@@ -892,6 +1039,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"\n## {env_id}: break points (first value where the controller breaks)\n")
         print(breaks_table(breaks, env_id))
         print()
+    print(
+        "## What the break points meet: the stiff speed loop (stiff_pi, and z_torque's inner loop)"
+    )
+    print(
+        "## on the nominal string with the bit sliding, and the observer's memory on surface signals\n"
+    )
+    print(loops_table(loops))
+    print()
     print(
         f"{summary['runs']} runs ({summary['distinct_settings']} distinct settings x "
         f"{len(controllers)} controllers x the scenarios, per env) in {seconds:.1f} s "

@@ -675,7 +675,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                     f"{depth:g} is out of range: allowed > BHA length {string.bha_length_m} m",
                 )
         for name in dict.fromkeys(args.controllers):
-            modes = observations_of(name, args.observations) if level is None else (None,)
+            modes = (
+                observations_of(name, args.observations)
+                if level is None
+                else (str(realism_keywords(level)["observation"]),)
+            )
             runs += [(name, obs, depth) for depth in depths for obs in modes]
     else:
         runs = [(name, None, None) for name in dict.fromkeys(args.controllers)]

@@ -154,6 +154,44 @@ def test_break_points_on_a_synthetic_table() -> None:
         break_points([_row("dead", 0, 1.0, 0.1, c="c")])
 
 
+# ----------------------------------------------------------------------- loop margins
+def test_loop_margins_of_a_pi_loop_on_an_inertia_are_the_closed_forms() -> None:
+    inertia, kp = 930.0, 69_681.0
+    ki = kp**2 / (4.0 * inertia)  # critically damped, as stiff_pi
+    m = realism.loop_margins(kp, ki, lambda w: 1j * w * inertia)
+    # |kp + ki / (j w)| = J w: J^2 w^4 - kp^2 w^2 - ki^2 = 0.
+    w_c = math.sqrt((kp**2 + math.sqrt(kp**4 + 4.0 * inertia**2 * ki**2)) / (2.0 * inertia**2))
+    pm = math.atan(kp * w_c / ki)
+    assert m.crossover_rad_s == pytest.approx(w_c, rel=1e-3)
+    assert m.phase_margin_deg == pytest.approx(math.degrees(pm), abs=0.05)
+    assert m.dead_time_margin_s == pytest.approx(pm / w_c, rel=2e-3)
+    # A lag adds -atan(w tau) to the phase -90 - atan(ki / (kp w)): zero margin at tau = kp / ki.
+    assert m.lag_margin_s == pytest.approx(kp / ki, rel=1e-3)
+    p = realism.loop_margins(kp, 0.0, lambda w: 1j * w * inertia)  # a P loop: 90 degrees
+    assert p.phase_margin_deg == pytest.approx(90.0, abs=0.01) and math.isinf(p.lag_margin_s)
+    assert p.dead_time_margin_s == pytest.approx(math.pi / 2 / (kp / inertia), rel=2e-3)
+
+
+@pytest.mark.parametrize("parameters", ["zribi2024", "field_2500m"])
+def test_chain_impedance_is_the_solved_chain(parameters: str) -> None:
+    """The recursion against the chain's equations solved at each frequency: the nodes'
+    speeds under a unit torque on the top drive, ``(j w M + D + (K / (j w) + C) L) v = e0``."""
+    from drill_env.distributed import chain_from_parameters
+
+    chain = chain_from_parameters(parameters)
+    n = chain.node_inertia_kg_m2.size
+    for w in (0.3, 2.0, 40.0):
+        a = np.diag(1j * w * chain.node_inertia_kg_m2 + chain.node_damping_nm_s_rad)
+        for e in range(n - 1):
+            k = chain.element_stiffness_nm_rad[e] / (1j * w) + chain.element_damping_nm_s_rad[e]
+            a[e, e] += k
+            a[e + 1, e + 1] += k
+            a[e, e + 1] -= k
+            a[e + 1, e] -= k
+        v = np.linalg.solve(a, np.eye(n)[0])
+        assert realism.chain_impedance(chain, np.array(w)) == pytest.approx(1.0 / v[0], rel=1e-9)
+
+
 # ------------------------------------------------------------------------------- runs
 @pytest.mark.parametrize(("env_id", "scenario"), [(PAPER_ENV, "h03"), (FIELD_ENV, "f01")])
 def test_a_run_is_the_held_out_run_at_any_decision_period(env_id: str, scenario: str) -> None:
@@ -350,8 +388,39 @@ def test_map_command_with_a_level(tmp_path: Path, capsys: pytest.CaptureFixture[
         "stick_slip_map_stiff_pi_surface_only.csv",
     ]
     capsys.readouterr()
-    assert cli_main([*argv, "--workers", "2", "--out", str(tmp_path / "w")]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "argument --realism: the maps of a level of realism run" in err
     assert cli_main(["map", "--realism", "lab", *grid]) == 2
     assert "argument --realism: invalid choice: 'lab'" in capsys.readouterr().err
+
+
+SWEEP_GRID = ["--controllers", "stiff_pi", "csmc", "--wob-n", "2", "--wob-min", "6e4",
+              "--wob-max", "1e5", "--speed-n", "2", "--speed-min", "6", "--speed-max", "12",
+              "--duration", "10", "--window", "5", "--no-progress", "--no-plots"]  # fmt: skip
+
+
+def map_files(tmp_path: Path, name: str, env_id: str, *options: str) -> dict[str, str]:
+    """The CSV files of ``drill-gym map`` with ``options`` on ``env_id`` (name: text)."""
+    out = tmp_path / name
+    assert cli_main(["map", "--env", env_id, *SWEEP_GRID, *options, "--out", str(out)]) == 0
+    return {p.name: p.read_text() for p in sorted(out.glob("*.csv"))}
+
+
+@pytest.mark.parametrize(("env_id", "level"), [(PAPER_ENV, "surface_only"), (FIELD_ENV, "ideal")])
+def test_map_of_a_level_on_the_sweep_runner_is_the_serial_map(
+    env_id: str, level: str, tmp_path: Path
+) -> None:
+    """The sweep runner (serially, a task per WOB row) makes the serial maps of a level, and
+    they are not the default maps (the level reaches the cells)."""
+    serial = map_files(tmp_path, "serial", env_id, "--realism", level)
+    swept = map_files(tmp_path, "swept", env_id, "--realism", level, "--task-size", "1")
+    assert len(serial) == 2 and all(name.endswith(f"_{level}.csv") for name in serial)
+    assert swept == serial
+    default = map_files(tmp_path, "default", env_id)
+    observation = realism_keywords(level)["observation"]
+    stem = "stick_slip_map_stiff_pi" + (f"_{observation}_2500m" if env_id == FIELD_ENV else "")
+    assert default[f"{stem}.csv"] != serial[f"{stem}_{level}.csv"]
+
+
+@pytest.mark.slow
+def test_map_of_a_level_on_ray_is_the_serial_map(tmp_path: Path) -> None:
+    serial = map_files(tmp_path, "serial", FIELD_ENV, "--realism", "field")
+    assert map_files(tmp_path, "ray", FIELD_ENV, "--realism", "field", "--workers", "2") == serial
