@@ -192,6 +192,47 @@ def test_chain_impedance_is_the_solved_chain(parameters: str) -> None:
         assert realism.chain_impedance(chain, np.array(w)) == pytest.approx(1.0 / v[0], rel=1e-9)
 
 
+def _torque_swing(env_id: str, **actuator: float) -> float:
+    """Std of the applied torque of ``stiff_pi`` over the last 10 s of a noise-free 40 s run
+    at a constant operating point (bit sliding), N m."""
+    point = (1e5, 10.0) if env_id == FIELD_ENV else (97_347.0, 12.0)
+    env = gym.make(
+        env_id, randomize=False, base_controller="stiff_pi", episode_s=40.0, control_dt_s=1.0,
+        noise_std_rad_s=0.0, wob_n=point[0], reference_speed_rad_s=point[1],
+        **{**IDEAL, **actuator},
+    )  # fmt: skip
+    env.reset(seed=0)
+    torques = []
+    for _ in range(40):
+        env.step(np.zeros(1, dtype=np.float32))
+        torques.append(env.unwrapped.plant_samples().torque_nm)  # type: ignore[attr-defined]
+    env.close()
+    return float(np.std(np.concatenate(torques)[-10_000:]))
+
+
+@pytest.mark.parametrize(
+    ("env_id", "keyword", "margin", "wider"),
+    [
+        (PAPER_ENV, "actuator_dead_time_s", "dead_time_margin_s", 10.0),
+        (PAPER_ENV, "actuator_lag_s", "lag_margin_s", 5.0),
+        (FIELD_ENV, "actuator_dead_time_s", "dead_time_margin_s", 3.0),
+    ],
+)
+def test_the_stiff_loop_oscillates_past_its_margin(
+    env_id: str, keyword: str, margin: str, wider: float
+) -> None:
+    """The closed loop, simulated with the friction and the torque limits, against the linear
+    margins of :func:`realism.loop_margins`: at 0.8 times the margin the torque holds as still
+    as with an ideal drive, at 1.25 times it swings ``wider`` times wider. (The field string's
+    lag margin marks no such onset: it is left out.)"""
+    (row,) = realism.loop_numbers([env_id])
+    quiet = _torque_swing(env_id)
+    below = _torque_swing(env_id, **{keyword: round(0.8 * row[margin], 3)})  # whole plant steps
+    above = _torque_swing(env_id, **{keyword: round(1.25 * row[margin], 3)})
+    assert below < 1.2 * quiet, (below, quiet)
+    assert above > wider * below, (above, below)
+
+
 # ------------------------------------------------------------------------------- runs
 @pytest.mark.parametrize(("env_id", "scenario"), [(PAPER_ENV, "h03"), (FIELD_ENV, "f01")])
 def test_a_run_is_the_held_out_run_at_any_decision_period(env_id: str, scenario: str) -> None:
