@@ -84,6 +84,7 @@ __all__ = [
     "LIMIT_RISE",
     "LoopMargins",
     "MEAN_KEYS",
+    "PRONE",
     "SCENARIOS",
     "SEVERITY_LIMIT",
     "SURFACE",
@@ -138,6 +139,14 @@ SCENARIOS: Final[dict[str, tuple[str, ...]]] = {
 }
 """The held-out scenarios of each env the study runs (``experiments.evaluate.HELD_OUT`` and
 ``FIELD_HELD_OUT``): three stick-slip-prone and three ordinary ones on each."""
+
+PRONE: Final[dict[str, tuple[str, ...]]] = {
+    PAPER_ENV: ("h01", "h03", "h12"),
+    FIELD_ENV: ("f01", "f07", "f08"),
+}
+"""The stick-slip-prone scenarios among :data:`SCENARIOS` (low speed, a wrong model, high WOB;
+short and slow, long and mild, sticky): the mean severity over those of a setting's scenarios
+is its ``prone_severity``."""
 
 MEAN_KEYS: Final = (
     "iae",
@@ -509,7 +518,8 @@ def mean_rows(
 
     Returns:
         One row per (env, setting, controller) with the means of :data:`MEAN_KEYS` over the
-        scenarios and the number of diverged runs; and one row per run.
+        scenarios, ``prone_severity`` (the mean severity over those of :data:`PRONE`; NaN
+        for none) and the number of diverged runs; and one row per run.
     """
     means: list[dict[str, Any]] = []
     runs: list[dict[str, Any]] = []
@@ -534,6 +544,13 @@ def mean_rows(
                     )  # fmt: skip
                 row = {**head, "controller": controller}
                 row.update({k: _mean([r[k] for r in mine]) for k in MEAN_KEYS})
+                row["prone_severity"] = _mean(
+                    [
+                        r["stick_slip_severity"]
+                        for s, r in zip(study.scenarios[env_id], mine, strict=True)
+                        if s in PRONE[env_id]
+                    ]
+                )
                 row["diverged"] = sum(bool(r["diverged"]) for r in mine)
                 row["runs"] = len(mine)
                 means.append(row)
@@ -732,7 +749,8 @@ def loop_numbers(envs: Sequence[str] = ENV_IDS) -> list[dict[str, Any]]:
 
 # ------------------------------------------------------------------------------ outputs
 def means_table(means: Sequence[Mapping[str, Any]], env_id: str) -> str:
-    """IAE and severity of every controller at every setting of ``env_id`` (markdown)."""
+    """Mean IAE, severity, severity on the prone scenarios and stuck fraction of every
+    controller at every setting of ``env_id`` (markdown)."""
     mine = [r for r in means if r["env"] == env_id]
     controllers = list(dict.fromkeys(r["controller"] for r in mine))
     by = {(r["factor"], r["index"], r["controller"]): r for r in mine}
@@ -741,7 +759,10 @@ def means_table(means: Sequence[Mapping[str, Any]], env_id: str) -> str:
         line: dict[str, Any] = {"setting": f"{factor}: {label}" if factor != label else factor}
         for c in controllers:
             r = by[(factor, index, c)]
-            cell = f"{r['iae']:.0f} / {r['stick_slip_severity']:.2f}"
+            cell = (
+                f"{r['iae']:.0f} / {r['stick_slip_severity']:.2f} / "
+                f"{r['prone_severity']:.2f} / {r['stuck_fraction']:.2f}"
+            )
             line[c] = cell + (f" ({r['diverged']} div.)" if r["diverged"] else "")
         lines.append(line)
     columns = [Column("setting", "setting", align="left")] + [Column(c, c) for c in controllers]
@@ -841,7 +862,7 @@ def write_outputs(
 ) -> list[Path]:
     """The tables of the study in ``out``."""
     mean_keys = ["env", "factor", "index", "value", "label", "controller", *MEAN_KEYS,
-                 "diverged", "runs"]  # fmt: skip
+                 "prone_severity", "diverged", "runs"]  # fmt: skip
     run_keys = ["env", "factor", "index", "value", "label", "controller", "scenario",
                 *MEAN_KEYS, "diverged"]  # fmt: skip
     break_keys = list(breaks[0]) if breaks else ["env", "controller", "factor"]
@@ -1016,6 +1037,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "settings": len(study.settings),
         "distinct_settings": len(study.keywords()),
         "scenarios": {e: list(s) for e, s in scenarios.items()},
+        "prone": {e: [s for s in scenarios[e] if s in PRONE[e]] for e in scenarios},
         "episode_s": study.episode_s,
         "criterion": {
             "iae_ratio": IAE_RATIO,
@@ -1033,8 +1055,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             save_figure(fig, out / "figures" / name) for name, fig in realism_figures(means, breaks)
         ]
     for env_id in envs:
-        print(f"## {env_id}: mean IAE (rad) / mean stick-slip severity over "
-              f"{', '.join(scenarios[env_id])}\n")  # fmt: skip
+        prone = ", ".join(s for s in scenarios[env_id] if s in PRONE[env_id]) or "none"
+        print(f"## {env_id}: mean IAE (rad) / stick-slip severity / severity on the prone "
+              f"scenarios ({prone}) / stuck fraction over {', '.join(scenarios[env_id])}\n")  # fmt: skip
         print(means_table(means, env_id))
         print(f"\n## {env_id}: break points (first value where the controller breaks)\n")
         print(breaks_table(breaks, env_id))

@@ -3,6 +3,7 @@ of realism (``experiments.stick_slip_map.compute_map(..., realism=...)``, ``--re
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import json
 import math
@@ -255,8 +256,8 @@ def test_the_tiny_study_runs_and_writes_its_files(
 ) -> None:
     out = tmp_path / "realism"
     argv = [
-        "realism", "--controllers", "stiff_pi", "z_torque", "--scenarios", "h14", "f03",
-        "--episode", "3", "--factors", "rate_limit", "--out", str(out), "--no-progress",
+        "realism", "--controllers", "stiff_pi", "z_torque", "--scenarios", "h14", "h01",
+        "f03", "f07", "--episode", "3", "--factors", "rate_limit", "--out", str(out), "--no-progress",
     ]  # fmt: skip
     assert cli_main(argv) == 0
     printed = capsys.readouterr().out
@@ -267,9 +268,20 @@ def test_the_tiny_study_runs_and_writes_its_files(
         "summary.json", "realism_rate_limit.png",
     }  # fmt: skip
     means = json.loads((out / "realism.json").read_text())
-    # 2 envs x (ideal + 6 rate limits + field) x 2 controllers, one scenario each.
-    assert len(means) == 2 * 8 * 2 and {r["runs"] for r in means} == {1}
-    assert len((out / "runs.csv").read_text().splitlines()) == 1 + 2 * 8 * 2
+    # 2 envs x (ideal + 6 rate limits + field) x 2 controllers, two scenarios each.
+    assert len(means) == 2 * 8 * 2 and {r["runs"] for r in means} == {2}
+    assert len((out / "runs.csv").read_text().splitlines()) == 1 + 2 * 8 * 2 * 2
+    # The prone severity is that of the one prone scenario (h01, f07), the mean of both not.
+    per_run = {
+        (r["env"], r["factor"], r["index"], r["controller"], r["scenario"]): r
+        for r in csv.DictReader((out / "runs.csv").open())
+    }
+    for r in means:
+        key = (r["env"], r["factor"], str(r["index"]), r["controller"])
+        prone, other = ("h01", "h14") if r["env"] == PAPER_ENV else ("f07", "f03")
+        severities = [float(per_run[(*key, sc)]["stick_slip_severity"]) for sc in (prone, other)]
+        assert r["prone_severity"] == pytest.approx(severities[0], rel=1e-12)
+        assert r["stick_slip_severity"] == pytest.approx(np.mean(severities), rel=1e-12)
     breaks = json.loads((out / "breakpoints.json").read_text())
     assert {(b["env"], b["factor"]) for b in breaks} == {
         (e, f) for e in (PAPER_ENV, FIELD_ENV) for f in ("rate_limit", "field")
@@ -288,11 +300,11 @@ def test_the_tiny_study_runs_and_writes_its_files(
         base_controller="z_torque",
     )  # fmt: skip
     want = episode_metrics(rollout(env, ZeroAction(), held_out.seed))
-    assert by[(FIELD_ENV, "rate_limit", 4, "z_torque")]["iae"] == pytest.approx(
-        want["iae"], rel=1e-12
-    )
+    got = per_run[(FIELD_ENV, "rate_limit", "4", "z_torque", "f03")]["iae"]
+    assert float(got) == pytest.approx(want["iae"], rel=1e-12)
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["runs"] == 2 * 7 * 2 and summary["distinct_settings"] == 7
+    assert summary["runs"] == 2 * 7 * 2 * 2 and summary["distinct_settings"] == 7
+    assert summary["prone"] == {PAPER_ENV: ["h01"], FIELD_ENV: ["f07"]}
 
 
 def test_every_figure_has_no_text_problems() -> None:
