@@ -86,6 +86,7 @@ __all__ = [
     "MEAN_KEYS",
     "PRONE",
     "SCENARIOS",
+    "SPEED_LOOPS",
     "SEVERITY_LIMIT",
     "SURFACE",
     "Factor",
@@ -716,12 +717,19 @@ def loop_margins(
     return LoopMargins(float(w[cross[-1]]), float(np.degrees(pm[-1])), delay, lag)
 
 
-def loop_numbers(envs: Sequence[str] = ENV_IDS) -> list[dict[str, Any]]:
-    """What the break points are measured against, per env: the stiff speed loop's margins
-    (``stiff_pi``, and ``z_torque``'s inner loop, which has the same gains) on the env's nominal
-    string (``zribi2024``; ``field_2500m`` at 2,500 m) with the bit sliding, and the memory of
-    the sliding-mode controllers' observer on the surface setting (:data:`SURFACE`): the
-    slowest time constant of its one-step transition ``F``, s."""
+SPEED_LOOPS: Final = ("stiff_pi", "soft_speed")
+"""The speed loops whose margins :func:`loop_numbers` gives (``z_torque``'s inner loop has the
+gains of ``stiff_pi``)."""
+
+
+def loop_numbers(
+    envs: Sequence[str] = ENV_IDS, loops: Sequence[str] = SPEED_LOOPS
+) -> list[dict[str, Any]]:
+    """What the break points are measured against, per env and speed loop: the loop's margins
+    (:func:`loop_margins` of its ``kp``, ``ki``) on the env's nominal string (``zribi2024``;
+    ``field_2500m`` at 2,500 m) with the bit sliding, and the memory of the sliding-mode
+    controllers' observer on the surface setting (:data:`SURFACE`): the slowest time constant
+    of its one-step transition ``F``, s (the same in every row of an env)."""
     from baselines.observer import ObserverGains, design_observer
     from drill_env.control import make_controller
     from drill_env.parameters import PLANT_DT_S, PRESETS
@@ -730,20 +738,21 @@ def loop_numbers(envs: Sequence[str] = ENV_IDS) -> list[dict[str, Any]]:
     for env_id in envs:
         config = FieldEnvConfig(**SURFACE) if env_id == FIELD_ENV else EnvConfig(**SURFACE)
         model = config.string() if isinstance(config, FieldEnvConfig) else PRESETS["zribi2024"]
-        tuning = make_controller("stiff_pi").tuning(model)  # type: ignore[attr-defined]
-        chain = chain_from_parameters(model)
-        margins = loop_margins(tuning.kp, tuning.ki, functools.partial(chain_impedance, chain))
+        impedance = functools.partial(chain_impedance, chain_from_parameters(model))
         design = design_observer(model, config.measurement_channel(), ObserverGains())
         slowest = float(np.max(np.abs(np.linalg.eigvals(design.F))))
-        rows.append(
-            {
-                "env": env_id,
-                "kp": tuning.kp,
-                "ki": tuning.ki,
-                **margins._asdict(),
-                "observer_memory_s": -PLANT_DT_S / math.log(slowest),
-            }
-        )
+        for loop in loops:
+            tuning = make_controller(loop).tuning(model)  # type: ignore[attr-defined]
+            rows.append(
+                {
+                    "env": env_id,
+                    "loop": loop,
+                    "kp": tuning.kp,
+                    "ki": tuning.ki,
+                    **loop_margins(tuning.kp, tuning.ki, impedance)._asdict(),
+                    "observer_memory_s": -PLANT_DT_S / math.log(slowest),
+                }
+            )
     return rows
 
 
@@ -792,7 +801,10 @@ def loops_table(loops: Sequence[Mapping[str, Any]]) -> str:
     """:func:`loop_numbers` as a markdown table."""
     columns = [
         Column("env", "env", align="left"),
-        Column("crossover_rad_s", "stiff loop: crossover (rad/s)", "{:.1f}"),
+        Column("loop", "speed loop", align="left"),
+        Column("kp", "kp (N m s/rad)", "{:.0f}"),
+        Column("ki", "ki (N m/rad)", "{:.0f}"),
+        Column("crossover_rad_s", "crossover (rad/s)", "{:.2f}"),
         Column("phase_margin_deg", "phase margin (deg)", "{:.1f}"),
         Column("dead_time_margin_s", "dead-time margin (ms)", "{:.1f}"),
         Column("lag_margin_s", "lag margin (ms)", "{:.0f}"),
@@ -1062,12 +1074,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"\n## {env_id}: break points (first value where the controller breaks)\n")
         print(breaks_table(breaks, env_id))
         print()
-    print(
-        "## What the break points meet: the stiff speed loop (stiff_pi, and z_torque's inner loop)"
-    )
-    print(
-        "## on the nominal string with the bit sliding, and the observer's memory on surface signals\n"
-    )
+    print("## What the break points meet: the speed loops' margins (z_torque's inner loop has the")
+    print("## gains of stiff_pi) on the nominal string with the bit sliding, and the memory of the")
+    print("## sliding-mode controllers' observer on surface signals\n")
     print(loops_table(loops))
     print()
     print(

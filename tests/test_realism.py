@@ -226,7 +226,7 @@ def test_the_stiff_loop_oscillates_past_its_margin(
     margins of :func:`realism.loop_margins`: at 0.8 times the margin the torque holds as still
     as with an ideal drive, at 1.25 times it swings ``wider`` times wider. (The field string's
     lag margin marks no such onset: it is left out.)"""
-    (row,) = realism.loop_numbers([env_id])
+    (row,) = realism.loop_numbers([env_id], ["stiff_pi"])
     quiet = _torque_swing(env_id)
     below = _torque_swing(env_id, **{keyword: round(0.8 * row[margin], 3)})  # whole plant steps
     above = _torque_swing(env_id, **{keyword: round(1.25 * row[margin], 3)})
