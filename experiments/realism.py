@@ -32,8 +32,15 @@ The runs go through the sweep runner (:mod:`experiments.sweep`): serially in thi
 default, on Ray with ``--workers``; settings that coincide (no telemetry and the surface
 setting, a dead time of 0 and the ideal level, ...) are run once.
 
+Beside the break points the study gives what they meet (:func:`loop_numbers`): the phase,
+dead-time and lag margins of the speed loops (:func:`loop_margins` of ``stiff_pi`` and
+``soft_speed`` on the impedance the string presents to the top drive,
+:func:`chain_impedance`) and the memory of the sliding-mode controllers' observer on surface
+signals. docs/realism.md reports the study run with its defaults.
+
 Outputs (``--out``, default ``results/realism``): ``realism.csv`` and ``realism.json`` (one
-row per env, factor value and controller: the means over the scenarios), ``runs.csv`` (one row
+row per env, factor value and controller: the means over the scenarios and the mean severity
+over the prone ones, :data:`PRONE`), ``runs.csv`` (one row
 per run), ``breakpoints.csv`` and ``breakpoints.json``, ``summary.json`` and
 ``figures/realism_<factor>.png``; markdown tables on standard output.
 """
