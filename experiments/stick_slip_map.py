@@ -48,6 +48,7 @@ from drill_env.distributed import DISTRIBUTED_PRESETS, with_measured_depth
 from drill_env.evaluation import reset_each
 from drill_env.limits import MAX_REFERENCE_RAD_S, MAX_WOB_N
 from drill_env.metrics import WindowStatistics
+from drill_env.options import REALISM_LEVELS, realism_keywords
 from drill_env.parameters import PLANT_DT_S, PRESETS
 from drill_env.scenarios import RPM
 from experiments.arguments import ArgumentParser, names_type, number_type
@@ -65,11 +66,13 @@ from experiments.tables import write_csv
 
 __all__ = [
     "CSV_COLUMNS",
+    "DEFAULT_REALISM",
     "MapPolicy",
     "StickSlipMap",
     "compute_map",
     "grid_values",
     "main",
+    "map_realism",
     "stick_slip",
     "write_map_csv",
 ]
@@ -86,6 +89,27 @@ MAX_CHUNK_STEPS: Final = 1000
 """Plant steps per compiled call (1 s): bounds the memory of the per-step records."""
 UNSTABLE_SEVERITY: Final = 0.5
 """A cell counts as stick-slipping when its severity exceeds this or its bit ever sticks."""
+DEFAULT_REALISM: Final[dict[str, str | None]] = {PAPER_ENV: "ideal", FIELD_ENV: None}
+"""The level of realism (``drill_env.options.REALISM_LEVELS``) a map runs at by default:
+``DrillString-v0``'s own defaults are the ``ideal`` level; ``DrillStringField-v0``'s map
+keeps the env's sensors and top drive with the observation it is given, which is no level."""
+
+
+def map_realism(env_id: str, realism: str | None) -> str | None:
+    """The level of realism a map of ``env_id`` applies: ``None`` for the default map
+    (:data:`DEFAULT_REALISM`, or no level), else ``realism``.
+
+    Raises:
+        ValueError: for an unknown env or level.
+    """
+    is_field(env_id)  # validates the env
+    if realism is None or realism == DEFAULT_REALISM[env_id]:
+        return None
+    if realism not in REALISM_LEVELS:
+        raise ValueError(
+            f"realism = {realism!r} is not a known level: allowed {', '.join(REALISM_LEVELS)}"
+        )
+    return realism
 
 
 def stick_slip(
@@ -134,6 +158,8 @@ class StickSlipMap:
             ``DrillString-v0``).
         measured_depth_m: The field string's measured depth, m (``None`` on
             ``DrillString-v0``).
+        realism: The level of realism the map ran at (``None``: the default map,
+            :func:`map_realism`).
     """
 
     controller: str
@@ -150,20 +176,25 @@ class StickSlipMap:
     env_id: str = PAPER_ENV
     observation: str | None = None
     measured_depth_m: float | None = None
+    realism: str | None = None
 
     @property
     def label(self) -> str:
-        """The controller, with the observation mode on the field string."""
-        if self.observation is None:
-            return self.controller
-        return f"{self.controller} ({self.observation})"
+        """The controller, with the observation mode on the field string and the level of
+        realism when it is not the default: ``proposed (surface) [field]``."""
+        label = self.controller
+        if self.observation is not None:
+            label += f" ({self.observation})"
+        return label if self.realism is None else f"{label} [{self.realism}]"
 
     def file_stem(self) -> str:
         """``stick_slip_map_<controller>``, on the field string with the observation mode and
-        the depth: ``stick_slip_map_stiff_pi_surface_2500m``."""
-        if self.observation is None or self.measured_depth_m is None:
-            return f"stick_slip_map_{self.controller}"
-        return f"stick_slip_map_{self.controller}_{self.observation}_{self.measured_depth_m:g}m"
+        the depth (``stick_slip_map_stiff_pi_surface_2500m``), and with the level of realism
+        when it is not the default (``stick_slip_map_proposed_surface_2500m_field``)."""
+        stem = f"stick_slip_map_{self.controller}"
+        if self.observation is not None and self.measured_depth_m is not None:
+            stem += f"_{self.observation}_{self.measured_depth_m:g}m"
+        return stem if self.realism is None else f"{stem}_{self.realism}"
 
     @property
     def cells(self) -> int:
@@ -265,6 +296,7 @@ def compute_map(
     env_id: str = PAPER_ENV,
     observation: str | None = None,
     measured_depth_m: float | None = None,
+    realism: str | None = None,
 ) -> StickSlipMap:
     """Run every (WOB, reference speed) cell from rest and measure its stick-slip.
 
@@ -286,7 +318,15 @@ def compute_map(
         observation: On the field string, the observation mode of the controller (``state`` or
             ``surface``; default ``state``). Without noise the surface torque and the
             telemetry are exact too; with noise they carry the env's default noise.
+            With ``realism``, the level's observation (an ``observation`` that differs from
+            it is an error).
         measured_depth_m: On the field string, its measured depth, m (default the preset's).
+        realism: A level of ``drill_env.options.REALISM_LEVELS``: the map's env gets
+            ``realism_keywords(realism)`` (the observation, the sensors with their noise,
+            the telemetry and the actuator; ``noise_std_rad_s`` still sets the speed noise).
+            ``None`` (the default) keeps today's map: ``DrillString-v0`` at its own defaults
+            (the ``ideal`` level, which gives the same map), ``DrillStringField-v0`` at its
+            own with ``observation``.
 
     Returns:
         The :class:`StickSlipMap`.
@@ -313,10 +353,28 @@ def compute_map(
         raise ValueError(
             f"parameters = {parameters!r} is not a known preset of {env_id}: {sorted(presets)}"
         )
-    extra: dict[str, Any] = {}
+    level = map_realism(env_id, realism)
+    extra: dict[str, Any] = {} if level is None else realism_keywords(level)
+    if level is not None and observation not in (None, extra["observation"]):
+        raise ValueError(
+            f"observation = {observation!r} is not that of realism = {level!r} "
+            f"({extra['observation']!r}): leave it out"
+        )
+    trained_observation = policy_kwargs.pop("observation", None)
+    if policy is not None and level is not None:
+        trained = trained_observation or "state"
+        if trained != extra["observation"]:
+            raise ValueError(
+                f"realism = {level!r} observes {extra['observation']!r} signals, model "
+                f"{policy.name!r} was trained on {trained!r} ones: map it at a level that "
+                "observes what it was trained on"
+            )
     if field:
-        trained_observation = policy_kwargs.pop("observation", None)
-        observation = observation or trained_observation or "state"
+        observation = (
+            observation
+            or trained_observation
+            or ("state" if level is None else extra["observation"])
+        )
         if observation not in OBSERVATIONS:
             raise ValueError(
                 f"observation = {observation!r} is not valid: allowed {', '.join(OBSERVATIONS)}"
@@ -324,10 +382,10 @@ def compute_map(
         if measured_depth_m is None:
             measured_depth_m = DISTRIBUTED_PRESETS[parameters].measured_depth_m
         with_measured_depth(parameters, measured_depth_m)  # validates the depth
-        extra = {"observation": observation, "measured_depth_m": float(measured_depth_m)}
-        if noise_std_rad_s == 0:
+        extra.update(observation=observation, measured_depth_m=float(measured_depth_m))
+        if noise_std_rad_s == 0 and level is None:
             extra.update(torque_noise_std_nm=0.0, telemetry_noise_std_rad_s=0.0)
-    elif observation is not None or measured_depth_m is not None:
+    elif (level is None and observation is not None) or measured_depth_m is not None:
         raise ValueError(
             f"observation and measured_depth_m are keywords of the field string, not of {env_id}"
         )
@@ -373,11 +431,10 @@ def compute_map(
         num_envs=n,
         parameters=parameters,
         randomize=False,
-        **({"base_controller": controller} if policy is None else policy_kwargs),
         control_dt_s=chunk * PLANT_DT_S,
         episode_s=total_steps * PLANT_DT_S,
         noise_std_rad_s=float(noise_std_rad_s),
-        **extra,
+        **{**({"base_controller": controller} if policy is None else policy_kwargs), **extra},
     )
     observations = reset_each(
         venv,
@@ -433,6 +490,7 @@ def compute_map(
         env_id=env_id,
         observation=observation if field else None,
         measured_depth_m=float(measured_depth_m) if measured_depth_m is not None else None,
+        realism=level,
     )
 
 
@@ -481,12 +539,20 @@ stick_slip_map_NAME_OBSERVATION_DEPTHm and stick_slip_maps_DEPTHm.png. Its defau
 50-200 kN, 40-160 rpm (4.19-16.76 rad/s), 100 s runs with the last 50 s analysed (the field
 string's stick-slip cycles last 4-11 s, so the window holds at least four of the longest).
 
+With --realism LEVEL (ideal, wired_pipe, field, surface_only) the cells get that level's
+sensors, telemetry and top drive (the field level: surface signals at 100 Hz with their noise,
+telemetry every 5 s and 5 s late, 20 ms dead time, 20 ms lag, a 100 kN m/s rate limit), every
+controller with the level's observation (the sliding-mode controllers on the surface signals
+run their state observer); the file names end in _LEVEL. Without it a map keeps the env's own
+settings (DrillString-v0: the ideal level).
+
 examples:
   drill-gym map                                         # stiff_pi on the default grid
   drill-gym map --controllers stiff_pi soft_speed z_torque proposed --out results/maps
   drill-gym map --wob-n 5 --speed-n 4 --duration 40 --window 20   # a quick coarse map
   drill-gym map --controllers z_torque proposed --models agents/models/residual_ppo
   drill-gym map --env DrillStringField-v0 --controllers soft_speed --depths 1500 2500 4000
+  drill-gym map --controllers proposed stiff_pi --realism field --out results/maps-field
 """
 
 
@@ -620,6 +686,15 @@ def _parser() -> ArgumentParser:
         f"{FIELD_ENV} (default: zribi2024; field_2500m on {FIELD_ENV})",
     )
     parser.add_argument(
+        "--realism",
+        choices=REALISM_LEVELS,
+        default=None,
+        metavar="LEVEL",
+        help=f"level of realism of the sensors, telemetry and top drive: {', '.join(REALISM_LEVELS)}"
+        " (every controller then runs with the level's observation, --observations is not "
+        f"used; files end in _LEVEL; default: the env's own, which is ideal on {PAPER_ENV})",
+    )
+    parser.add_argument(
         "--out", type=Path, default=Path("results"), metavar="DIR", help="output folder"
     )
     parser.add_argument(
@@ -673,6 +748,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     if abs(round(args.duration * 10) - args.duration * 10) > 1e-6:
         parser.fail("--duration", f"{args.duration:g} is not a multiple of 0.1 s")
+    level = map_realism(args.env, args.realism)
     if args.controllers is None:
         args.controllers = [] if args.models else ["stiff_pi"]
     policies: list[MapPolicy] = []
@@ -703,7 +779,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                     f"{depth:g} is out of range: allowed > BHA length {string.bha_length_m} m",
                 )
         for name in dict.fromkeys(args.controllers):
-            modes = observations_of(name, args.observations)
+            modes = (
+                observations_of(name, args.observations)
+                if level is None
+                else (str(realism_keywords(level)["observation"]),)
+            )
             runs += [(name, obs, depth) for depth in depths for obs in modes]
         runs += [(policy, None, depth) for depth in depths for policy in policies]
     else:
@@ -731,6 +811,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     env_id=args.env,
                     observation=observation,
                     measured_depth_m=depth,
+                    realism=level,
                 ),
                 depth,
             )
@@ -753,7 +834,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         results.setdefault(depth, []).append(result)
     for depth, maps in results.items():
         if len(maps) > 1 and not args.no_plots:
-            name = "stick_slip_maps.png" if depth is None else f"stick_slip_maps_{depth:g}m.png"
+            name = "stick_slip_maps" + ("" if depth is None else f"_{depth:g}m")
+            name += ("" if level is None else f"_{level}") + ".png"
             print(f"wrote {save_figure(maps_figure(maps), args.out / name)}")
     return 0
 

@@ -265,6 +265,11 @@ def test_a_model_of_another_env_or_period_is_refused() -> None:
     field.env_kwargs = {**field.env_kwargs, "env_id": "DrillStringField-v0"}
     with pytest.raises(ValueError, match="trained on DrillStringField-v0: map it with env_id"):
         compute_map(field, [1e5], [5.0], duration_s=2.0, window_s=1.0, progress=False)
+    with pytest.raises(ValueError, match="was trained on 'state' ones: map it at a level that"):
+        compute_map(
+            _ZeroResidual(), [1e5], [5.0], duration_s=2.0, window_s=1.0, progress=False,
+            realism="surface_only",
+        )  # fmt: skip
     slow = _ZeroResidual()
     slow.env_kwargs = {**slow.env_kwargs, "control_dt_s": 0.5}
     with pytest.raises(ValueError, match="multiple of the policy's decision period 0.5 s"):
