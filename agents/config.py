@@ -82,9 +82,9 @@ class TrainConfig:
     seed: int = 1
     """Seed of everything: the network initialisation, PPO's sampling and the training
     scenarios (string ``i`` of the vector env starts from reset seed ``seed + i``)."""
-    total_timesteps: int = 4_000_000
+    total_timesteps: int = 3_000_000
     """Agent decisions to train for, summed over the parallel environments, rounded up to
-    whole rollouts of ``n_steps * num_envs`` (4 M: 250 rollouts of 16,000)."""
+    whole rollouts of ``n_steps * num_envs`` (3 M: 188 rollouts of 16,000)."""
     num_envs: int = 16
     """Drill strings simulated in parallel (one native vector env, one compiled call per step)."""
     torch_threads: int = 1
@@ -118,11 +118,11 @@ class TrainConfig:
     Without it one line per rollout and per validation is printed."""
     verbose: int = 0
     """SB3 verbosity: 0 silent, 1 prints SB3's training statistics after each rollout."""
-    validate_every: int = 200_000
+    validate_every: int = 100_000
     """Run the validation scenarios every this many decisions, log mean IAE, RMSD and
     stick-slip severity relative to the base controller, and keep the best model;
     0 disables validation (the final model is then the last one)."""
-    validation_episodes: int = 32
+    validation_episodes: int = 16
     """Validation scenarios (drawn from the training distribution with fixed seeds that the
     held-out set of ``drill-gym evaluate`` does not use)."""
 

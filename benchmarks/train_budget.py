@@ -3,8 +3,9 @@
 Runs, one after the other and with the default :class:`agents.config.TrainConfig`:
 
 * ``residual_ppo``: PPO residual on top of the proposed adaptive SMC (the shipped agent);
-* ``direct_ppo``: the same PPO, same budget and seed, setting the whole torque from scratch
-  (``--base-controller none``), for contrast;
+* ``direct_ppo``: the same PPO and seed setting the whole torque from scratch
+  (``--base-controller none``), for contrast, with the settings its shipped model records
+  (``agents/models/direct_ppo/config.json``: 2 M decisions and the reward of that run);
 
 prints the wall time of each, draws the learning curves, and with ``--ship`` copies the two
 final models to ``agents/models/`` and the figure to ``docs/figures/``. Then
@@ -25,6 +26,7 @@ import json
 import shutil
 import time
 from pathlib import Path
+from typing import Any
 
 from agents.config import TrainConfig
 from agents.policy import DEFAULT_MODEL_DIR
@@ -32,6 +34,15 @@ from agents.train import train
 from experiments.plots import plot_learning_curves
 
 FIGURE = Path("docs/figures/residual_ppo_learning_curve.png")
+
+
+def _shipped_settings(name: str) -> dict[str, Any]:
+    """The training settings recorded in a shipped model's ``config.json`` (checked JSON)."""
+    record = json.loads((DEFAULT_MODEL_DIR / name / "config.json").read_text())
+    settings = dict(record["train_config"])
+    settings.pop("run_dir", None)
+    settings.pop("save_dir", None)
+    return settings
 
 
 def main() -> None:
@@ -50,7 +61,10 @@ def main() -> None:
     configs = {
         "residual_ppo": dataclasses.replace(base, run_dir=str(out / "residual_ppo")),
         "direct_ppo": dataclasses.replace(
-            base, exp_name="direct_ppo", base_controller="none", run_dir=str(out / "direct_ppo")
+            TrainConfig.from_dict(_shipped_settings("direct_ppo")),
+            seed=args.seed,
+            progress_bar=False,
+            run_dir=str(out / "direct_ppo"),
         ),
     }
     if args.only:

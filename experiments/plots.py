@@ -65,6 +65,7 @@ __all__ = [
     "plot_learning_curves",
     "probability_figure",
     "read_csv_columns",
+    "realism_figure",
     "save_figure",
     "space_time_figure",
     "speed_torque_figure",
@@ -1139,6 +1140,116 @@ def _caption(result: StickSlipMap) -> str:
         f"{plant}, runs of {result.duration_s:g} s from rest, last "
         f"{result.window_s:g} s analysed, {noise}"
     )
+
+
+# ------------------------------------------------------------------------ realism study
+REALISM_METRICS: Final = ("iae", "stick_slip_severity", "stuck_fraction", "torque_at_limit")
+"""The metrics of each row of :func:`realism_figure`."""
+_REALISM_TITLES: Final = {
+    "iae": "IAE (rad)",
+    "stick_slip_severity": "stick-slip severity",
+    "stuck_fraction": "stuck fraction",
+    "torque_at_limit": "share at a torque limit",
+}
+
+
+def realism_figure(
+    panels: Mapping[str, Mapping[str, Sequence[Mapping[str, Any]]]],
+    value_labels: Sequence[str],
+    xlabel: str,
+    title: str = "",
+    *,
+    breaks: Mapping[tuple[str, str], int] | None = None,
+    severity_limit: float = 0.5,
+    metrics: Sequence[str] = REALISM_METRICS,
+) -> Figure:
+    """Metrics of the controllers against the values of one factor: one row of panels per
+    group (env), one panel per metric, one line per controller.
+
+    Args:
+        panels: Row title (an env id) -> controller -> one mapping per value of the factor
+            (with the ``metrics`` keys, an ``index`` into ``value_labels`` and ``diverged``,
+            the number of diverged runs; a ``None`` or NaN metric draws no point).
+        value_labels: The factor's values as the x axis shows them, in order.
+        xlabel: The factor, with its unit.
+        title: Figure title.
+        breaks: (row title, controller) -> index of the value at which the controller breaks:
+            a ring around that point in every panel.
+        severity_limit: A dotted line at this severity (the stick-slip threshold).
+        metrics: The metric keys, one panel each.
+
+    Returns:
+        The figure.
+
+    Raises:
+        ValueError: if ``panels`` is empty or a row has no controller.
+    """
+    if not panels:
+        raise ValueError("panels is empty: nothing to plot")
+    empty = [name for name, lines in panels.items() if not lines]
+    if empty:
+        raise ValueError(f"row(s) {', '.join(map(repr, empty))} have no controller")
+    n_rows, n_cols = len(panels), len(metrics)
+    fig = _figure(4.0 * n_cols + 0.6, 3.1 * n_rows + 1.9)
+    axes = np.asarray(fig.subplots(n_rows, n_cols, squeeze=False, sharex=True))
+    ticks = ["\n".join(textwrap.wrap(str(v), 14)) for v in value_labels]
+    position = np.arange(len(value_labels), dtype=float)
+    handles: dict[str, Any] = {}  # the controllers' lines
+    marks: dict[str, Any] = {}  # the marks, listed after them
+    for row, (name, lines) in enumerate(panels.items()):
+        for col, metric in enumerate(metrics):
+            ax = axes[row, col]
+            for k, (label, points) in enumerate(lines.items()):
+                color = color_of(label, k)
+                style = _DASHES[k % len(_DASHES)]
+                x = np.array([float(p["index"]) for p in points])
+                y = np.array(
+                    [math.nan if p.get(metric) is None else float(p[metric]) for p in points]
+                )
+                (line,) = ax.plot(
+                    x, y, color=color, ls=style[0], lw=style[1],
+                    marker=_MARKERS[k % len(_MARKERS)], ms=5, label=label,
+                )  # fmt: skip
+                handles.setdefault(label, line)
+                gone = np.array([bool(p.get("diverged")) for p in points])
+                if gone.any():
+                    (cross,) = ax.plot(
+                        x[gone], y[gone], ls="", marker="x", ms=11, mew=2.0, color="k",
+                        label="a run diverged",
+                    )  # fmt: skip
+                    marks.setdefault("a run diverged", cross)
+                where = (breaks or {}).get((name, label))
+                if where is not None and np.any(x == where):
+                    at = int(np.flatnonzero(x == where)[0])
+                    (ring,) = ax.plot(
+                        [x[at]], [y[at]], ls="", marker="o", ms=14, mfc="none", mew=1.6,
+                        color=color, label="break point (ring, in the controller's colour)",
+                    )  # fmt: skip
+                    marks.setdefault("break point (ring, in the controller's colour)", ring)
+            if metric == "stick_slip_severity":
+                limit = ax.axhline(
+                    severity_limit, color="0.4", ls=":", lw=1.2,
+                    label=f"severity {severity_limit:g}: stick-slip",
+                )  # fmt: skip
+                marks.setdefault(f"severity {severity_limit:g}: stick-slip", limit)
+            ax.set_title(f"{name}: {_REALISM_TITLES.get(metric, key_label(metric))}", fontsize=11)
+            ax.grid(True, alpha=0.3)
+            ax.set_xticks(position, ticks)
+            ax.set_xlim(-0.3, len(value_labels) - 0.7)
+            ax.set_ylim(bottom=0.0)  # every metric is >= 0: a ratio reads as one
+            if row == n_rows - 1:
+                ax.set_xlabel(xlabel)
+    handles.update(marks)
+    labels = list(handles)
+    fig.legend(
+        handles=[handles[k] for k in labels],
+        labels=labels,
+        loc="outside lower center",
+        ncol=_legend_columns(fig, labels, 10.0, most=5),
+        fontsize=10,
+    )
+    _suptitle(fig, title)
+    return fig
 
 
 # ------------------------------------------------------------ the field string's waves

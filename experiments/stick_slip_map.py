@@ -32,10 +32,10 @@ from __future__ import annotations
 import argparse
 import math
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Final, NamedTuple
+from typing import Any, Final, NamedTuple, Protocol
 
 import gymnasium as gym
 import numpy as np
@@ -48,6 +48,7 @@ from drill_env.distributed import DISTRIBUTED_PRESETS, with_measured_depth
 from drill_env.evaluation import reset_each
 from drill_env.limits import MAX_REFERENCE_RAD_S, MAX_WOB_N
 from drill_env.metrics import WindowStatistics
+from drill_env.options import REALISM_LEVELS, realism_keywords
 from drill_env.parameters import PLANT_DT_S, PRESETS
 from drill_env.scenarios import RPM
 from experiments.arguments import ArgumentParser, names_type, number_type
@@ -65,10 +66,13 @@ from experiments.tables import write_csv
 
 __all__ = [
     "CSV_COLUMNS",
+    "DEFAULT_REALISM",
+    "MapPolicy",
     "StickSlipMap",
     "compute_map",
     "grid_values",
     "main",
+    "map_realism",
     "stick_slip",
     "write_map_csv",
 ]
@@ -85,6 +89,27 @@ MAX_CHUNK_STEPS: Final = 1000
 """Plant steps per compiled call (1 s): bounds the memory of the per-step records."""
 UNSTABLE_SEVERITY: Final = 0.5
 """A cell counts as stick-slipping when its severity exceeds this or its bit ever sticks."""
+DEFAULT_REALISM: Final[dict[str, str | None]] = {PAPER_ENV: "ideal", FIELD_ENV: None}
+"""The level of realism (``drill_env.options.REALISM_LEVELS``) a map runs at by default:
+``DrillString-v0``'s own defaults are the ``ideal`` level; ``DrillStringField-v0``'s map
+keeps the env's sensors and top drive with the observation it is given, which is no level."""
+
+
+def map_realism(env_id: str, realism: str | None) -> str | None:
+    """The level of realism a map of ``env_id`` applies: ``None`` for the default map
+    (:data:`DEFAULT_REALISM`, or no level), else ``realism``.
+
+    Raises:
+        ValueError: for an unknown env or level.
+    """
+    is_field(env_id)  # validates the env
+    if realism is None or realism == DEFAULT_REALISM[env_id]:
+        return None
+    if realism not in REALISM_LEVELS:
+        raise ValueError(
+            f"realism = {realism!r} is not a known level: allowed {', '.join(REALISM_LEVELS)}"
+        )
+    return realism
 
 
 def stick_slip(
@@ -133,6 +158,8 @@ class StickSlipMap:
             ``DrillString-v0``).
         measured_depth_m: The field string's measured depth, m (``None`` on
             ``DrillString-v0``).
+        realism: The level of realism the map ran at (``None``: the default map,
+            :func:`map_realism`).
     """
 
     controller: str
@@ -149,20 +176,25 @@ class StickSlipMap:
     env_id: str = PAPER_ENV
     observation: str | None = None
     measured_depth_m: float | None = None
+    realism: str | None = None
 
     @property
     def label(self) -> str:
-        """The controller, with the observation mode on the field string."""
-        if self.observation is None:
-            return self.controller
-        return f"{self.controller} ({self.observation})"
+        """The controller, with the observation mode on the field string and the level of
+        realism when it is not the default: ``proposed (surface) [field]``."""
+        label = self.controller
+        if self.observation is not None:
+            label += f" ({self.observation})"
+        return label if self.realism is None else f"{label} [{self.realism}]"
 
     def file_stem(self) -> str:
         """``stick_slip_map_<controller>``, on the field string with the observation mode and
-        the depth: ``stick_slip_map_stiff_pi_surface_2500m``."""
-        if self.observation is None or self.measured_depth_m is None:
-            return f"stick_slip_map_{self.controller}"
-        return f"stick_slip_map_{self.controller}_{self.observation}_{self.measured_depth_m:g}m"
+        the depth (``stick_slip_map_stiff_pi_surface_2500m``), and with the level of realism
+        when it is not the default (``stick_slip_map_proposed_surface_2500m_field``)."""
+        stem = f"stick_slip_map_{self.controller}"
+        if self.observation is not None and self.measured_depth_m is not None:
+            stem += f"_{self.observation}_{self.measured_depth_m:g}m"
+        return stem if self.realism is None else f"{stem}_{self.realism}"
 
     @property
     def cells(self) -> int:
@@ -231,8 +263,27 @@ def _chunk_steps(total_steps: int) -> int:
     return 1  # pragma: no cover - d = 1 always divides
 
 
+class MapPolicy(Protocol):
+    """A learned controller on the map (:class:`agents.policy.ResidualPolicy` is one): its
+    name, the env keywords it was trained with and an SB3-style deterministic ``predict``."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def env_kwargs(self) -> Mapping[str, Any]: ...
+
+    def predict(
+        self,
+        observation: npt.ArrayLike,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> tuple[npt.NDArray[np.float32], Any]: ...
+
+
 def compute_map(
-    controller: str,
+    controller: str | MapPolicy,
     wob_n: npt.ArrayLike,
     reference_speed_rad_s: npt.ArrayLike,
     duration_s: float = 100.0,
@@ -245,11 +296,14 @@ def compute_map(
     env_id: str = PAPER_ENV,
     observation: str | None = None,
     measured_depth_m: float | None = None,
+    realism: str | None = None,
 ) -> StickSlipMap:
     """Run every (WOB, reference speed) cell from rest and measure its stick-slip.
 
     Args:
-        controller: Registered controller name (:func:`baselines.controller_names`).
+        controller: Registered controller name (:func:`baselines.controller_names`), or a
+            learned policy (:class:`MapPolicy`, e.g. ``agents.load_policy(path)``): the cells
+            then run with its env keywords and its deterministic action at every decision.
         wob_n: WOB values of the rows, N (each > 0).
         reference_speed_rad_s: Reference bit speeds of the columns, rad/s (each > 0).
         duration_s: Length of each run, s (a multiple of 0.1 s, at most 10,000 s).
@@ -264,7 +318,15 @@ def compute_map(
         observation: On the field string, the observation mode of the controller (``state`` or
             ``surface``; default ``state``). Without noise the surface torque and the
             telemetry are exact too; with noise they carry the env's default noise.
+            With ``realism``, the level's observation (an ``observation`` that differs from
+            it is an error).
         measured_depth_m: On the field string, its measured depth, m (default the preset's).
+        realism: A level of ``drill_env.options.REALISM_LEVELS``: the map's env gets
+            ``realism_keywords(realism)`` (the observation, the sensors with their noise,
+            the telemetry and the actuator; ``noise_std_rad_s`` still sets the speed noise).
+            ``None`` (the default) keeps today's map: ``DrillString-v0`` at its own defaults
+            (the ``ideal`` level, which gives the same map), ``DrillStringField-v0`` at its
+            own with ``observation``.
 
     Returns:
         The :class:`StickSlipMap`.
@@ -272,9 +334,17 @@ def compute_map(
     Raises:
         ValueError: naming the argument that is out of range or unknown.
     """
-    names = controller_names()
-    if controller not in names:
-        raise ValueError(f"unknown controller {controller!r}: valid names are {', '.join(names)}")
+    policy = None if isinstance(controller, str) else controller
+    policy_kwargs = _policy_env_kwargs(policy, env_id) if policy is not None else {}
+    if policy is not None:
+        controller = policy.name
+    else:
+        names = controller_names()
+        if controller not in names:
+            raise ValueError(
+                f"unknown controller {controller!r}: valid names are {', '.join(names)}"
+            )
+    assert isinstance(controller, str)
     field = is_field(env_id)
     presets = DISTRIBUTED_PRESETS if field else PRESETS
     if parameters is None:
@@ -283,9 +353,28 @@ def compute_map(
         raise ValueError(
             f"parameters = {parameters!r} is not a known preset of {env_id}: {sorted(presets)}"
         )
-    extra: dict[str, Any] = {}
+    level = map_realism(env_id, realism)
+    extra: dict[str, Any] = {} if level is None else realism_keywords(level)
+    if level is not None and observation not in (None, extra["observation"]):
+        raise ValueError(
+            f"observation = {observation!r} is not that of realism = {level!r} "
+            f"({extra['observation']!r}): leave it out"
+        )
+    trained_observation = policy_kwargs.pop("observation", None)
+    if policy is not None and level is not None:
+        trained = trained_observation or "state"
+        if trained != extra["observation"]:
+            raise ValueError(
+                f"realism = {level!r} observes {extra['observation']!r} signals, model "
+                f"{policy.name!r} was trained on {trained!r} ones: map it at a level that "
+                "observes what it was trained on"
+            )
     if field:
-        observation = observation or "state"
+        observation = (
+            observation
+            or trained_observation
+            or ("state" if level is None else extra["observation"])
+        )
         if observation not in OBSERVATIONS:
             raise ValueError(
                 f"observation = {observation!r} is not valid: allowed {', '.join(OBSERVATIONS)}"
@@ -293,10 +382,10 @@ def compute_map(
         if measured_depth_m is None:
             measured_depth_m = DISTRIBUTED_PRESETS[parameters].measured_depth_m
         with_measured_depth(parameters, measured_depth_m)  # validates the depth
-        extra = {"observation": observation, "measured_depth_m": float(measured_depth_m)}
-        if noise_std_rad_s == 0:
+        extra.update(observation=observation, measured_depth_m=float(measured_depth_m))
+        if noise_std_rad_s == 0 and level is None:
             extra.update(torque_noise_std_nm=0.0, telemetry_noise_std_rad_s=0.0)
-    elif observation is not None or measured_depth_m is not None:
+    elif (level is None and observation is not None) or measured_depth_m is not None:
         raise ValueError(
             f"observation and measured_depth_m are keywords of the field string, not of {env_id}"
         )
@@ -327,6 +416,13 @@ def compute_map(
         raise ValueError(f"noise_std_rad_s = {noise_std_rad_s!r} is out of range: allowed [0, 10]")
 
     chunk = _chunk_steps(total_steps)
+    if policy is not None:  # one chunk per decision of the policy
+        chunk = round(float(policy_kwargs.pop("control_dt_s", 0.1)) / PLANT_DT_S)
+        if total_steps % chunk:
+            raise ValueError(
+                f"duration_s = {duration_s!r} is out of range: allowed a multiple of the "
+                f"policy's decision period {chunk * PLANT_DT_S:g} s"
+            )
     cells = [(float(w), float(v)) for w in wobs for v in speeds]
     n = len(cells)
     started = time.perf_counter()
@@ -335,13 +431,12 @@ def compute_map(
         num_envs=n,
         parameters=parameters,
         randomize=False,
-        base_controller=controller,
         control_dt_s=chunk * PLANT_DT_S,
         episode_s=total_steps * PLANT_DT_S,
         noise_std_rad_s=float(noise_std_rad_s),
-        **extra,
+        **{**({"base_controller": controller} if policy is None else policy_kwargs), **extra},
     )
-    reset_each(
+    observations = reset_each(
         venv,
         [seed + i for i in range(n)],
         [{"wob_n": w, "reference_speed_rad_s": v} for w, v in cells],
@@ -350,6 +445,7 @@ def compute_map(
     stats = WindowStatistics(n)
     diverged = np.zeros(n, dtype=bool)
     actions = np.zeros((n, 1), dtype=np.float32)
+    policy_state: Any = None
     n_chunks = total_steps // chunk
     bar = tqdm(
         total=n_chunks,
@@ -360,7 +456,11 @@ def compute_map(
     )
     with bar:
         for k in range(n_chunks):
-            _, _, terminated, _, _ = venv.step(actions)
+            if policy is not None:
+                actions, policy_state = policy.predict(
+                    observations, policy_state, np.full(n, k == 0), deterministic=True
+                )
+            observations, _, terminated, _, _ = venv.step(actions)
             diverged |= terminated
             bar.update()
             first = max(window_start - k * chunk, 0)
@@ -390,7 +490,28 @@ def compute_map(
         env_id=env_id,
         observation=observation if field else None,
         measured_depth_m=float(measured_depth_m) if measured_depth_m is not None else None,
+        realism=level,
     )
+
+
+_MAP_OWN_KEYWORDS: Final = frozenset(
+    {"parameters", "randomize", "episode_s", "noise_std_rad_s", "measured_depth_m", "env_id"}
+)
+"""Env keywords that the map sets itself, whatever a policy was trained with."""
+
+
+def _policy_env_kwargs(policy: MapPolicy, env_id: str) -> dict[str, Any]:
+    """The env keywords of a policy's cells: its own (decision period, base controller,
+    residual scale, observation mode, ...) without those the map sets; a policy trained on
+    another env is refused."""
+    kwargs = dict(policy.env_kwargs)
+    trained_on = kwargs.get("env_id", PAPER_ENV)
+    if trained_on != env_id:
+        raise ValueError(
+            f"policy {policy.name!r} was trained on {trained_on}: map it with env_id {trained_on}"
+            f", not {env_id}"
+        )
+    return {k: v for k, v in kwargs.items() if k not in _MAP_OWN_KEYWORDS}
 
 
 def write_map_csv(result: StickSlipMap, path: str | Path) -> Path:
@@ -418,11 +539,20 @@ stick_slip_map_NAME_OBSERVATION_DEPTHm and stick_slip_maps_DEPTHm.png. Its defau
 50-200 kN, 40-160 rpm (4.19-16.76 rad/s), 100 s runs with the last 50 s analysed (the field
 string's stick-slip cycles last 4-11 s, so the window holds at least four of the longest).
 
+With --realism LEVEL (ideal, wired_pipe, field, surface_only) the cells get that level's
+sensors, telemetry and top drive (the field level: surface signals at 100 Hz with their noise,
+telemetry every 5 s and 5 s late, 20 ms dead time, 20 ms lag, a 100 kN m/s rate limit), every
+controller with the level's observation (the sliding-mode controllers on the surface signals
+run their state observer); the file names end in _LEVEL. Without it a map keeps the env's own
+settings (DrillString-v0: the ideal level).
+
 examples:
   drill-gym map                                         # stiff_pi on the default grid
   drill-gym map --controllers stiff_pi soft_speed z_torque proposed --out results/maps
   drill-gym map --wob-n 5 --speed-n 4 --duration 40 --window 20   # a quick coarse map
+  drill-gym map --controllers z_torque proposed --models agents/models/residual_ppo
   drill-gym map --env DrillStringField-v0 --controllers soft_speed --depths 1500 2500 4000
+  drill-gym map --controllers proposed stiff_pi --realism field --out results/maps-field
 """
 
 
@@ -458,10 +588,20 @@ def _parser() -> ArgumentParser:
     parser.add_argument(
         "--controllers",
         nargs="+",
-        default=["stiff_pi"],
+        default=None,
         type=controllers,
         metavar="NAME",
-        help=f"controllers to map, by registered name: {', '.join(controller_names())}",
+        help=f"controllers to map, by registered name: {', '.join(controller_names())} "
+        "(default: stiff_pi, or none when --models are given)",
+    )
+    parser.add_argument(
+        "--models",
+        nargs="+",
+        default=[],
+        metavar="PATH",
+        help="learned controllers to map too: model folders in the project's format (e.g. "
+        "agents/models/residual_ppo), each run with its own env keywords and its deterministic "
+        "action at every decision (maps of models run serially)",
     )
     parser.add_argument(  # the earlier name, still accepted
         "--controller", dest="controllers", nargs="+", type=controllers, help=argparse.SUPPRESS
@@ -546,6 +686,15 @@ def _parser() -> ArgumentParser:
         f"{FIELD_ENV} (default: zribi2024; field_2500m on {FIELD_ENV})",
     )
     parser.add_argument(
+        "--realism",
+        choices=REALISM_LEVELS,
+        default=None,
+        metavar="LEVEL",
+        help=f"level of realism of the sensors, telemetry and top drive: {', '.join(REALISM_LEVELS)}"
+        " (every controller then runs with the level's observation, --observations is not "
+        f"used; files end in _LEVEL; default: the env's own, which is ideal on {PAPER_ENV})",
+    )
+    parser.add_argument(
         "--out", type=Path, default=Path("results"), metavar="DIR", help="output folder"
     )
     parser.add_argument(
@@ -599,7 +748,27 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     if abs(round(args.duration * 10) - args.duration * 10) > 1e-6:
         parser.fail("--duration", f"{args.duration:g} is not a multiple of 0.1 s")
-    runs: list[tuple[str, str | None, float | None]] = []
+    level = map_realism(args.env, args.realism)
+    if args.controllers is None:
+        args.controllers = [] if args.models else ["stiff_pi"]
+    policies: list[MapPolicy] = []
+    if args.models:
+        if sweep_requested(args):
+            parser.fail(
+                "--models",
+                "maps of models run serially: without --workers, --ray, "
+                "--address, --results and --resume",
+            )
+        from agents.policy import load_policy
+
+        for path in args.models:
+            try:
+                policy = load_policy(path)
+                _policy_env_kwargs(policy, args.env)
+            except (OSError, ValueError) as err:
+                parser.fail("--models", f"{path}: {err}")
+            policies.append(policy)
+    runs: list[tuple[str | MapPolicy, str | None, float | None]] = []
     if field:
         string = DISTRIBUTED_PRESETS[args.parameters]
         depths = list(dict.fromkeys(args.depths or [string.measured_depth_m]))
@@ -610,15 +779,22 @@ def main(argv: Sequence[str] | None = None) -> int:
                     f"{depth:g} is out of range: allowed > BHA length {string.bha_length_m} m",
                 )
         for name in dict.fromkeys(args.controllers):
-            modes = observations_of(name, args.observations)
+            modes = (
+                observations_of(name, args.observations)
+                if level is None
+                else (str(realism_keywords(level)["observation"]),)
+            )
             runs += [(name, obs, depth) for depth in depths for obs in modes]
+        runs += [(policy, None, depth) for depth in depths for policy in policies]
     else:
         runs = [(name, None, None) for name in dict.fromkeys(args.controllers)]
+        runs += [(policy, None, None) for policy in policies]
     computed: Iterable[tuple[StickSlipMap, float | None]]
     if sweep_requested(args):  # on the sweep runner: Ray, a results file, a resume
         from experiments.sweep_studies import run_map_sweep
 
-        computed = ((m, m.measured_depth_m) for m in run_map_sweep(args, runs, wobs, speeds))
+        named = [(name, obs, depth) for name, obs, depth in runs if isinstance(name, str)]
+        computed = ((m, m.measured_depth_m) for m in run_map_sweep(args, named, wobs, speeds))
     else:
         computed = (
             (
@@ -635,6 +811,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     env_id=args.env,
                     observation=observation,
                     measured_depth_m=depth,
+                    realism=level,
                 ),
                 depth,
             )
@@ -657,7 +834,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         results.setdefault(depth, []).append(result)
     for depth, maps in results.items():
         if len(maps) > 1 and not args.no_plots:
-            name = "stick_slip_maps.png" if depth is None else f"stick_slip_maps_{depth:g}m.png"
+            name = "stick_slip_maps" + ("" if depth is None else f"_{depth:g}m")
+            name += ("" if level is None else f"_{level}") + ".png"
             print(f"wrote {save_figure(maps_figure(maps), args.out / name)}")
     return 0
 

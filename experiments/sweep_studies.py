@@ -34,6 +34,7 @@ import numpy as np
 
 from drill_env.control import controller_names
 from drill_env.distributed import DISTRIBUTED_PRESETS, with_measured_depth
+from drill_env.options import realism_keywords
 from drill_env.parameters import PRESETS
 from experiments.field import (
     COMPARE_DEPTHS_M,
@@ -44,7 +45,7 @@ from experiments.field import (
     observations_of,
     run_label,
 )
-from experiments.stick_slip_map import DEFAULT_WINDOW_S, StickSlipMap, compute_map
+from experiments.stick_slip_map import DEFAULT_WINDOW_S, StickSlipMap, compute_map, map_realism
 from experiments.stick_slip_map import DEFAULTS as MAP_DEFAULTS
 from experiments.sweep import (
     COMPARE_TASK_RUNS,
@@ -305,16 +306,19 @@ class MapStudy:
 
     def runs(self) -> list[MapRun]:
         """The maps, in the order of ``drill-gym map``: each controller, then (on the field
-        string) each depth, then each observation mode the controller can use."""
+        string) each depth, then each observation mode the controller can use (with a level
+        of realism in :attr:`keywords`, the level's observation for every controller)."""
         if not self.field:
             return list(dict.fromkeys((c, None, None) for c in self.controllers))
         depths = self.depths_m or (DISTRIBUTED_PRESETS[self.preset].measured_depth_m,)
+        level = map_realism(self.env_id, self.keywords.get("realism"))
+        fixed = None if level is None else (str(realism_keywords(level)["observation"]),)
         return list(
             dict.fromkeys(
                 (c, o, float(d))
                 for c in self.controllers
                 for d in depths
-                for o in observations_of(c, self.observations)
+                for o in (fixed or observations_of(c, self.observations))
             )
         )
 
@@ -732,8 +736,10 @@ def run_map_sweep(
 
     from experiments.sweep import backend_from_args, results_path_from_args, run_sweep
 
-    # Further compute_map keywords of the command line: one entry per option.
-    keywords: dict[str, Any] = {}
+    # Further compute_map keywords of the command line: one entry per option (none for the
+    # default map, so that its spec, and the results files written for it, stay as they were).
+    level = map_realism(args.env, args.realism)
+    keywords: dict[str, Any] = {} if level is None else {"realism": level}
     study = MapStudy(
         tuple(dict.fromkeys(run[0] for run in runs)),
         tuple(float(w) for w in wobs),

@@ -435,7 +435,8 @@ def _heldout(model: Path, scenario_ids: Sequence[str] | None) -> dict[str, Any]:
         observations=[observation] if observation else ["surface"],
     )
     label = run_label({"controller": base, "observation": observation})
-    goal = summarize(rows, label)["goal"][agent.name]
+    agent_label = run_label({"controller": agent.name, "observation": observation})
+    goal = summarize(rows, label, agents=[agent_label])["goal"][agent_label]
     return {
         "heldout_iae_ratio": goal["iae_ratio"],
         "heldout_rmsd_ratio": goal["rmsd_ratio"],

@@ -126,7 +126,7 @@ def test_help_is_plain_text_and_shows_every_default(capsys: pytest.CaptureFixtur
     flat = " ".join(text.split())
     assert flat.count("(default: ") == len(dataclasses.fields(TrainConfig))
     assert (
-        "(default: 4000000; DrillStringField-v0: " in flat
+        "(default: 3000000; DrillStringField-v0: " in flat
         and "(default: false)" in flat
         and "(default: 64 64)" in flat
     )
@@ -442,7 +442,7 @@ def test_budget_is_rounded_up_to_whole_rollouts(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     assert planned_timesteps(TrainConfig(total_timesteps=20_000)) == 32_000
-    assert planned_timesteps(TrainConfig()) == 4_000_000
+    assert planned_timesteps(TrainConfig()) == 3_008_000  # 188 rollouts of 16,000
     config = tiny_config(tmp_path, total_timesteps=200, validate_every=0, checkpoint_every=0)
     out = train(config)
     text = capsys.readouterr().out
@@ -626,3 +626,20 @@ def test_evaluate_cli_writes_table_and_files(trained: Path, tmp_path: Path) -> N
     assert [r["controller"] for r in rows] == ["proposed", "residual_ppo"]
     summary = json.loads((out / "summary.json").read_text())
     assert set(summary["goal"]) == {"proposed", "residual_ppo"}
+
+
+def test_the_default_command_trains_the_shipped_agent() -> None:
+    """``drill-gym train`` with its defaults is the recipe of the shipped agent: every setting
+    that shapes the training (not where it writes or how often it checkpoints) is the default."""
+    shipped = json.loads((DEFAULT_MODEL_DIR / "residual_ppo" / "config.json").read_text())
+    output_only = {"run_dir", "save_dir", "checkpoint_every", "tensorboard", "progress_bar"}
+    # settings added after the shipped run, with the value that run had (one env, no stacking)
+    later = {"env_id": "DrillString-v0", "observation": "", "frame_stack": 1}
+    record = {**later, **shipped["train_config"]}
+    defaults = dataclasses.asdict(TrainConfig())
+    differ = {
+        key: (record.get(key), value)
+        for key, value in defaults.items()
+        if key not in output_only and record.get(key) != value
+    }
+    assert not differ

@@ -28,21 +28,37 @@ def test_held_out_set_covers_the_training_ranges() -> None:
     assert sum(s.prone for s in HELD_OUT) == 14
 
 
-def test_summary_goal_check() -> None:
-    def row(label: str, iae: float, rmsd: float, sev: float, prone: bool) -> dict[str, Any]:
-        metrics = {
-            k: 1.0
-            for k in ("ise", "rmse", "overshoot_pct", "chattering_nm_per_s", "stuck_fraction")
-        }
-        return {
-            "controller": label, "prone": prone, "iae": iae, "rmsd_nm": rmsd,
-            "stick_slip_severity": sev, "settling_time_s": None, "diverged": False, **metrics,
-        }  # fmt: skip
+def _row(label: str, scenario: str, iae: float, rmsd: float, sev: float, prone: bool,
+         chattering: float = 1.0) -> dict[str, Any]:  # fmt: skip
+    metrics = {k: 1.0 for k in ("ise", "rmse", "overshoot_pct", "stuck_fraction")}
+    return {
+        "scenario": scenario, "controller": label, "prone": prone, "iae": iae, "rmsd_nm": rmsd,
+        "stick_slip_severity": sev, "settling_time_s": None, "diverged": False,
+        "chattering_nm_per_s": chattering, **metrics,
+    }  # fmt: skip
 
-    rows = [row("proposed", 100, 10, 1.0, True), row("agent", 60, 10, 0.5, True)]
-    rows += [row("proposed", 100, 10, 0.0, False), row("agent", 80, 10, 0.9, False)]
-    goal = summarize(rows)["goal"]["agent"]
-    assert goal["iae_ratio"] == pytest.approx(0.7) and goal["met"]
+
+def test_summary_goal_check() -> None:
+    """The goal: the lowest mean IAE and prone severity of all, RMSD within 1 % and chattering
+    no higher than the base's, and no scenario more than 5 % worse than the base."""
+    rows = [_row("proposed", "a", 100, 10, 1.0, True), _row("agent", "a", 60, 10.1, 0.5, True)]
+    rows += [_row("proposed", "b", 100, 10, 0.0, False), _row("agent", "b", 80, 10.1, 0.9, False)]
+    rows += [_row("loop", "a", 75, 12, 0.6, True), _row("loop", "b", 75, 12, 0.1, False)]
+    goal = summarize(rows, agents=["agent"])["goal"]["agent"]
+    assert goal["iae_ratio"] == pytest.approx(0.7) and goal["rmsd_ratio"] == pytest.approx(1.01)
+    assert goal["worst_iae_ratio"] == pytest.approx(0.8) and goal["best_engineered_iae"] == 75
+    assert goal["met"] and goal["missed"] == []
+    # a better engineered loop, more chattering, one scenario 10 % worse than the base
+    rows += [_row("better", "a", 60, 9, 0.2, True), _row("better", "b", 60, 9, 0.1, False)]
+    rows[1] = _row("agent", "a", 110, 10.1, 0.5, True, chattering=1.5)
+    goal = summarize(rows, agents=["agent"])["goal"]["agent"]
+    assert goal["worst_iae_ratio"] == pytest.approx(1.1) and not goal["met"]
+    assert goal["missed"] == [
+        "IAE below every engineered controller's",
+        "prone severity below every engineered controller's",
+        "chattering no higher than the base's",
+        "IAE at most 1.05 x the base's in every scenario",
+    ]
 
 
 def test_corner_set_lies_at_or_beyond_the_edges_of_the_training_randomisation() -> None:

@@ -40,12 +40,10 @@ def test_the_paper_env_keeps_the_shipped_agents_defaults() -> None:
         1,
         "",
     )
-    assert (config.residual_scale_nm, config.reward_torque, config.reward_residual) == (
-        20_000.0,
-        1.0,
-        0.0,
-    )
-    assert (config.total_timesteps, config.validation_episodes) == (4_000_000, 32)
+    # the settings of the shipped paper-string agent's training (its record)
+    record = json.loads((DEFAULT_MODEL_DIR / "residual_ppo" / "config.json").read_text())
+    for name in ("total_timesteps", "validation_episodes", "residual_scale_nm", "reward_torque"):
+        assert getattr(config, name) == record["train_config"][name], name
 
 
 def test_field_defaults_apply_to_the_fields_not_given() -> None:

@@ -215,3 +215,81 @@ def test_cli_no_plots_writes_only_csv(tmp_path: Path) -> None:
         "stick_slip_map_csmc.csv",
         "stick_slip_map_soft_speed.csv",
     ]
+
+
+# ---------------------------------------------------------------------------- learned models
+class _ZeroResidual:
+    """A policy that adds nothing to its base controller: its map is the base's map."""
+
+    name = "zero_residual"
+    env_kwargs = {"base_controller": "proposed", "control_dt_s": 0.1, "residual_scale_nm": 1e4}
+
+    def predict(self, observation: Any, state: Any = None, episode_start: Any = None,
+                deterministic: bool = True) -> tuple[np.ndarray, Any]:  # fmt: skip
+        return np.zeros((len(observation), 1), dtype=np.float32), state
+
+
+def test_a_zero_residual_policy_maps_like_its_base_controller() -> None:
+    grid = ([60e3, 170e3], [2.0, 10.0])
+    base = compute_map("proposed", *grid, duration_s=6.0, window_s=3.0, progress=False)
+    learned = compute_map(_ZeroResidual(), *grid, duration_s=6.0, window_s=3.0, progress=False)
+    assert learned.controller == "zero_residual"
+    # the same trajectories, summed over the window in other chunks (0.1 s instead of 1 s)
+    np.testing.assert_allclose(learned.severity, base.severity, rtol=1e-12)
+    np.testing.assert_array_equal(learned.stuck_fraction, base.stuck_fraction)
+
+
+def test_the_shipped_agent_maps_as_its_own_env_rollout() -> None:
+    """A map cell of the shipped agent is its env run from rest with the policy's action at
+    every decision (``rollout`` of a plain env with the policy's keywords)."""
+    from agents import load_default_policy
+
+    policy = load_default_policy()
+    assert policy is not None
+    wob, speed = 160e3, 4.0
+    result = compute_map(policy, [wob], [speed], duration_s=8.0, window_s=5.0, progress=False)
+    env = gym.make(
+        "DrillString-v0", randomize=False, wob_n=wob, reference_speed_rad_s=speed,
+        noise_std_rad_s=0.0, episode_s=8.0, max_episode_steps=80, **policy.env_kwargs,
+    )  # fmt: skip
+    trace = rollout(env, policy, seed=0)
+    bit = trace.bit_speed_rad_s[-5000:]
+    assert trace.bit_speed_rad_s.size == 8000
+    severity = (bit.max() - bit.min()) / (2 * bit.mean()) if bit.mean() > 0 else 1.0
+    assert result.severity[0, 0] == pytest.approx(severity, rel=1e-12)
+    assert result.stuck_fraction[0, 0] == pytest.approx(trace.bit_stuck[-5000:].mean(), rel=1e-12)
+
+
+def test_a_model_of_another_env_or_period_is_refused() -> None:
+    field = _ZeroResidual()
+    field.env_kwargs = {**field.env_kwargs, "env_id": "DrillStringField-v0"}
+    with pytest.raises(ValueError, match="trained on DrillStringField-v0: map it with env_id"):
+        compute_map(field, [1e5], [5.0], duration_s=2.0, window_s=1.0, progress=False)
+    with pytest.raises(ValueError, match="was trained on 'state' ones: map it at a level that"):
+        compute_map(
+            _ZeroResidual(), [1e5], [5.0], duration_s=2.0, window_s=1.0, progress=False,
+            realism="surface_only",
+        )  # fmt: skip
+    slow = _ZeroResidual()
+    slow.env_kwargs = {**slow.env_kwargs, "control_dt_s": 0.5}
+    with pytest.raises(ValueError, match="multiple of the policy's decision period 0.5 s"):
+        compute_map(slow, [1e5], [5.0], duration_s=2.2, window_s=1.0, progress=False)
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--models", "no/such/model"], r"argument --models: no/such/model: "),
+        (["--models", "agents/models/residual_ppo", "--workers", "2"],
+         r"argument --models: maps of models run serially"),
+    ],
+)  # fmt: skip
+def test_cli_bad_models_name_the_argument(
+    argv: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("drill-gym map: error: ") and err.count("\n") == 1, err
+    assert re.search(message, err), err
