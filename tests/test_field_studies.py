@@ -291,7 +291,19 @@ def test_field_evaluate_command_leaves_out_models_of_the_other_env(
     assert "is for DrillString-v0: left out" in out.err
     assert "| stiff_pi (surface) |" in out.out
     rows = json.loads((tmp_path / "heldout.json").read_text())
-    assert {field.run_label(r) for r in rows} == {"stiff_pi (surface)", "proposed (state)"}
+    shipped = [evaluate.load_policy(p) for p in evaluate.shipped_models()]
+    # the shipped models made for the field string run there, beside their base controllers
+    # (with no agent, the base is the proposed SMC)
+    mine = [a for a in shipped if a.env_id == FIELD]
+    observation = {a.name: a.env_kwargs.get("observation", "surface") for a in mine}
+    expected = {"stiff_pi (surface)"} | {
+        f"{name} ({observation[a.name]})"
+        for a in mine
+        for name in (a.name, a.env_kwargs["base_controller"])
+    }
+    if not mine:
+        expected.add("proposed (state)")
+    assert {field.run_label(r) for r in rows} == expected
     with pytest.raises(SystemExit):
         evaluate.main(["--env", FIELD, "--scenarios", "h01", "--out", str(tmp_path)])
 
