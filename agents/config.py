@@ -40,10 +40,9 @@ class TrainConfig:
     seed: int = 1
     """Seed of everything: the network initialisation, PPO's sampling and the training
     scenarios (string ``i`` of the vector env starts from reset seed ``seed + i``)."""
-    total_timesteps: int = 2_000_000
+    total_timesteps: int = 4_000_000
     """Agent decisions to train for, summed over the parallel environments, rounded up to
-    whole rollouts of ``n_steps * num_envs`` (2 M: 125 rollouts of 16,000; about 5 min on
-    2 busy cores)."""
+    whole rollouts of ``n_steps * num_envs`` (4 M: 250 rollouts of 16,000)."""
     num_envs: int = 16
     """Drill strings simulated in parallel (one native vector env, one compiled call per step)."""
     torch_threads: int = 1
@@ -55,7 +54,7 @@ class TrainConfig:
     save_dir: str = ""
     """Where the final model goes (config.json, policy.npz, obs_norm.npz). Empty:
     ``{run_dir}/model``."""
-    checkpoint_every: int = 100_000
+    checkpoint_every: int = 500_000
     """Save a checkpoint (policy, value network, optimizer state and normalisation statistics,
     no pickle) at the first rollout end after every this many decisions; the last one is
     always saved at the end of the run. 0: only the last one."""
@@ -77,11 +76,11 @@ class TrainConfig:
     Without it one line per rollout and per validation is printed."""
     verbose: int = 0
     """SB3 verbosity: 0 silent, 1 prints SB3's training statistics after each rollout."""
-    validate_every: int = 100_000
+    validate_every: int = 200_000
     """Run the validation scenarios every this many decisions, log mean IAE, RMSD and
     stick-slip severity relative to the base controller, and keep the best model;
     0 disables validation (the final model is then the last one)."""
-    validation_episodes: int = 16
+    validation_episodes: int = 32
     """Validation scenarios (drawn from the training distribution with fixed seeds that the
     held-out set of ``drill-gym evaluate`` does not use)."""
 
@@ -91,7 +90,7 @@ class TrainConfig:
     policy that sets the whole top-drive torque."""
     control_dt_s: float = 0.1
     """Decision period of the agent, s (the base controller still runs at every 1 ms step)."""
-    residual_scale_nm: float = 10_000.0
+    residual_scale_nm: float = 20_000.0
     """Residual torque per unit action, N m: ``u = clip(u_base + residual_scale_nm * a)``."""
     episode_s: float = 100.0
     """Training episode length, s (the start-up transient and one mid-episode WOB step)."""
@@ -108,14 +107,16 @@ class TrainConfig:
     """Weight of the share of time with the bit stuck (0: the tracking term already counts a
     stuck bit as a full error; an extra weight made the agent prefer spinning the bit far
     above a low reference to ever sticking)."""
-    reward_torque: float = 0.0
+    reward_torque: float = 1.0
     """Weight of the env's torque term ``mean(u^2) / max_torque^2`` per decision (the paper's
-    RMSD measure, from every plant step), subtracted from the reward."""
-    reward_residual: float = 0.5
+    RMSD measure, from every plant step), subtracted from the reward: it keeps the agent's
+    gain in IAE from costing torque."""
+    reward_residual: float = 0.0
     """Weight of the env's residual term ``mean((u - u_base)^2) / residual_scale_nm^2`` per
     decision (the torque the residual adds, after the torque limits), subtracted from the
-    reward: it trades some of the IAE gain for a lower torque (RMSD). Residual mode only
-    (ignored with ``base_controller none``)."""
+    reward: it pulls the added torque toward 0 (a weight of 0.5 halved the agent's gain in
+    IAE; the torque term controls the RMSD directly). Residual mode only (ignored with
+    ``base_controller none``)."""
 
     # ------------------------------------------------------------------------- PPO
     learning_rate: float = 3e-4

@@ -877,12 +877,6 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
     start = time.perf_counter()
     figures = not args.no_plots
     if sweep_requested(args):  # on the sweep runner: Ray, a results file, a resume
-        if field:
-            parser.fail(
-                "--workers",
-                f"the sweep runner runs the comparison on {PAPER_ENV}: run the "
-                f"{args.env} comparison without --workers, --ray, --address or --resume",
-            )
         from experiments.sweep_studies import run_compare_sweep
 
         rows, traces, figures = run_compare_sweep(

@@ -34,7 +34,6 @@ import math
 import sys
 import time
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
@@ -52,24 +51,25 @@ from agents.policy import (
 from drill_env.control import controller_names
 from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
-from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, WobProfile
 from experiments.arguments import ArgumentParser, names_type
 from experiments.field import (
     ENV_IDS,
     FIELD_ENV,
-    HELD_OUT_CASES,
-    HELD_OUT_EPISODE_S,
     HELD_OUT_FIGURES,
     OBSERVATIONS,
     PAPER_ENV,
-    FieldCase,
     is_field,
     observations_of,
     run_label,
     run_on,
 )
-from experiments.field import (
-    prone as field_prone,
+from experiments.heldout import (
+    EPISODE_S,
+    FIELD_HELD_OUT,
+    HELD_OUT,
+    SCENARIO_SETS,
+    HeldOutScenario,
+    held_out_set,
 )
 from experiments.sweep import EVALUATE_TASK_SCENARIOS, add_sweep_options, sweep_requested
 from experiments.tables import write_csv, write_json
@@ -91,141 +91,11 @@ __all__ = [
     "write_figures",
 ]
 
-EPISODE_S: Final = 100.0
-"""Length of every held-out run, s."""
 BASE_CONTROLLER: Final = "proposed"
 """The controller the goal is measured against."""
-NOISE_STD_RAD_S: Final = 0.1
-"""Measurement noise on the speeds, rad/s."""
-
-
-@dataclass(frozen=True)
-class HeldOutScenario:
-    """One held-out run: its id, its reset seed (which drives the noise), the name of its
-    uncertainty condition and the scenario.
-
-    Attributes:
-        id: ``h01``, ``h02``, ... (``f01``, ... on the field string)
-        seed: Reset seed of the run.
-        condition: The paper's parametric-uncertainty condition (``nominal``,
-            ``condition1``..``condition3``), or the field string's friction and damping
-            condition.
-        scenario: The scenario (``NOISE_STD_RAD_S`` noise, from rest).
-        field: The field scenario it was made from (``None`` on the paper's string).
-    """
-
-    id: str
-    seed: int
-    condition: str
-    scenario: Scenario
-    field: FieldCase | None = None
-
-    @property
-    def reference_speed_rad_s(self) -> float:
-        """The (constant) reference bit speed, rad/s."""
-        return self.scenario.reference.value(0.0)
-
-    @property
-    def prone(self) -> bool:
-        """Stick-slip prone: V_ref <= 6 rad/s, or a WOB of at least 150 kN at some time (on the
-        field string: :func:`experiments.field.prone`)."""
-        if self.field is not None:
-            return field_prone(self.field)
-        wob = self.scenario.wob
-        wob_max = max(wob.initial_n, wob.final_n or 0.0)
-        return self.reference_speed_rad_s <= 6.0 or wob_max >= 150e3
-
-    def env_kwargs(self) -> dict[str, Any]:
-        """The env keywords of the run (``DrillString-v0``'s, or ``DrillStringField-v0``'s)."""
-        episode_s = EPISODE_S if self.field is None else HELD_OUT_EPISODE_S
-        return {**self.scenario.keywords(), "episode_s": episode_s}
-
-    def row(self) -> dict[str, Any]:
-        """The scenario's columns of a result row."""
-        if self.field is not None:
-            return {
-                "scenario": self.id,
-                **self.field.columns(),
-                "in_range": self.field.in_range(),
-                "seed": self.seed,
-                "prone": self.prone,
-            }
-        wob = self.scenario.wob
-        return {
-            "scenario": self.id,
-            "reference_speed_rad_s": self.reference_speed_rad_s,
-            "wob_n": wob.initial_n,
-            "wob_step_time_s": wob.step_time_s,
-            "wob_final_n": wob.final_n,
-            "uncertainty": self.condition,
-            "seed": self.seed,
-            "prone": self.prone,
-        }
-
-
-def _held_out(
-    k: int,
-    ref: float,
-    wob_kn: float,
-    condition: str,
-    step: tuple[float, float] | None = None,
-) -> HeldOutScenario:
-    wob = WobProfile(wob_kn * 1e3)
-    if step is not None:
-        wob = WobProfile(wob_kn * 1e3, step[0], step[1] * 1e3)
-    scenario = Scenario(
-        wob=wob,
-        reference=SpeedProfile.constant(ref),
-        uncertainty=UNCERTAINTY_CONDITIONS[condition],
-        noise_std_rad_s=NOISE_STD_RAD_S,
-    )
-    return HeldOutScenario(f"h{k:02d}", 9_000 + k, condition, scenario)
-
-
-HELD_OUT: Final[tuple[HeldOutScenario, ...]] = (
-    _held_out(1, 4.0, 60.0, "nominal"),
-    _held_out(2, 4.0, 120.0, "condition1", (50.0, 180.0)),
-    _held_out(3, 5.0, 90.0, "condition2"),
-    _held_out(4, 5.0, 160.0, "condition3", (60.0, 100.0)),
-    _held_out(5, 6.0, 200.0, "nominal"),
-    _held_out(6, 6.0, 70.0, "condition2", (40.0, 150.0)),
-    _held_out(7, 7.0, 130.0, "condition1"),
-    _held_out(8, 8.0, 100.0, "nominal", (50.0, 190.0)),
-    _held_out(9, 8.0, 175.0, "condition3"),
-    _held_out(10, 9.0, 65.0, "condition1"),
-    _held_out(11, 10.0, 110.0, "condition2", (60.0, 70.0)),
-    _held_out(12, 10.0, 185.0, "nominal"),
-    _held_out(13, 11.0, 140.0, "condition3", (40.0, 200.0)),
-    _held_out(14, 12.0, 97.347, "nominal"),
-    _held_out(15, 12.0, 155.0, "condition2"),
-    _held_out(16, 13.0, 80.0, "condition1", (50.0, 130.0)),
-    _held_out(17, 14.0, 195.0, "condition1"),
-    _held_out(18, 14.0, 60.0, "condition3"),
-    _held_out(19, 15.0, 125.0, "nominal", (50.0, 165.0)),
-    _held_out(20, 16.0, 170.0, "condition2"),
-)
-"""The held-out scenarios: WOB 60-200 kN (eight with one step change), V_ref 4-16 rad/s, the
-four uncertainty conditions, ``NOISE_STD_RAD_S`` noise, ``EPISODE_S`` seconds from rest."""
-
-FIELD_NOISE_STD_RAD_S: Final = 0.05
-"""Noise of the measured speeds in the field's held-out runs, rad/s (the env's; the surface
-torque and the telemetry carry the env's noise too)."""
-
-FIELD_HELD_OUT: Final[tuple[HeldOutScenario, ...]] = tuple(
-    HeldOutScenario(c.id, c.seed, c.condition.name, c.scenario(FIELD_NOISE_STD_RAD_S), c)
-    for c in HELD_OUT_CASES
-)
-"""The held-out scenarios of ``DrillStringField-v0`` (:data:`experiments.field.HELD_OUT_CASES`:
-16 fixed scenarios, 8 within the env's randomisation ranges, 8 outside them), the controllers
-knowing the nominal string."""
 
 FIGURE_SCENARIOS: Final = ("h01", "h02", "h08", "h14", *HELD_OUT_FIGURES)
 """Scenarios drawn one by one (bit speed and torque, base against residual)."""
-
-
-def held_out_set(env_id: str) -> tuple[HeldOutScenario, ...]:
-    """The held-out scenarios of ``env_id``."""
-    return FIELD_HELD_OUT if is_field(env_id) else HELD_OUT
 
 
 def run_scenario(
@@ -611,19 +481,30 @@ def _parser() -> ArgumentParser:
         + ", ".join(controller_names())
         + " (default: all; an agent's base controller is always added)",
     )
-    ids = [s.id for s in HELD_OUT]
-    field_ids = [s.id for s in FIELD_HELD_OUT]
+    sets = {name: s for env_sets in SCENARIO_SETS.values() for name, s in env_sets.items()}
+    parser.add_argument(
+        "--scenario-set",
+        default="heldout",
+        choices=list(sets),
+        help=f"the held-out set: heldout (h01-h20; on {FIELD_ENV} f01-f16) or corners "
+        f"(c01-c16, {PAPER_ENV} only: the edges of the training randomisation and beyond)",
+    )
+    ids = [s.id for env_sets in SCENARIO_SETS.values() for v in env_sets.values() for s in v]
     parser.add_argument(
         "--scenarios",
         nargs="+",
         default=None,
         metavar="ID",
-        type=names_type(lambda: ids + field_ids, "scenario"),
-        help=f"only these held-out scenarios, {ids[0]} to {ids[-1]} (default: all 20; on "
-        f"{FIELD_ENV} {field_ids[0]} to {field_ids[-1]}, all 16)",
+        type=names_type(lambda: ids, "scenario"),
+        help="only these scenarios of the set (default: all of them)",
     )
     parser.add_argument(
-        "--out", type=Path, default=Path("results/evaluate"), metavar="DIR", help="output folder"
+        "--out",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="output folder (default: results/evaluate, results/evaluate_corners for the "
+        "corner set)",
     )
     parser.add_argument("--no-plots", action="store_true", help="write no figures")
     parser.add_argument(
@@ -666,18 +547,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         for a, p in zip(agents, paths, strict=True):
             a.name = f"{a.name}:{p}"
         labels = [a.name for a in agents]
-    held_out = held_out_set(args.env)
+    try:
+        held_out = held_out_set(args.env, args.scenario_set)
+    except ValueError as err:
+        parser.fail("--scenario-set", str(err))
     scenarios: Sequence[HeldOutScenario] = held_out
     if args.scenarios:
         wrong = [i for i in args.scenarios if i not in {s.id for s in held_out}]
         if wrong:
             parser.fail(
                 "--scenarios",
-                f"{', '.join(wrong)} is not a held-out scenario of {args.env}: allowed "
-                f"{held_out[0].id} to {held_out[-1].id}",
+                f"{', '.join(wrong)} is not a scenario of the {args.scenario_set} set of "
+                f"{args.env}: allowed {held_out[0].id} to {held_out[-1].id}",
             )
         scenarios = [s for s in held_out if s.id in args.scenarios]
-    out: Path = args.out
+    default_out = "evaluate" if args.scenario_set == "heldout" else f"evaluate_{args.scenario_set}"
+    out: Path = args.out if args.out is not None else Path("results") / default_out
     t0 = time.perf_counter()
     base_names = sorted({a.env_kwargs.get("base_controller") or BASE_CONTROLLER for a in agents})
     if field and not agents:
@@ -705,12 +590,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     keep = [*bases, *labels]
     figures = not args.no_plots
     if sweep_requested(args):  # on the sweep runner: Ray, a results file, a resume
-        if field:
-            parser.fail(
-                "--workers",
-                f"the sweep runner runs the held-out evaluation on {PAPER_ENV}: run the "
-                f"{args.env} evaluation without --workers, --ray, --address or --resume",
-            )
         from experiments.sweep_studies import run_evaluate_sweep
 
         rows, traces, figures = run_evaluate_sweep(args, agents, controllers, scenarios, keep)

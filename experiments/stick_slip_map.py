@@ -616,16 +616,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         runs = [(name, None, None) for name in dict.fromkeys(args.controllers)]
     computed: Iterable[tuple[StickSlipMap, float | None]]
     if sweep_requested(args):  # on the sweep runner: Ray, a results file, a resume
-        if field:
-            parser.fail(
-                "--workers",
-                f"the sweep runner runs the maps of {PAPER_ENV}: run the {args.env} maps "
-                "without --workers, --ray, --address or --resume (or drill-gym probability-map "
-                "--rows depth for maps over depth on the sweep runner)",
-            )
         from experiments.sweep_studies import run_map_sweep
 
-        computed = ((m, None) for m in run_map_sweep(args, [r[0] for r in runs], wobs, speeds))
+        computed = ((m, m.measured_depth_m) for m in run_map_sweep(args, runs, wobs, speeds))
     else:
         computed = (
             (

@@ -19,7 +19,7 @@ __all__ = ["DESCRIPTION", "main"]
 
 DESCRIPTION: Final = """\
 Train the residual PPO agent: a Stable-Baselines3 PPO policy that adds a learned torque (up to
-+-10 kN m by default) to the proposed adaptive sliding-mode controller, which still runs at
++-20 kN m by default) to the proposed adaptive sliding-mode controller, which still runs at
 every 1 ms plant step; the agent decides every 0.1 s. It trains on randomised scenarios (WOB
 60-200 kN with a 50 % chance of a step, reference bit speed 4-16 rad/s, parameter uncertainty
 up to 75 %, 0.1 rad/s measurement noise) in 16 strings simulated together. The defaults are

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# Create .venv and install drill-string-gym with its [rl,dev,video,scale] extras into it.
-# Idempotent: the installs are skipped while .venv/.installed-<sha256 of pyproject.toml> exists and
-# the three packages are importable from it. Works from any working directory. The scale extra
-# (Ray, Optuna) is for the sweeps; its tests run in the default suite.
+# Create .venv and install drill-string-gym with its [rl,dev,video,scale,zoo] extras into it.
+# Idempotent: the installs are skipped while .venv/.installed-<sha256 of pyproject.toml and the
+# extras> exists and the three packages are importable from it. Works from any working
+# directory. The scale extra (Ray, Optuna) is for the sweeps, the zoo extra (RL Baselines3 Zoo)
+# for agents/zoo; their tests run in the default suite.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
@@ -11,8 +12,10 @@ if [[ ! -x .venv/bin/python ]]; then
     python3 -m venv .venv
 fi
 
+extras="rl,dev,video,scale,zoo"
 hash=$(.venv/bin/python -c \
-    'import hashlib; print(hashlib.sha256(open("pyproject.toml", "rb").read()).hexdigest())')
+    'import hashlib, sys; print(hashlib.sha256(open("pyproject.toml", "rb").read() + sys.argv[1].encode()).hexdigest())' \
+    "${extras}")
 stamp=".venv/.installed-${hash}"
 
 installed() {
@@ -30,7 +33,7 @@ if ! installed; then
     # torch first, pinned: this version is a local CPU wheel here; any other torch request
     # would download a multi-GB CUDA build. The [rl] extra's range is then already satisfied.
     "${pip[@]}" install "torch==2.13.0"
-    "${pip[@]}" install -e ".[rl,dev,video,scale]"
+    "${pip[@]}" install -e ".[${extras}]"
     rm -f .venv/.installed-*
     touch "${stamp}"
 fi

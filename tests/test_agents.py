@@ -126,7 +126,7 @@ def test_help_is_plain_text_and_shows_every_default(capsys: pytest.CaptureFixtur
     flat = " ".join(text.split())
     assert flat.count("(default: ") == len(dataclasses.fields(TrainConfig))
     assert (
-        "(default: 2000000)" in flat and "(default: false)" in flat and "(default: 64 64)" in flat
+        "(default: 4000000)" in flat and "(default: false)" in flat and "(default: 64 64)" in flat
     )
     assert "--no-tensorboard turns it off" in flat
 
@@ -440,7 +440,7 @@ def test_budget_is_rounded_up_to_whole_rollouts(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     assert planned_timesteps(TrainConfig(total_timesteps=20_000)) == 32_000
-    assert planned_timesteps(TrainConfig()) == 2_000_000
+    assert planned_timesteps(TrainConfig()) == 4_000_000
     config = tiny_config(tmp_path, total_timesteps=200, validate_every=0, checkpoint_every=0)
     out = train(config)
     text = capsys.readouterr().out

@@ -43,3 +43,50 @@ def test_summary_goal_check() -> None:
     rows += [row("proposed", 100, 10, 0.0, False), row("agent", 80, 10, 0.9, False)]
     goal = summarize(rows)["goal"]["agent"]
     assert goal["iae_ratio"] == pytest.approx(0.7) and goal["met"]
+
+
+def test_corner_set_lies_at_or_beyond_the_edges_of_the_training_randomisation() -> None:
+    """Every corner run sits at an edge of the training distribution (or beyond it) in at least
+    one dimension, and no seed is shared with the main set or the validation scenarios."""
+    from drill_env.scenarios import Randomization
+    from experiments.heldout import CORNERS, held_out_set
+
+    train = Randomization()
+    lo_v, hi_v = train.reference_range_rad_s
+    _, hi_w = train.wob_range_n
+    _, hi_d = train.delta_range
+    step_s = train.wob_step_time_fraction[0] * 100.0
+    assert len({s.id for s in CORNERS}) == len(CORNERS) == 16
+    seeds = {s.seed for s in CORNERS}
+    assert not seeds & {s.seed for s in HELD_OUT} and all(s < 20_000 for s in seeds)
+    for s in CORNERS:
+        wob = s.scenario.wob
+        edges = [
+            s.reference_speed_rad_s < lo_v or s.reference_speed_rad_s > hi_v,
+            max(wob.initial_n, wob.final_n or 0.0) > hi_w,
+            max(s.scenario.uncertainty) >= hi_d,
+            wob.step_time_s is not None and wob.step_time_s != step_s,
+        ]
+        assert any(edges), s.id
+    assert held_out_set("DrillString-v0", "corners") is CORNERS
+    with pytest.raises(ValueError, match="'corners' is not a held-out set of DrillStringField-v0"):
+        held_out_set("DrillStringField-v0", "corners")
+
+
+def test_evaluate_command_on_the_corner_set(
+    tmp_path: Any, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import json
+
+    from experiments.evaluate import main
+
+    argv = ["--scenario-set", "corners", "--scenarios", "c01", "c12", "--controllers",
+            "proposed", "--no-plots", "--no-progress", "--out", str(tmp_path)]  # fmt: skip
+    assert main(argv) == 0
+    rows = json.loads((tmp_path / "heldout.json").read_text())
+    assert {r["scenario"] for r in rows} == {"c01", "c12"}
+    assert {r["uncertainty"] for r in rows} == {"d=(0.75,0.75,0.75)", "condition1"}
+    with pytest.raises(SystemExit) as err:
+        main(["--scenario-set", "corners", "--scenarios", "h01", "--out", str(tmp_path)])
+    assert err.value.code == 2
+    assert "h01 is not a scenario of the corners set" in capsys.readouterr().err

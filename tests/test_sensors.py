@@ -64,7 +64,7 @@ def test_telemetry_is_sampled_delayed_and_held_as_configured(
 ) -> None:
     """At every decision the telemetry in info is the true bit speed (records) at the last
     sample instant (a multiple of the period) whose delay has passed, its age the time since
-    that instant; NaN before the first delivery."""
+    that instant; 0, the time since the start and not received before the first delivery."""
     infos, (_, records) = _run(
         "DrillString-v0", round(8.0 / control_dt_s), randomize=False, noise_std_rad_s=0.0,
         telemetry_period_s=period_s, telemetry_delay_s=delay_s, control_dt_s=control_dt_s,
@@ -76,11 +76,13 @@ def test_telemetry_is_sampled_delayed_and_held_as_configured(
     for info in infos:
         k = round(info["time_s"] / DT)
         sample = _last_sample(k, period, delay)
-        if sample is None:
-            assert math.isnan(info["telemetry_bit_speed_rad_s"])
-            assert math.isnan(info["telemetry_age_s"])
+        if sample is None:  # nothing received yet: 0, the time since the start, not received
+            assert info["telemetry_bit_speed_rad_s"] == 0.0
+            assert info["telemetry_age_s"] == pytest.approx(k * DT, abs=1e-12)
+            assert not info["telemetry_received"]
             continue
         delivered += 1
+        assert info["telemetry_received"]
         truth = bit[sample] if sample < k else info["bit_speed_rad_s"]  # sampled now: the end
         assert info["telemetry_bit_speed_rad_s"] == truth
         assert info["telemetry_age_s"] == pytest.approx((k - sample) * DT, abs=1e-12)

@@ -1,6 +1,7 @@
 """The sweep runner on a local Ray cluster (the scale extra): the same numbers as the serial
-path, bit for bit, for a map, a held-out evaluation and a comparison table; a worker that
-dies mid-sweep has its task retried, with nothing lost and nothing counted twice.
+path, bit for bit, for a map (of either env), a held-out evaluation and a comparison table;
+a worker that dies mid-sweep has its task retried, with nothing lost and nothing counted
+twice.
 
 One local cluster of two CPUs serves the whole module (the runner joins a running session).
 """
@@ -23,6 +24,7 @@ from agents import load_default_policy  # noqa: E402
 from experiments import compare  # noqa: E402
 from experiments.cli import main as cli_main  # noqa: E402
 from experiments.evaluate import HELD_OUT, evaluate  # noqa: E402
+from experiments.field import FIELD_ENV  # noqa: E402
 from experiments.stick_slip_map import compute_map  # noqa: E402
 from experiments.sweep import Backend, Task, TaskResult, ray_session, run_sweep  # noqa: E402
 from experiments.sweep_studies import CompareStudy, EvaluateStudy, MapStudy  # noqa: E402
@@ -50,6 +52,32 @@ def test_map_on_ray_equals_the_serial_map_bit_for_bit() -> None:
     swept = study.maps(outcome)[0]
     assert swept.severity.tobytes() == serial.severity.tobytes()
     assert swept.stuck_fraction.tobytes() == serial.stuck_fraction.tobytes()
+
+
+def test_field_map_on_ray_equals_the_serial_map_bit_for_bit() -> None:
+    """A map of the field string (both observation modes of a speed loop at one depth) on
+    two workers: the cells equal compute_map's bit for bit, with the same observation mode,
+    depth and file name."""
+    wobs, speeds = [60e3, 120e3, 180e3], [6.0, 12.0]
+    kw: dict[str, Any] = {"duration_s": 2.0, "window_s": 1.0, "noise_std_rad_s": 0.05, "seed": 7}
+    study = MapStudy(
+        ("soft_speed",), tuple(wobs), tuple(speeds), task_cells=2, env_id=FIELD_ENV,
+        depths_m=(1500.0,), **kw,
+    )  # fmt: skip
+    outcome = run_sweep(study, RAY, progress=False)
+    assert len(outcome.ran) == 6  # one row per task, two maps
+    for swept, (controller, observation, depth) in zip(
+        study.maps(outcome), study.runs(), strict=True
+    ):
+        serial = compute_map(
+            controller, wobs, speeds, progress=False, env_id=FIELD_ENV, observation=observation,
+            measured_depth_m=depth, **kw,
+        )  # fmt: skip
+        assert swept.severity.tobytes() == serial.severity.tobytes()
+        assert swept.stuck_fraction.tobytes() == serial.stuck_fraction.tobytes()
+        assert (swept.observation, swept.measured_depth_m, swept.file_stem()) == (
+            serial.observation, serial.measured_depth_m, serial.file_stem(),
+        )  # fmt: skip
 
 
 def test_heldout_evaluation_on_ray_equals_the_serial_one() -> None:

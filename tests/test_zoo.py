@@ -24,7 +24,7 @@ HAVE_ZOO = importlib.util.find_spec("rl_zoo3") is not None
 ENV_KWARGS = {
     "base_controller": "proposed",
     "control_dt_s": 0.1,
-    "residual_scale_nm": 10_000.0,
+    "residual_scale_nm": 20_000.0,
     "randomize": True,
     "episode_s": 100.0,
 }
