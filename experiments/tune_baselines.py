@@ -402,11 +402,11 @@ class TuneSettings:
 
     env_id: str = drill_env.ENV_ID
     loops: tuple[str, ...] = tuple(SEARCH_SPACES)
-    candidates: int = 80
-    refine: int = 40
+    candidates: int = 32
+    refine: int = 16
     zoom: float = 0.25
     episodes: int = 32
-    top: int = 8
+    top: int = 4
     search_seed: int = 0
     task_candidates: int = 1
 
