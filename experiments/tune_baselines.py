@@ -793,9 +793,13 @@ search ranges (log-spaced):
     )
     + """
 
+budget: the defaults run 3 loops x (32 + 16) candidates x 32 episodes of 100 s plus the
+validation (515,200 simulated s on DrillString-v0): about 5 CPU minutes there and twice that on
+the field string (docs/tuned-baselines.md gives the measured times).
+
 examples:
-  drill-gym tune --write                                   # DrillString-v0, about 20 min
-  drill-gym tune --env DrillStringField-v0 --write         # the field string, about 1 h
+  drill-gym tune --write                                   # DrillString-v0
+  drill-gym tune --env DrillStringField-v0 --write         # the field string
   drill-gym tune --loops soft_speed --candidates 8 --refine 0 --episodes 4 --top 2
 """
 )
