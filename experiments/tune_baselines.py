@@ -1,10 +1,10 @@
 """``drill-gym tune``: tune the industry speed loops' factors with the agent's tuning budget,
 on the agent's training scenarios, and select them by the agent's validation rule.
 
-The residual agent (``drill-gym train``) learns from about 200,000-400,000 simulated seconds of
+The residual agent (``drill-gym train``) learns from about 400,000 simulated seconds of
 randomised training episodes and keeps the model with the best validation score
 (:func:`agents.train.validation_score`: mean IAE ratio to the proposed SMC plus
-``10 max(RMSD ratio - 0.99, 0)``, on the 16 validation scenarios of
+``10 max(RMSD ratio - 0.99, 0)``, on the 32 validation scenarios of
 :func:`agents.train.validation_scenarios`). This command gives the speed loops ``stiff_pi``,
 ``soft_speed`` and ``z_torque`` the same:
 
@@ -777,7 +777,7 @@ reset seed 1 + i, then its own seed sequence), scored by the agent's validation 
 the proposed sliding-mode controller on the same episodes (mean IAE ratio + 10 x max(mean RMSD
 ratio - 0.99, 0); a diverged run rules a candidate out). Round 0: the default factors and a
 Latin hypercube over log-spaced ranges; round 1: a Latin hypercube around round 0's best. The
---top candidates by training score (and the defaults) then run the agent's 16 validation
+--top candidates by training score (and the defaults) then run the agent's 32 validation
 scenarios (reset seeds 20000 + k); the one with the lowest validation score is selected.
 
 Writes into --out: tune_round0.jsonl, tune_round1.jsonl, tune_validation.jsonl (results of the

@@ -67,14 +67,15 @@ def test_a_tiny_search_writes_its_files_and_a_gains_file_that_loads(
         assert f"{loop}: selected {selected['key']}" in printed
     assert "stiff_pi" not in entries  # only the loops tuned
     # training: 2 episodes of 2 s for the reference and for each of 5 candidates per loop;
-    # validation: 16 episodes for the reference and for the top 2 (and the default) per loop
+    # validation: the agent's validation episodes for the reference and for the top 2 (and the
+    # default) per loop
     with (out / "candidates.csv").open() as f:
         rows = list(csv.DictReader(f))
     for loop in ("soft_speed", "z_torque"):
         assert sum(r["validated"] == "True" for r in rows if r["loop"] == loop) == 2
     validated = sum(bool(r.get("validation_score")) for r in rows)
     assert validated in (4, 5, 6)
-    expected = 2 * 2.0 * (1 + 2 * 5) + 16 * 2.0 * (1 + validated)
+    expected = 2 * 2.0 * (1 + 2 * 5) + len(tune.validation_episodes()) * 2.0 * (1 + validated)
     assert summary["budget"]["simulated_s"] == pytest.approx(expected)
 
     # --resume reads everything back: the same selection, no run made
@@ -132,7 +133,7 @@ def test_the_second_training_episode_is_the_vector_envs_second_episode() -> None
 def test_validation_episodes_are_the_agents_validation_scenarios() -> None:
     kwargs, seeds = validation_scenarios(TrainConfig())
     assert [s for s, _ in tune.validation_episodes()] == seeds
-    assert seeds == [VALIDATION_SEED + k for k in range(16)]
+    assert seeds == [VALIDATION_SEED + k for k in range(TrainConfig().validation_episodes)]
     ours = tune.tuning_env_kwargs("DrillString-v0")
     assert ours == {k: v for k, v in kwargs.items() if k != "base_controller"}
     assert tune.tuning_env_kwargs("DrillStringField-v0") == {"randomize": True, "episode_s": 100.0}
