@@ -794,7 +794,7 @@ search ranges (log-spaced):
     + """
 
 budget: the defaults run 3 loops x (32 + 16) candidates x 32 episodes of 100 s plus the
-validation (515,200 simulated s): about 5 CPU minutes on DrillString-v0 and 14 on
+validation (about 515,000 simulated s): about 5 CPU minutes on DrillString-v0 and 14 on
 the field string (docs/tuned-baselines.md gives the measured times).
 
 examples:
