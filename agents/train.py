@@ -35,6 +35,7 @@ import os
 import shutil
 import sys
 import time
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final
 
@@ -60,6 +61,8 @@ __all__ = [
     "planned_timesteps",
     "policy_env_kwargs",
     "train",
+    "validation_scenarios",
+    "validation_score",
 ]
 
 VALIDATION_SEED = 20_000
@@ -75,6 +78,33 @@ over this (a 1 % margin below the base controller's RMSD)."""
 REFERENCE_CONTROLLER: Final = {PAPER_ENV_ID: "proposed", FIELD_ENV_ID: "soft_speed"}
 """The controller a from-scratch agent (``--base-controller none``) is validated against, per
 env (a residual agent is validated against its own base controller)."""
+
+
+def validation_scenarios(config: TrainConfig) -> tuple[dict[str, Any], list[int]]:
+    """The validation scenarios of a run: the keywords of ``config.env_id`` (the policy's, the
+    training distribution, episode length and noise) and the reset seeds
+    ``VALIDATION_SEED + k``, ``k < validation_episodes``."""
+    kwargs = {
+        **policy_env_kwargs(config),
+        "randomize": True,
+        "episode_s": config.episode_s,
+        "noise_std_rad_s": config.noise_std_rad_s,
+    }
+    return kwargs, [VALIDATION_SEED + k for k in range(config.validation_episodes)]
+
+
+def validation_score(
+    metrics: Sequence[Mapping[str, Any]], reference: Sequence[Mapping[str, Any]]
+) -> tuple[float, float, float, float]:
+    """The validation ratios and score of episode metrics against the base controller's on the
+    same scenarios: mean IAE, RMSD and severity ratios and the selection score
+    ``IAE ratio + 10 max(RMSD ratio - RMSD_TARGET, 0)`` (lower is better)."""
+
+    def ratio(key: str) -> float:
+        return float(np.mean([m[key] for m in metrics]) / np.mean([m[key] for m in reference]))
+
+    iae, rmsd, sev = ratio("iae"), ratio("rmsd_nm"), ratio("stick_slip_severity")
+    return iae, rmsd, sev, float(iae + 10.0 * max(rmsd - RMSD_TARGET, 0.0))
 
 
 def policy_env_kwargs(config: TrainConfig) -> dict[str, Any]:
@@ -526,18 +556,12 @@ class _Validation:
         self.progress = progress
         self.best_dir = run_dir / "best"
         self.csv = run_dir / "validation.csv"
-        kwargs = {
-            **policy_env_kwargs(config),
-            "randomize": True,
-            "episode_s": config.episode_s,
-            "noise_std_rad_s": config.noise_std_rad_s,
-        }
+        kwargs, self.seeds = validation_scenarios(config)
         self.env = gym.make(config.env_id, max_episode_steps=-1, **kwargs)
         base = kwargs["base_controller"] or REFERENCE_CONTROLLER[config.env_id]
         base_env = gym.make(
             config.env_id, max_episode_steps=-1, **{**kwargs, "base_controller": base}
         )
-        self.seeds = [VALIDATION_SEED + k for k in range(config.validation_episodes)]
         self.reference = [episode_metrics(rollout(base_env, ZeroAction(), s)) for s in self.seeds]
         self.best = math.inf
         score_file = self.best_dir / "score.json"
@@ -555,14 +579,7 @@ class _Validation:
 
         policy = _snapshot(model, venv, self.config)
         metrics = [episode_metrics(rollout(self.env, policy, s)) for s in self.seeds]
-        iae = np.mean([m["iae"] for m in metrics]) / np.mean([m["iae"] for m in self.reference])
-        rmsd = np.mean([m["rmsd_nm"] for m in metrics]) / np.mean(
-            [m["rmsd_nm"] for m in self.reference]
-        )
-        sev = np.mean([m["stick_slip_severity"] for m in metrics]) / np.mean(
-            [m["stick_slip_severity"] for m in self.reference]
-        )
-        score = float(iae + 10.0 * max(rmsd - RMSD_TARGET, 0.0))
+        iae, rmsd, sev, score = validation_score(metrics, self.reference)
         steps = int(model.num_timesteps)
         values = {
             "validation/iae_ratio": float(iae),

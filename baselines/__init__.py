@@ -1,6 +1,7 @@
 """Fixed controllers behind one registry: the paper's four sliding-mode controllers (``csmc``,
-``msmc``, ``asmc``, ``proposed``) and three industry top-drive speed loops (``stiff_pi``,
-``soft_speed``, ``z_torque``).
+``msmc``, ``asmc``, ``proposed``), three industry top-drive speed loops (``stiff_pi``,
+``soft_speed``, ``z_torque``) and the same loops with the factors tuned by ``drill-gym tune``
+(``stiff_pi_tuned``, ``soft_speed_tuned``, ``z_torque_tuned``, :mod:`baselines.tuned`).
 
 ``make_controller(name, **gains)`` builds a controller; every controller can run inside
 ``DrillString-v0`` as its ``base_controller`` (compiled, at every plant step) or drive it as a
@@ -28,6 +29,7 @@ from baselines.smc import SlidingModeController, SurfaceGains  # noqa: E402
 from baselines.soft_speed import SoftSpeed, SoftSpeedGains  # noqa: E402
 from baselines.speed_loop import DriveLimits, SpeedLoopController, SpeedLoopTuning  # noqa: E402
 from baselines.stiff_pi import StiffPI, StiffPIGains  # noqa: E402
+from baselines.tuned import SoftSpeedTuned, StiffPITuned, ZTorqueTuned  # noqa: E402
 from baselines.z_torque import ZTorque, ZTorqueGains  # noqa: E402
 from drill_env.control import controller_names, make_controller, register_controller  # noqa: E402
 
@@ -48,13 +50,16 @@ __all__ = [
     "SlidingModeController",
     "SoftSpeed",
     "SoftSpeedGains",
+    "SoftSpeedTuned",
     "SpeedLoopController",
     "SpeedLoopTuning",
     "StiffPI",
     "StiffPIGains",
+    "StiffPITuned",
     "SurfaceGains",
     "ZTorque",
     "ZTorqueGains",
+    "ZTorqueTuned",
     "controller_names",
     "make_controller",
     "register_controller",

@@ -14,6 +14,7 @@ from baselines.msmc import MSMC
 from baselines.proposed import ProposedASMC
 from baselines.soft_speed import SoftSpeed
 from baselines.stiff_pi import StiffPI
+from baselines.tuned import SoftSpeedTuned, StiffPITuned, ZTorqueTuned
 from baselines.z_torque import ZTorque
 from drill_env.control import register_controller
 
@@ -25,10 +26,16 @@ BUILT_IN: Final[dict[str, type[CompiledLawController]]] = {
     "asmc": ASMC,
     "proposed": ProposedASMC,
     "stiff_pi": StiffPI,
+    "stiff_pi_tuned": StiffPITuned,
     "soft_speed": SoftSpeed,
+    "soft_speed_tuned": SoftSpeedTuned,
     "z_torque": ZTorque,
+    "z_torque_tuned": ZTorqueTuned,
 }
-"""The built-in controller classes by name; each takes gain keywords (and ``model``)."""
+"""The built-in controller classes by name; each takes gain keywords (and ``model``). A
+``*_tuned`` loop follows its default one (``controller_names()`` keeps this order, and so do
+the tables): the same law with the factors of ``baselines/tuned_gains.json``
+(:mod:`baselines.tuned`)."""
 
 COMPILED_LAWS: Final = {name: cls.law for name, cls in BUILT_IN.items()}
 """The compiled law (a numba ``cfunc``) each built-in controller runs in the plant loop."""

@@ -84,8 +84,9 @@ class SoftSpeed(SpeedLoopController):
     ) -> SpeedLoopTuning:
         """``kp = max(impedance_factor Z - c_dt, 0)``, ``ki = (frequency_factor w_s)^2 J_dt``,
         ``j_ff = J_dt`` (when compensating)."""
-        m = string_view(self.model if model is None else model)
-        g: SoftSpeedGains = self.gains
+        model = self.model if model is None else model
+        m = string_view(model)
+        g: SoftSpeedGains = self.gains_for(model)
         z = m.impedance
         w_s = m.stick_slip_rad_s
         kp = max(g.impedance_factor * z - m.c_dt, 0.0)

@@ -18,7 +18,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 import numpy.typing as npt
@@ -174,6 +174,12 @@ class SpeedLoopController(CompiledLawController):
     ) -> SpeedLoopTuning:
         """The gains derived from ``model`` (the controller's own model when omitted)."""
         raise NotImplementedError
+
+    def gains_for(self, model: DrillStringParameters | DistributedStringParameters) -> Any:
+        """The gains :meth:`tuning` derives the numbers from for ``model``: the controller's
+        own gains (the tuned variants of :mod:`baselines.tuned` pick theirs by the kind of
+        model)."""
+        return self.gains
 
     law = speed_loop_law
     error_slot = PS_ERROR

@@ -66,8 +66,9 @@ class StiffPI(SpeedLoopController):
         self, model: DrillStringParameters | DistributedStringParameters | None = None
     ) -> SpeedLoopTuning:
         """``kp = bandwidth_factor Z``, ``ki = kp^2 / (4 damping_ratio^2 J_dt)``."""
-        m = string_view(self.model if model is None else model)
-        g: StiffPIGains = self.gains
+        model = self.model if model is None else model
+        m = string_view(model)
+        g: StiffPIGains = self.gains_for(model)
         z = m.impedance
         kp = g.bandwidth_factor * z
         ki = kp**2 / (4.0 * g.damping_ratio**2 * m.J_dt)

@@ -85,8 +85,9 @@ class ZTorque(SpeedLoopController):
     ) -> SpeedLoopTuning:
         """``z = impedance_factor Z``, ``tau_mean = mean_periods 2 pi / w_s`` and the stiff
         inner loop of :class:`baselines.stiff_pi.StiffPI`."""
-        m = string_view(self.model if model is None else model)
-        g: ZTorqueGains = self.gains
+        model = self.model if model is None else model
+        m = string_view(model)
+        g: ZTorqueGains = self.gains_for(model)
         z = m.impedance
         w_s = m.stick_slip_rad_s
         kp = g.bandwidth_factor * z

@@ -2,7 +2,7 @@
 
 Subcommands, each a module with ``main(argv)`` imported only when used (so the core needs no
 torch): ``compare``, ``map``, ``probability-map``, ``train``, ``sweep-train``, ``evaluate``,
-``convert``, ``waves``, ``realism``. Every user error ends with
+``convert``, ``waves``, ``realism``, ``tune``. Every user error ends with
 one line on standard error and exit code 2 (:mod:`experiments.arguments`); ``DRILL_GYM_DEBUG=1``
 shows the traceback instead.
 """
@@ -51,6 +51,10 @@ SUBCOMMANDS = {
     "realism": (
         "experiments.realism",
         "who survives realism: each controller as sensors, telemetry and top drive get real",
+    ),
+    "tune": (
+        "experiments.tune_baselines",
+        "tune the speed loops' factors with the agent's budget, scenarios and selection rule",
     ),
 }
 """Subcommand name -> (module with ``main(argv)``, one line of help)."""

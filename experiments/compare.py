@@ -480,8 +480,16 @@ def markdown_table(rows: Sequence[Mapping[str, Any]]) -> str:
     return _markdown(rows, FIELD_TABLE_COLUMNS if field else TABLE_COLUMNS, _diverged_cell)
 
 
-INDUSTRY_CONTROLLERS: Final = ("stiff_pi", "soft_speed", "z_torque")
-"""The industry top-drive speed loops, drawn together in the noise figure."""
+INDUSTRY_CONTROLLERS: Final = (
+    "stiff_pi",
+    "stiff_pi_tuned",
+    "soft_speed",
+    "soft_speed_tuned",
+    "z_torque",
+    "z_torque_tuned",
+)
+"""The industry top-drive speed loops, default and tuned (:mod:`baselines.tuned`), drawn
+together in the noise figure."""
 
 
 def _families(rows: Sequence[Mapping[str, Any]]) -> dict[str, list[str]]:
