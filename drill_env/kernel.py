@@ -315,6 +315,25 @@ def _sense(meas, hold, tel, tel_buf, s, k, x, surface, std, torque_std, tel_std,
 
 
 @njit(cache=True, inline="always")
+def _sense_ideal(meas, hold, k, x, surface, std, torque_std, applied, noise, sensor, r) -> None:
+    """:func:`_sense` for a channel that samples the surface at every step, has no telemetry
+    and measures the state: the same values, without the telemetry's work (its entries stay
+    as the last full sensing left them: no value)."""
+    top_speed = x[0] + std * noise[r, 0]
+    sense_surface(hold, k, 1, top_speed, surface + torque_std * sensor[r, 0])
+    meas[M_STATE] = top_speed
+    meas[M_STATE + 1] = x[1]
+    meas[M_STATE + 2] = x[2] + std * noise[r, 1]
+    meas[M_STATE + 3] = x[3]
+    meas[M_STATE + 4] = x[4] + std * noise[r, 2]
+    meas[M_STATE + 5] = x[5]
+    meas[M_STATE + 6] = x[6] + std * noise[r, 3]
+    meas[M_TOP_DRIVE_SPEED] = hold[HOLD_SPEED]
+    meas[M_SURFACE_TORQUE] = hold[HOLD_TORQUE]
+    meas[M_APPLIED_TORQUE] = applied
+
+
+@njit(cache=True, inline="always")
 def _command_and_torque(s, act, line, u_base: float, command: float):
     """The clipped command and the torque the actuator applies over this step, N m."""
     u_command = min(max(u_base + command, s.u_min), s.u_max)
@@ -449,6 +468,7 @@ def _advance_one(i, b, s):
     residual_squared = 0.0
     stuck = 0.0
     n_done = 0
+    ideal_channel = s.state_mode and s.sensor_steps == 1 and s.telemetry_period <= 0
     for j in range(s.n_sub):
         if not ok:
             for c in range(N_RECORD):
@@ -458,8 +478,12 @@ def _advance_one(i, b, s):
         wob = profile_value(wob_t, wob_v, wob_n, t)
         ref = profile_value(ref_t, ref_v, ref_n, t)
         surface = p[P_K_PI] * xi[1] + p[P_C_PI] * (xi[0] - xi[2])
-        _sense(meas, hold, tel, tel_buf, s, k, xi, surface, std, torque_std, tel_std, u_prev,
-               noise, sensor, row + j)  # fmt: skip
+        if ideal_channel:
+            _sense_ideal(meas, hold, k, xi, surface, std, torque_std, u_prev, noise, sensor,
+                         row + j)  # fmt: skip
+        else:
+            _sense(meas, hold, tel, tel_buf, s, k, xi, surface, std, torque_std, tel_std,
+                   u_prev, noise, sensor, row + j)  # fmt: skip
         gain = _slot(ls, s.gain_slot)  # the gain this step's torque uses (the law advances it)
         u_base = _base_torque(s, lp, ls, meas, external, ref)
         u_command, u = _command_and_torque(s, act, line, u_base, command)
