@@ -12,9 +12,11 @@ import argparse
 import math
 import sys
 from collections.abc import Callable, Sequence
-from typing import Any, NoReturn
+from typing import Any, Final, NoReturn
 
 __all__ = [
+    "BASE_SEED_HIGH",
+    "SEED_HIGH",
     "ArgumentParser",
     "HelpFormatter",
     "error_line",
@@ -22,10 +24,17 @@ __all__ = [
     "number_type",
     "one_line",
     "run_command",
+    "seed_option",
+    "seed_type",
 ]
 
 USAGE_ERROR: int = 2
 """Exit code of a user error (the argparse convention)."""
+SEED_HIGH: Final = 2**32 - 1
+"""Largest seed a command takes when it uses the seed as it is (a reset or training seed)."""
+BASE_SEED_HIGH: Final = 2**31 - 1
+"""Largest seed a command takes when it adds an item's index to it (cell ``i`` of a map is
+reset with ``seed + i``), so that every derived seed stays within :data:`SEED_HIGH`."""
 
 
 def one_line(text: str) -> str:
@@ -132,6 +141,18 @@ def number_type(
 
     parse.__name__ = "integer" if integer else "number"
     return parse
+
+
+def seed_type(base: bool = False) -> Callable[[str], Any]:
+    """The argparse ``type`` of a seed: an integer in ``[0, SEED_HIGH]``, or in
+    ``[0, BASE_SEED_HIGH]`` for a base seed (``base``) to which items add their index."""
+    return number_type(0, BASE_SEED_HIGH if base else SEED_HIGH, integer=True)
+
+
+def seed_option(parser: argparse.ArgumentParser, help: str, *, base: bool = False) -> None:
+    """Add the ``--seed N`` option of a study (default 0; :func:`seed_type`), ``help`` saying
+    what the seed drives."""
+    parser.add_argument("--seed", type=seed_type(base), default=0, metavar="N", help=help)
 
 
 def names_type(valid: Callable[[], Sequence[str]], what: str) -> Callable[[str], str]:

@@ -46,7 +46,7 @@ from drill_env.evaluation import Trace, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
 from drill_env.parameters import PLANT_DT_S, resolve_parameters
 from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, WobProfile
-from experiments.arguments import ArgumentParser, names_type, number_type
+from experiments.arguments import ArgumentParser, names_type, number_type, seed_option
 from experiments.field import (
     COMPARE_CONDITIONS,
     COMPARE_DEPTHS_M,
@@ -814,13 +814,7 @@ def _parser() -> ArgumentParser:
         metavar="S",
         help="length of every run, s (a multiple of the 1 ms plant step)",
     )
-    p.add_argument(
-        "--seed",
-        type=number_type(0, 2**32 - 1, integer=True),
-        default=0,
-        metavar="N",
-        help="reset seed of every run (it drives the measurement noise)",
-    )
+    seed_option(p, "reset seed of every run (it drives the measurement noise)")
     p.add_argument("--out", type=Path, default=Path("results"), metavar="DIR", help="output folder")
     p.add_argument(
         "--reading",

@@ -62,7 +62,7 @@ from drill_env.limits import MAX_REFERENCE_RAD_S, MAX_WOB_N
 from drill_env.metrics import WindowStatistics
 from drill_env.parameters import PLANT_DT_S, PRESETS
 from drill_env.scenarios import FieldRandomization, Randomization
-from experiments.arguments import ArgumentParser, names_type, number_type
+from experiments.arguments import ArgumentParser, names_type, number_type, seed_option
 from experiments.stick_slip_map import DEFAULT_WINDOW_S, grid_values, stick_slip
 from experiments.sweep import (
     PROBABILITY_TASK_CELLS,
@@ -656,13 +656,7 @@ def _parser() -> ArgumentParser:
         help="plant preset (default: zribi2024 on DrillString-v0, field_2500m on the field env)",
     )
     p.add_argument("--out", type=Path, default=Path("results"), metavar="DIR", help="output folder")
-    p.add_argument(
-        "--seed",
-        type=number_type(0, 2**31 - 1, integer=True),
-        default=0,
-        metavar="N",
-        help="draw k of every cell is reset with seed + k",
-    )
+    seed_option(p, "draw k of every cell is reset with seed + k", base=True)
     p.add_argument("--no-plots", action="store_true", help="write the CSV files only")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_sweep_options(

@@ -63,7 +63,7 @@ from drill_env.control import controller_names
 from drill_env.distributed import Chain, chain_from_parameters
 from drill_env.evaluation import ZeroAction, episode_metrics
 from drill_env.options import REALISM_KEYWORDS, EnvConfig, FieldEnvConfig, realism_keywords
-from experiments.arguments import ArgumentParser, names_type, number_type
+from experiments.arguments import ArgumentParser, names_type, number_type, seed_option
 from experiments.evaluate import FIELD_HELD_OUT, HELD_OUT, HeldOutScenario
 from experiments.field import ENV_IDS, FIELD_ENV, PAPER_ENV, run_on
 from experiments.sweep import (
@@ -993,13 +993,7 @@ def _parser() -> ArgumentParser:
         metavar="S",
         help="length of every run, s (a whole number of seconds)",
     )
-    parser.add_argument(
-        "--seed",
-        type=number_type(0, 2**31 - 1, integer=True),
-        default=0,
-        metavar="N",
-        help="added to every scenario's own reset seed (it drives the noise)",
-    )
+    seed_option(parser, "added to every scenario's own reset seed (it drives the noise)", base=True)
     parser.add_argument(
         "--out", type=Path, default=Path("results/realism"), metavar="DIR", help="output folder"
     )

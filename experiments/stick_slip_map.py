@@ -51,7 +51,7 @@ from drill_env.metrics import WindowStatistics
 from drill_env.options import REALISM_LEVELS, realism_keywords
 from drill_env.parameters import PLANT_DT_S, PRESETS
 from drill_env.scenarios import RPM
-from experiments.arguments import ArgumentParser, names_type, number_type
+from experiments.arguments import ArgumentParser, names_type, number_type, seed_option
 from experiments.field import (
     ENV_IDS,
     FIELD_ENV,
@@ -697,12 +697,10 @@ def _parser() -> ArgumentParser:
     parser.add_argument(
         "--out", type=Path, default=Path("results"), metavar="DIR", help="output folder"
     )
-    parser.add_argument(
-        "--seed",
-        type=number_type(0, 2**31 - 1, integer=True),
-        default=0,
-        metavar="N",
-        help="reset seed of the first cell (cell i uses seed + i; it drives the noise)",
+    seed_option(
+        parser,
+        "reset seed of the first cell (cell i uses seed + i; it drives the noise)",
+        base=True,
     )
     parser.add_argument("--no-plots", action="store_true", help="write the CSV files only")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")

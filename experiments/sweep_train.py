@@ -50,7 +50,7 @@ from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final
 
-from experiments.arguments import ArgumentParser, names_type, number_type
+from experiments.arguments import ArgumentParser, names_type, number_type, seed_type
 from experiments.sweep import ADDRESS_VARIABLE, Backend, ray_session
 from experiments.tables import Column, markdown_table, write_csv, write_json
 
@@ -572,7 +572,7 @@ def _parser() -> ArgumentParser:
     p.add_argument(
         "--seeds",
         nargs="+",
-        type=number_type(0, 2**32 - 1, integer=True),
+        type=seed_type(),
         default=[1],
         metavar="S",
         help="training seeds, one trial (per grid point and sample) each",

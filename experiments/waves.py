@@ -58,7 +58,7 @@ from drill_env.modes import (
 )
 from drill_env.parameters import PLANT_DT_S, PRESETS, DrillStringParameters
 from drill_env.scenarios import WobProfile
-from experiments.arguments import ArgumentParser, names_type, number_type
+from experiments.arguments import ArgumentParser, names_type, number_type, seed_option
 from experiments.field import (
     FIELD_CONDITIONS,
     FIELD_ENV,
@@ -626,10 +626,7 @@ def _parser() -> ArgumentParser:
         metavar="S",
         help="analysis window at the end of each run, s",
     )
-    p.add_argument(
-        "--seed", type=number_type(0, 2**32 - 1, integer=True), default=0, metavar="N",
-        help="reset seed of every run (it drives the noise)",
-    )  # fmt: skip
+    seed_option(p, "reset seed of every run (it drives the noise)")
     p.add_argument(
         "--out", type=Path, default=Path("results/waves"), metavar="DIR", help="output folder"
     )
