@@ -6,7 +6,8 @@ compiled inside the plant loop, and so can yours: see examples/compiled_controll
 stick-slips at this low speed and high WOB (docs/specification.md section 6): watch
 stuck_fraction.
 
-Run: .venv/bin/python examples/custom_controller.py
+Run: .venv/bin/python examples/custom_controller.py, or score it beside the built-in controllers:
+.venv/bin/drill-gym compare --controllers proposed examples/custom_controller.py:SpeedPI
 """
 
 from __future__ import annotations
@@ -34,14 +35,15 @@ class SpeedPI:
         return self.feedforward_nm + self.kp * error + self.ki * self.integral
 
 
-env = gym.make(
-    "DrillString-v0",
-    randomize=False,
-    base_controller=SpeedPI(),
-    reference_speed_rad_s=5.0,
-    wob_n=150_000.0,
-    episode_s=40.0,
-    control_dt_s=1.0,
-)
-metrics = episode_metrics(rollout(env, ZeroAction(), seed=0))
-print({k: round(v, 3) if isinstance(v, float) else v for k, v in metrics.items()})
+if __name__ == "__main__":  # importing the file (PATH.py:SpeedPI) runs nothing
+    env = gym.make(
+        "DrillString-v0",
+        randomize=False,
+        base_controller=SpeedPI(),
+        reference_speed_rad_s=5.0,
+        wob_n=150_000.0,
+        episode_s=40.0,
+        control_dt_s=1.0,
+    )
+    metrics = episode_metrics(rollout(env, ZeroAction(), seed=0))
+    print({k: round(v, 3) if isinstance(v, float) else v for k, v in metrics.items()})

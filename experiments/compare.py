@@ -46,7 +46,8 @@ from drill_env.evaluation import Trace, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
 from drill_env.parameters import PLANT_DT_S, resolve_parameters
 from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, WobProfile
-from experiments.arguments import ArgumentParser, names_type, number_type, seed_option
+from experiments.arguments import ArgumentParser, number_type, seed_option
+from experiments.controllers import CONTROLLERS_HELP, controller_type, refuse_on_ray
 from experiments.field import (
     COMPARE_CONDITIONS,
     COMPARE_DEPTHS_M,
@@ -775,10 +776,11 @@ def _parser() -> ArgumentParser:
         "--controllers",
         nargs="+",
         metavar="NAME",
-        type=names_type(controller_names, "controller"),
+        type=controller_type,
         help="controllers to compare, by registered name: "
         + ", ".join(controller_names())
-        + " (default: all, the paper's four first)",
+        + " (default: all, the paper's four first), "
+        + CONTROLLERS_HELP,
     )
     p.add_argument(
         "--conditions",
@@ -848,6 +850,7 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
     parser = _parser()
     args = parser.parse_args(argv)
     controllers = list(args.controllers) if args.controllers else default_controllers()
+    refuse_on_ray(parser.fail, args, controllers)
     try:
         decision_period(args.duration)
     except ValueError:

@@ -52,6 +52,7 @@ from drill_env.control import controller_names
 from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
 from experiments.arguments import ArgumentParser, names_type
+from experiments.controllers import CONTROLLERS_HELP, controller_type, refuse_on_ray
 from experiments.field import (
     ENV_IDS,
     FIELD_ENV,
@@ -559,10 +560,11 @@ def _parser() -> ArgumentParser:
         nargs="+",
         default=None,
         metavar="NAME",
-        type=names_type(controller_names, "controller"),
+        type=controller_type,
         help="controllers to score beside the agents, by registered name: "
         + ", ".join(controller_names())
-        + " (default: all; an agent's base controller is always added)",
+        + " (default: all; an agent's base controller is always added), "
+        + CONTROLLERS_HELP,
     )
     sets = {name: s for env_sets in SCENARIO_SETS.values() for name, s in env_sets.items()}
     parser.add_argument(
@@ -653,6 +655,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     controllers = args.controllers
     if controllers is not None:
         controllers = list(dict.fromkeys([*controllers, *base_names]))
+        refuse_on_ray(parser.fail, args, controllers)
     base_label = BASE_CONTROLLER
     bases = base_names
     if field:  # a run's label is its controller and observation mode
