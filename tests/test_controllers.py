@@ -84,7 +84,7 @@ def test_map_and_evaluate_take_a_user_controller(tmp_path: Path) -> None:
 def test_help_says_how_to_name_your_own_class_and_compile_it(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    for name in ("compare", "map", "evaluate"):
+    for name in ("compare", "map", "evaluate", "benchmark"):
         assert main([name, "--help"]) == 0
         out = " ".join(capsys.readouterr().out.split())
         assert "MODULE:CLASS" in out and "PATH.py:CLASS" in out, name
