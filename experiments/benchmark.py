@@ -518,8 +518,10 @@ def make_entry(text: str) -> Entry:
         ValueError: naming ``text`` and what it could have been.
         FileNotFoundError: for an incomplete model folder.
     """
+    from drill_env.control import controller_names
+
     path = Path(text)
-    if ":" not in text and path.exists():
+    if text not in controller_names() and ":" not in text and path.exists():
         from agents.policy import load_policy
 
         agent = load_policy(path)
