@@ -45,6 +45,7 @@ row per suite, entry and metric), ``runs.csv`` (one row per run) and ``profiles.
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import json
 import math
 import re
@@ -60,8 +61,8 @@ import numpy as np
 from drill_env.evaluation import Policy, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
 from drill_env.scenarios import WobProfile
-from experiments.arguments import ArgumentParser, number_type, seed_option
-from experiments.controllers import CONTROLLERS_HELP, resolve_controller_name
+from experiments.arguments import ArgumentParser, number_type, one_line, seed_option
+from experiments.controllers import CONTROLLERS_HELP, is_user_controller, resolve_controller_name
 from experiments.field import (
     CONTROLLER_MODELS,
     ENV_IDS,
@@ -127,11 +128,14 @@ IDLE_DECISION_S: Final = 1.0
 every plant step, and the noise samples do not depend on the decision period)."""
 
 SCORE_KEYS: Final = (
-    "suite", "suite_sha256", "env_id", "entry", "metric", "prone_only", "runs", "iqm", "ci_low",
-    "ci_high", "score", "score_low", "score_high", "reference", "best",
+    "suite", "suite_sha256", "env_id", "entry", "metric", "prone_only", "runs", "missing",
+    "diverged", "iqm", "ci_low", "ci_high", "score", "score_low", "score_high", "reference",
+    "best",
 )  # fmt: skip
 """Columns of ``scorecard.csv``."""
-RUN_KEYS: Final = ("suite", "entry", "scenario", "seed", "prone", *METRIC_KEYS, "diverged")
+RUN_KEYS: Final = (
+    "suite", "entry", "scenario", "seed", "prone", *METRIC_KEYS, "diverged", "note",
+)  # fmt: skip
 """Columns of ``runs.csv``."""
 
 _NAME: Final = re.compile(r"[a-z][a-z0-9_]*")
@@ -549,28 +553,45 @@ def run_suite(
     suite, the label, the scenario, the seed, ``prone`` and the metrics of
     :data:`drill_env.metrics.METRIC_KEYS`. Entries that do not run on the suite's env are left
     out."""
-    jobs = [job for job in (e.run(suite) for e in entries) if job is not None]
+    jobs = [(e, job) for e in entries if (job := e.run(suite)) is not None]
     total = len(jobs) * suite.runs
     bar = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(total=total, desc=suite.label, unit="run", file=sys.stderr)
+    field = is_field(suite.env_id)
     rows: list[dict[str, Any]] = []
-    for label, policy, kwargs in jobs:
+    for entry, (label, policy, kwargs) in jobs:
+        mine = entry.agent is None and is_user_controller(entry.name)
         for scenario in suite.scenarios:
             for seed in scenario.seeds:
-                trace = run_on(suite.env_id, {**suite.env_kwargs(scenario), **kwargs}, policy, seed)
-                rows.append(
-                    {
-                        "suite": suite.label,
-                        "entry": label,
-                        "scenario": scenario.id,
-                        "seed": seed,
-                        "prone": scenario.prone,
-                        **episode_metrics(trace),
-                    }
-                )
+                head = {
+                    "suite": suite.label,
+                    "entry": label,
+                    "scenario": scenario.id,
+                    "seed": seed,
+                    "prone": scenario.prone,
+                }
+                try:
+                    trace = run_on(
+                        suite.env_id, {**suite.env_kwargs(scenario), **kwargs}, policy, seed
+                    )
+                except ValueError as err:
+                    if not field:
+                        raise
+                    # A controller that cannot be made for this string (its tuning or model
+                    # has no solution there): a row without metrics, and the reason.
+                    rows.append({**head, **dict.fromkeys(METRIC_KEYS), "note": one_line(str(err))})
+                except Exception as err:
+                    if not mine:
+                        raise
+                    raise ValueError(
+                        f"{label} failed on {suite.label} {scenario.id} seed {seed}: "
+                        f"{type(err).__name__}: {err}"
+                    ) from err
+                else:
+                    rows.append({**head, **episode_metrics(trace), "note": ""})
                 if bar is not None:
                     bar.update()
     if bar is not None:
@@ -673,23 +694,29 @@ def score_suite(
     if reference not in labels:
         raise ValueError(f"suite {suite.label}: its reference controller {reference!r} was not run")
     prone_ids = {s.id for s in suite.scenarios if s.prone}
-    stats: dict[tuple[str, str], tuple[float, float, float, int]] = {}
+    stats: dict[tuple[str, str], tuple[float, float, float]] = {}
+    counts: dict[tuple[str, str], dict[str, int]] = {}
     for m_index, metric in enumerate(METRICS):
         for e_index, label in enumerate(labels):
             strata = []
+            diverged = 0
             for scenario in suite.scenarios:
                 if metric in PRONE_ONLY and scenario.id not in prone_ids:
                     continue
-                values = [
-                    r[metric] for r in mine if r["entry"] == label and r["scenario"] == scenario.id
-                ]
-                strata.append(np.array([math.nan if v is None else float(v) for v in values]))
-            runs = sum(s.size for s in strata)
-            if not strata or not all(np.isfinite(s).all() for s in strata):
-                stats[(label, metric)] = (math.nan, math.nan, math.nan, runs)
+                runs = [r for r in mine if r["entry"] == label and r["scenario"] == scenario.id]
+                diverged += sum(bool(r.get("diverged")) for r in runs)
+                values = [math.nan if r[metric] is None else float(r[metric]) for r in runs]
+                strata.append(np.array(values))
+            counts[(label, metric)] = {
+                "runs": sum(s.size for s in strata),
+                "missing": sum(int((~np.isfinite(s)).sum()) for s in strata),
+                "diverged": diverged,
+            }
+            if not strata or counts[(label, metric)]["missing"]:
+                # a run without a value (a controller that could not run there): no IQM
+                stats[(label, metric)] = (math.nan, math.nan, math.nan)
                 continue
-            point, low, high = iqm_interval(strata, resamples, (seed, m_index, e_index))
-            stats[(label, metric)] = (point, low, high, runs)
+            stats[(label, metric)] = iqm_interval(strata, resamples, (seed, m_index, e_index))
     out: list[dict[str, Any]] = []
     for metric in METRICS:
         finite = {
@@ -699,7 +726,7 @@ def score_suite(
         ref_value = stats[(reference, metric)][0]
         best_value = finite[best] if best is not None else math.nan
         for label in labels:
-            point, low, high, runs = stats[(label, metric)]
+            point, low, high = stats[(label, metric)]
             score = normalised_score(point, ref_value, best_value)
             # the score falls as the metric rises: the IQM's high end is the score's low end
             score_low = normalised_score(high, ref_value, best_value)
@@ -712,7 +739,7 @@ def score_suite(
                     "entry": label,
                     "metric": metric,
                     "prone_only": metric in PRONE_ONLY,
-                    "runs": runs,
+                    **counts[(label, metric)],
                     "iqm": point,
                     "ci_low": low,
                     "ci_high": high,
@@ -769,6 +796,14 @@ def suite_table(suite: Suite, scores: Sequence[Mapping[str, Any]]) -> str:
             cells.append(_interval(row, ("iqm", "ci_low", "ci_high"), m))
             cells.append(_interval(row, ("score", "score_low", "score_high"), None))
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    notes = [
+        f"{label}: {by[(label, first)]['missing']} runs without a value, "
+        f"{by[(label, first)]['diverged']} diverged"
+        for label in labels
+        if by[(label, first)]["missing"] or by[(label, first)]["diverged"]
+    ]
+    if notes:
+        lines += ["", "Runs that could not be scored or diverged: " + "; ".join(notes) + "."]
     return "\n".join(lines)
 
 
@@ -933,6 +968,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     """``drill-gym benchmark``: run, score and write; returns the exit code (see ``--help``)."""
     parser = _parser()
     args = parser.parse_args(list(argv) if argv is not None else None)
+    if importlib.util.find_spec("scipy") is None:  # before minutes of runs, not after
+        parser.error(
+            "needs the package 'scipy' for the bootstrap, which is not installed (the bench "
+            "extra has it: pip install -e '.[bench]')"
+        )
     start = time.perf_counter()
     if args.suites is None:
         args.suites = sorted({label.rsplit("-v", 1)[0] for label in shipped_suites()})

@@ -223,7 +223,7 @@ def load_controller(spec: str) -> str:
         target = getattr(target, part)
     if not callable(target):
         raise ValueError(f"controller {spec!r}: {attribute!r} is not a class")
-    if inspect.isclass(target):  # before any of its code runs
+    if inspect.isclass(target):  # before it is made
         _check_controller(target, spec, made=False)
     try:
         controller = target()

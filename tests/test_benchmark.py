@@ -281,3 +281,60 @@ def test_a_bad_option_is_one_line_and_exit_code_2(
     assert err.startswith("drill-gym benchmark: error: ")
     assert re.search(message, err), err
     assert not (tmp_path / "out").exists()
+
+
+def test_runs_without_a_value_give_no_iqm_and_are_counted(tmp_path: Path) -> None:
+    suite = load_suite(_tiny(tmp_path))
+    rows = []
+    for entry in ("proposed", "partial"):
+        for scenario in suite.scenarios:
+            for k, seed in enumerate(scenario.seeds):
+                value = None if entry == "partial" and k == 0 else 1.0 + k
+                rows.append(
+                    {"suite": suite.label, "entry": entry, "scenario": scenario.id, "seed": seed,
+                     "prone": scenario.prone, "diverged": entry == "proposed" and k == 1,
+                     **dict.fromkeys(METRICS, value)}
+                )  # fmt: skip
+    scores = {(s["entry"], s["metric"]): s for s in score_suite(suite, rows, resamples=200)}
+    partial, reference = scores[("partial", "iae")], scores[("proposed", "iae")]
+    assert math.isnan(partial["iqm"]) and math.isnan(partial["score"])
+    assert partial["missing"] == len(suite.scenarios) and partial["runs"] == 2 * len(
+        suite.scenarios
+    )
+    assert reference["diverged"] == len(suite.scenarios) and reference["missing"] == 0
+    assert reference["iqm"] == pytest.approx(1.5)
+
+
+def test_a_user_controller_that_raises_is_one_line_naming_the_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    source = tmp_path / "fragile_loops.py"
+    source.write_text(
+        "class Fragile:\n"
+        "    def reset(self): pass\n"
+        "    def torque(self, measurement, reference_speed_rad_s, dt_s):\n"
+        "        raise RuntimeError('out of coffee')\n"
+    )
+    suite = _tiny(tmp_path)
+    code = main(["benchmark", f"{source}:Fragile", "--suites", str(suite), "--no-progress",
+                 "--out", str(tmp_path / "out")])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1, err
+    assert (
+        "fragile_loops.Fragile failed on tiny-v1 h01 seed 9001: RuntimeError: out of coffee" in err
+    )
+
+
+def test_without_scipy_the_command_stops_before_any_run(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda name, *a: None if name == "scipy" else real(name, *a)
+    )
+    code = main(["benchmark", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 2 and "pip install -e '.[bench]'" in err and err.count("\n") == 1
+    assert not (tmp_path / "out").exists()
