@@ -62,7 +62,12 @@ from drill_env.evaluation import Policy, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
 from drill_env.scenarios import WobProfile
 from experiments.arguments import ArgumentParser, number_type, one_line, seed_option
-from experiments.controllers import CONTROLLERS_HELP, is_user_controller, resolve_controller_name
+from experiments.controllers import (
+    CONTROLLERS_HELP,
+    controller_type,
+    is_user_controller,
+    resolve_controller_name,
+)
 from experiments.field import (
     CONTROLLER_MODELS,
     ENV_IDS,
@@ -941,6 +946,15 @@ def _parser() -> ArgumentParser:
         "suite's reference controller is always added",
     )
     parser.add_argument(
+        "--controllers",
+        nargs="+",
+        default=[],
+        metavar="NAME",
+        type=controller_type,
+        help="controllers to score too (as POLICY): registered names, MODULE:CLASS or "
+        "PATH.py:CLASS",
+    )
+    parser.add_argument(
         "--suites",
         nargs="+",
         default=None,
@@ -986,7 +1000,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if len(set(labels)) != len(labels):
         parser.fail("--suites", f"the same suite twice: {', '.join(labels)}")
     entries: list[Entry] = []
-    for text in dict.fromkeys(args.policies or _default_entries()):
+    for text in dict.fromkeys([*args.policies, *args.controllers] or _default_entries()):
         try:
             entries.append(make_entry(text))
         except ValueError as err:

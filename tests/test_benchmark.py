@@ -269,8 +269,9 @@ def test_the_command_scores_a_controller_a_user_class_and_an_agent(tmp_path: Pat
         (["no_such_policy"], "argument POLICY: unknown controller 'no_such_policy'"),
         (["examples/custom_controller.py:Nope"], "has no 'Nope'"),
         (["--resamples", "5"], r"argument --resamples: 5 is out of range: allowed \[100, 100000\]"),
+        (["--controllers", "nope_xyz"], "argument --controllers: unknown controller 'nope_xyz'"),
     ],
-    ids=["suite", "policy", "user-class", "resamples"],
+    ids=["suite", "policy", "user-class", "resamples", "controllers"],
 )
 def test_a_bad_option_is_one_line_and_exit_code_2(
     argv: list[str], message: str, capsys: pytest.CaptureFixture[str], tmp_path: Path
