@@ -339,3 +339,17 @@ def test_without_scipy_the_command_stops_before_any_run(
     err = capsys.readouterr().err
     assert code == 2 and "pip install -e '.[bench]'" in err and err.count("\n") == 1
     assert not (tmp_path / "out").exists()
+
+
+def test_a_name_loads_the_latest_version_and_a_label_its_own(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import experiments.benchmark as benchmark
+
+    _tiny(tmp_path)
+    _tiny(tmp_path, version=2, episode_s=20.0)
+    _tiny(tmp_path, version=10, episode_s=30.0)
+    monkeypatch.setattr(benchmark, "SUITE_DIR", tmp_path)
+    assert shipped_suites() == ["tiny-v1", "tiny-v2", "tiny-v10"]
+    assert load_suite("tiny").label == "tiny-v10" and load_suite("tiny").episode_s == 30.0
+    assert load_suite("tiny-v2").episode_s == 20.0
