@@ -388,6 +388,8 @@ def parse_suite(data: Any, where: str) -> Suite:
     observation = r.choice("observation", ("state", "surface") if field else (None,))
     controller_model = r.choice("controller_model", CONTROLLER_MODELS if field else (None,))
     episode_s = r.real("episode_s", 1.0, 1e5)
+    if episode_s != round(episode_s):  # every decision period of controllers and agents fits
+        raise r.fail("episode_s", "a whole number of seconds in [1, 100000]")
     noise = r.real("noise_std_rad_s", 0.0, 10.0)
     items = r.data["scenarios"]
     if not isinstance(items, list) or not items:

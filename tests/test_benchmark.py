@@ -116,6 +116,7 @@ def _scenario_change(tmp_path: Path, **changes: Any) -> Path:
         (lambda p: _tiny(p, env_id="CartPole-v1"), "field env_id = 'CartPole-v1': allowed DrillString-v0"),
         (lambda p: _tiny(p, observation="surface"), "field observation = 'surface': allowed null"),
         (lambda p: _tiny(p, episode_s=-1), r"field episode_s = -1: allowed \[1, 100000\]"),
+        (lambda p: _tiny(p, episode_s=2.5), "field episode_s = 2.5: allowed a whole number of seconds"),
         (lambda p: _tiny(p, scenarios=[]), "field scenarios = \\[\\]: allowed a non-empty list"),
         (lambda p: _scenario_change(p, seeds=[1]), r"scenarios\[1\]: field seeds = \[1\]: allowed a list of at least 2"),
         (lambda p: _scenario_change(p, seeds=[4, 4]), "distinct integers"),
@@ -126,7 +127,8 @@ def _scenario_change(tmp_path: Path, **changes: Any) -> Path:
         (lambda p: p / "absent-v1.json", "no such file"),
     ],
     ids=[
-        "unknown-field", "renamed-version", "env", "observation", "episode", "no-scenarios",
+        "unknown-field", "renamed-version", "env", "observation", "episode", "fractional-episode",
+        "no-scenarios",
         "one-seed", "same-seed", "same-id", "half-a-step", "not-a-number", "not-json", "missing",
     ],
 )  # fmt: skip
