@@ -45,6 +45,17 @@ SHIPPED_SHA256 = {
 new file ``NAME-v(N+1).json`` with a new line here, and the old one stays as it was."""
 
 
+@pytest.fixture(autouse=True)
+def _own_registry(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The users' classes a test registers stay in that test (the registry is per process)."""
+    import baselines  # noqa: F401  (the built-in ones first, in their order, before the copy)
+    import drill_env.control as control
+    import experiments.controllers as controllers
+
+    monkeypatch.setattr(control, "_FACTORIES", dict(control._FACTORIES))
+    monkeypatch.setattr(controllers, "_LOADED", {})
+
+
 # ---------------------------------------------------------------------------------- suites
 def test_every_shipped_suite_is_pinned_and_unchanged() -> None:
     assert shipped_suites() == sorted(SHIPPED_SHA256)

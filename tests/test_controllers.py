@@ -25,6 +25,17 @@ FILE_SPEC = "examples/custom_controller.py:SpeedPI"
 MODULE_SPEC = "examples.compiled_controller:CompiledSpeedPI"
 
 
+@pytest.fixture(autouse=True)
+def _own_registry(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The users' classes a test registers stay in that test (the registry is per process)."""
+    import baselines  # noqa: F401  (the built-in ones first, in their order, before the copy)
+    import drill_env.control as control
+    import experiments.controllers as controllers
+
+    monkeypatch.setattr(control, "_FACTORIES", dict(control._FACTORIES))
+    monkeypatch.setattr(controllers, "_LOADED", {})
+
+
 def command(*argv: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, "-m", "experiments.cli", *argv],
