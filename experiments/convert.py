@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Final
 
 from experiments.arguments import ArgumentParser
@@ -58,9 +59,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     parser = _parser()
     args = parser.parse_args(list(argv) if argv is not None else None)
-    if args.old.endswith(".zip") and not args.trust_pickle:
+    if args.old.endswith(".zip") and not Path(args.old).is_dir() and not args.trust_pickle:
         parser.fail(
             "--trust-pickle", f"is required to read OLD = {args.old!r}: a pickle, and {PICKLE_RISK}"
+        )
+    if not Path(args.old).exists():
+        parser.error(
+            f"OLD = {args.old!r} does not exist: expected a model folder or a Stable-Baselines3 "
+            ".zip file"
         )
     from agents.convert import convert_model
 

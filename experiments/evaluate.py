@@ -551,8 +551,8 @@ def _parser() -> ArgumentParser:
         "models",
         nargs="*",
         metavar="MODEL",
-        help="model folders (config.json, policy.npz, obs_norm.npz; default: every model "
-        "shipped in agents/models/)",
+        help="model folders (config.json, policy.safetensors, obs_norm.safetensors; default: "
+        "every model shipped in agents/models/)",
     )
     parser.add_argument(
         "--controllers",
