@@ -51,25 +51,22 @@ from drill_env.layout import OBSERVATION_MODES
 from drill_env.options import EnvConfig, FieldEnvConfig
 
 __all__ = [
-    "Count",
     "ACTIVATIONS",
     "CONFIG_FILE",
-    "STRICT",
     "DEFAULT_ENV_ID",
     "ENV_IDS",
-    "FIELD_ENV_KEYWORDS",
     "FORMAT_VERSION",
     "MAX_FRAME_STACK",
     "MAX_INPUT_SIZE",
     "NOISE_TYPES",
     "NORM_FILE",
-    "POLICY_ENV_KEYWORDS",
     "PREVIOUS_FORMAT",
     "RECORD_FIELDS",
+    "STRICT",
     "WEIGHTS_FILE",
+    "Count",
     "GaussianMlp",
     "ModelConfig",
-    "ModelFiles",
     "ObsNorm",
     "PolicySpec",
     "array_files",
@@ -77,12 +74,11 @@ __all__ = [
     "read_arrays",
     "read_config",
     "read_json",
-    "read_model_files",
     "read_safetensors",
-    "validate_json",
     "split_env_id",
     "stack_frames",
     "validate_config",
+    "validate_json",
     "write_model_files",
     "write_safetensors",
 ]
@@ -94,21 +90,10 @@ CONFIG_FILE: Final = "config.json"
 WEIGHTS_FILE: Final = "policy.safetensors"
 NORM_FILE: Final = "obs_norm.safetensors"
 
-POLICY_ENV_KEYWORDS: Final = (
-    "base_controller",
-    "control_dt_s",
-    "residual_scale_nm",
-    "min_torque_nm",
-    "max_torque_nm",
-)
-"""The env keywords every model folder records (``env_kwargs`` in config.json)."""
 ENV_IDS: Final = (ENV_ID, FIELD_ENV_ID)
 """The envs a model can be for (``env_kwargs.env_id`` in config.json)."""
 DEFAULT_ENV_ID: Final = ENV_ID
 """The env of a model whose ``env_kwargs`` name none."""
-FIELD_ENV_KEYWORDS: Final = ("observation",)
-"""Optional ``env_kwargs`` of a model for ``DrillStringField-v0``: the keywords that shape its
-observation besides the base controller (default: the env's)."""
 
 MAX_JSON_BYTES: Final = 1_000_000
 MAX_OBSERVATION_SIZE: Final = 1024
@@ -201,39 +186,40 @@ def _show(value: Any) -> str:
 # ---------------------------------------------------------------------------------- schema
 def _printable(value: str) -> str:
     if not value.isprintable():
-        raise ValueError("allowed printable characters only")
+        raise ValueError(f" = {_show(value)}: allowed printable characters only")
     return value
 
 
-def _record_value(value: Any, depth: int = 0) -> Any:
-    """Free JSON of the training record: bounded depth, sizes and integers, plain keys."""
+def _record_value(value: Any, depth: int = 0, path: str = "") -> Any:
+    """Free JSON of the training record: bounded depth, sizes and integers, plain keys.
+
+    Raises:
+        ValueError: ``"{path} ..."``, the entry (below the validated field) and the problem.
+    """
     if isinstance(value, bool) or value is None:
         return value
-    if isinstance(value, float):
-        if not math.isfinite(value):  # 1e400 (NaN and Infinity are refused by the JSON reader)
-            raise ValueError("allowed a finite number")
-        return value
-    if isinstance(value, int):
-        if abs(value) > MAX_JSON_INT:
-            raise ValueError(f"{_show(value)} is out of range: allowed |x| <= 2**53")
-        return value
-    if isinstance(value, str):
-        if len(value) > MAX_STRING:
-            raise ValueError(f"a string of {len(value)} characters: allowed {MAX_STRING}")
+    if isinstance(value, float) and not math.isfinite(value):  # 1e400 (NaN: the JSON reader)
+        raise ValueError(f"{path} = {value!r}: allowed a finite number")
+    if isinstance(value, int) and abs(value) > MAX_JSON_INT:
+        raise ValueError(f"{path} = {_show(value)}: allowed an integer in [-2**53, 2**53]")
+    if isinstance(value, str) and len(value) > MAX_STRING:
+        raise ValueError(f"{path} is a string of {len(value)} characters: allowed {MAX_STRING}")
+    if not isinstance(value, (list, dict)):
         return value
     if depth >= MAX_RECORD_DEPTH:
-        raise ValueError(f"nested too deeply: allowed {MAX_RECORD_DEPTH} levels")
+        raise ValueError(f"{path} is nested too deeply: allowed {MAX_RECORD_DEPTH} levels")
     if len(value) > MAX_RECORD_ITEMS:
-        raise ValueError(f"{len(value)} items: allowed at most {MAX_RECORD_ITEMS}")
+        raise ValueError(f"{path} has {len(value)} items: allowed at most {MAX_RECORD_ITEMS}")
     if isinstance(value, list):
-        return [_record_value(v, depth + 1) for v in value]
+        return [_record_value(v, depth + 1, f"{path}[{i}]") for i, v in enumerate(value)]
     for key in value:
         if not _KEY.fullmatch(key):
             raise ValueError(
-                f"the key {_show(key)} is not a valid field name: allowed letters, digits, "
-                "'_', '.', '-', starting with a letter or '_'"
+                f"{path}.{_field_name([key])} is not a valid field name: allowed letters, "
+                "digits, '_', '.', '-', starting with a letter or '_' (entries such as "
+                "':serialized:' are refused)"
             )
-    return {k: _record_value(v, depth + 1) for k, v in value.items()}
+    return {k: _record_value(v, depth + 1, f"{path}.{k}") for k, v in value.items()}
 
 
 _KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_.\-]{0,99}")
@@ -243,7 +229,7 @@ Text = Annotated[str, Field(min_length=1, max_length=1000), AfterValidator(_prin
 Bound = Annotated[float, Field(ge=-MAX_BOUND, le=MAX_BOUND)]
 Count = Annotated[int, Field(ge=0, le=MAX_JSON_INT)]
 Threads = Annotated[int, Field(ge=1, le=1_000_000)]
-JsonValue = Annotated[Any, AfterValidator(_record_value)]
+Record = Annotated[dict[str, Any], AfterValidator(_record_value)]
 Model = TypeVar("Model", bound=BaseModel)
 
 
@@ -285,7 +271,7 @@ class _ConfigSchema(BaseModel):
     env_kwargs: _EnvKwargsSchema
     observation_size: Annotated[int, Field(ge=1, le=MAX_OBSERVATION_SIZE)]
     policy: _PolicySchema
-    train_config: dict[str, JsonValue] | None = None
+    train_config: Record | None = None
     timesteps: Count | None = None
     run_timesteps: Count | None = None
     resumed_from: Count | None = None
@@ -334,8 +320,8 @@ def _schema_error(
         return ValueError(f"{where!r}: field {name} is missing")
     if kind == "model_type":
         message = "expected an object"
-    elif kind == "value_error":
-        message = message.removeprefix("Value error, ")
+    elif kind == "value_error":  # our validators: the entry below the field, and the problem
+        return ValueError(f"{where!r}: field {name}{message.removeprefix('Value error, ')}")
     else:
         message = "allowed " + message.removeprefix("Input should be ")
     return ValueError(f"{where!r}: field {name} = {_show(first['input'])}: {message}")
@@ -360,9 +346,7 @@ class ModelConfig:
 
     Attributes:
         name: The agent's name.
-        env_kwargs: The env keywords (:data:`POLICY_ENV_KEYWORDS`, and for
-            ``DrillStringField-v0`` those of :data:`FIELD_ENV_KEYWORDS` it gives), without
-            ``env_id``.
+        env_kwargs: The env keywords the model records, without ``env_id``.
         spec: The architecture.
         record: The rest of the file (``format``, ``observation_size``, ``policy`` and the
             training record: ``train_config``, ``timesteps``, ...).
@@ -389,9 +373,9 @@ def split_env_id(env_kwargs: Mapping[str, Any]) -> tuple[str, dict[str, Any]]:
 
 
 def validate_env_kwargs(data: Any, where: str) -> dict[str, Any]:
-    """The ``env_kwargs`` field: the keywords of :data:`POLICY_ENV_KEYWORDS` (and ``env_id``,
-    ``observation`` for ``DrillStringField-v0``), typed here and checked by the env's own
-    ``EnvConfig`` (whether the base controller is registered is checked by the loader).
+    """The ``env_kwargs`` field: the keywords of ``_EnvKwargsSchema`` (``env_id`` and
+    ``observation`` for ``DrillStringField-v0`` only), typed there and checked by the env's
+    own ``EnvConfig`` (whether the base controller is registered is checked by the loader).
 
     Raises:
         ValueError: One line naming ``where`` and the field.
@@ -595,15 +579,6 @@ def check_obs_norm(norm: ObsNorm, where: str) -> None:
 
 
 # --------------------------------------------------------------------------- folder read/write
-@dataclass(frozen=True)
-class ModelFiles:
-    """The validated contents of a model folder."""
-
-    config: ModelConfig
-    weights: dict[str, npt.NDArray[np.float64]]
-    obs_norm: ObsNorm
-
-
 def array_files(format_version: int) -> tuple[str, str]:
     """``(weights file, normalisation file)`` of a model folder of ``format_version``."""
     if format_version == PREVIOUS_FORMAT:
@@ -630,18 +605,6 @@ def read_arrays(
     check_obs_norm(norm, str(norm_file))
     weights = read(folder / weights_name, config.spec.weight_shapes(), "policy network weights")
     return norm, weights
-
-
-def read_model_files(folder: Path) -> ModelFiles:
-    """Read and check ``config.json`` and the arrays of ``folder`` (format 3 or 2).
-
-    Raises:
-        FileNotFoundError: A file is missing.
-        ValueError: A file breaks the schema (one line naming the file and the field).
-    """
-    config = read_config(folder)
-    norm, weights = read_arrays(folder, config)
-    return ModelFiles(config, weights, norm)
 
 
 def write_model_files(
