@@ -1015,6 +1015,78 @@ def test_portable_files_win_over_a_model_zip_beside_them(tmp_path: Path, marker:
         assert policy.name == "residual_ppo"
 
 
+# ----------------------------------------------------------------------- every field, fuzzed
+HOSTILE_VALUES: tuple[Any, ...] = (
+    None, True, 0, -1, 10**400, 1e300, float("inf"), "", "x" * 20_000, "\x1b[2J",
+    [], [None], {}, {":serialized:": "gASV"}, [[[[[[[[1]]]]]]]],
+)  # fmt: skip
+
+
+def _leaves(value: Any, path: tuple[Any, ...] = ()) -> Iterator[tuple[Any, ...]]:
+    """The path of every entry of a parsed config, containers included."""
+    if path:
+        yield path
+    items = (
+        value.items()
+        if isinstance(value, dict)
+        else enumerate(value)
+        if isinstance(value, list)
+        else ()
+    )
+    for key, item in items:
+        yield from _leaves(item, (*path, key))
+
+
+@pytest.mark.parametrize("source", SHIPPED_NAMES)
+def test_every_config_entry_replaced_by_hostile_values_is_one_line(source: str) -> None:
+    """Each entry of each shipped config.json, replaced by each hostile value: the config is
+    accepted or refused with a one-line ValueError naming the file; nothing else escapes."""
+    from agents.model_format import validate_config
+
+    original = json.loads((DEFAULT_MODEL_DIR / source / "config.json").read_text())
+    refused = 0
+    for path in _leaves(original):
+        for value in HOSTILE_VALUES:
+            record = json.loads(json.dumps(original))
+            _set(path, value)(record)
+            try:
+                validate_config(record, "cfg.json")
+            except ValueError as err:
+                refused += 1
+                assert str(err).startswith("'cfg.json'") and "\n" not in str(err), err
+                assert len(str(err)) < 600, err
+    assert refused > 500
+
+
+def test_random_bytes_in_the_weights_are_refused_or_read_finite(tmp_path: Path) -> None:
+    """Flipped bytes anywhere in policy.safetensors (the header included): a one-line
+    ValueError naming the file, or finite arrays of the expected shapes; nothing else."""
+    from agents.model_format import read_safetensors
+
+    spec = load_policy(SHIPPED).spec
+    original = (SHIPPED / "policy.safetensors").read_bytes()
+    header = int.from_bytes(original[:8], "little")
+    rng = np.random.default_rng(7)
+    path = tmp_path / "policy.safetensors"
+    outcomes = {"refused": 0, "read": 0}
+    for trial in range(300):
+        data = bytearray(original)
+        end = 8 + header if trial % 2 else len(data)  # half of the trials hit the header
+        for i in rng.integers(0, end, size=int(rng.integers(1, 4))):
+            data[i] = int(rng.integers(0, 256))
+        path.write_bytes(bytes(data))
+        try:
+            arrays = read_safetensors(path, spec.weight_shapes(), "policy network weights")
+        except ValueError as err:
+            outcomes["refused"] += 1
+            assert str(err).startswith(repr(str(path))) and "\n" not in str(err), err
+        else:
+            outcomes["read"] += 1
+            assert all(np.all(np.isfinite(a)) for a in arrays.values())
+            assert {k: a.shape for k, a in arrays.items()} == spec.weight_shapes()
+    assert outcomes["refused"] > 50 and outcomes["read"] > 50, outcomes
+
+
 # ------------------------------------------------------------------------- the shipped agent
 def _recorded_observations(name: str = "residual_ppo", seeds: tuple[int, ...] = (1, 2)) -> Any:
     policy = load_policy(DEFAULT_MODEL_DIR / name)
