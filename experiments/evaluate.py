@@ -597,8 +597,8 @@ def _parser() -> ArgumentParser:
     parser.add_argument(
         "--trust-pickle",
         action="store_true",
-        help=f"also load Stable-Baselines3 model.zip files (older models): {PICKLE_RISK}; "
-        "only for files you made yourself or got from a source you trust",
+        help=f"also load the Stable-Baselines3 .zip files (older models) named as MODEL: "
+        f"{PICKLE_RISK}; only for files you made yourself or got from a source you trust",
     )
     add_sweep_options(
         parser,
