@@ -67,8 +67,8 @@ def convert_model(
             "(--trust-pickle) only for a file you trust"
         )
     folder = src.parent if src.is_file() else src
-    if trust_pickle and not pickled and not is_model_folder(folder):
-        named = folder / LEGACY_MODEL_FILE
+    named = folder / LEGACY_MODEL_FILE
+    if trust_pickle and not pickled and named.is_file() and not is_model_folder(folder):
         raise ValueError(
             f"{str(src)!r} is not a .zip file: --trust-pickle covers only the file you name, "
             f"never a folder's contents; name the file itself (such as {str(named)!r})"
