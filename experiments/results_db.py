@@ -262,7 +262,7 @@ class Fields:
             if chosen is None:
                 raise SchemaError(f"{_at(where, _shown(key))} is not a field of this record")
             if key not in self.optional:
-                Name().check(key, f"{where or 'record'}: the field name {_shown(key)}")
+                Name().check(key, f"{where or 'record'}: field name")
             chosen.check(entry, _at(where, key))
 
 

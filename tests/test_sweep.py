@@ -13,6 +13,7 @@ import sqlite3
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -191,7 +192,7 @@ class EchoStudy:
     def record_schema(self, item: str) -> Fields:
         return Fields({"value": Number(nullable=False), "nan": Number()})
 
-    def tasks(self, missing: list[str]) -> list[Task]:
+    def tasks(self, missing: Sequence[str]) -> list[Task]:
         index = {k: i for i, k in enumerate(self.items())}
         return [
             Task(

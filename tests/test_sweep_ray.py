@@ -8,8 +8,9 @@ One local cluster of two CPUs serves the whole module (the runner joins a runnin
 
 from __future__ import annotations
 
-import json
+import contextlib
 import os
+import sqlite3
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -26,7 +27,14 @@ from experiments.cli import main as cli_main  # noqa: E402
 from experiments.evaluate import HELD_OUT, evaluate  # noqa: E402
 from experiments.field import FIELD_ENV  # noqa: E402
 from experiments.stick_slip_map import compute_map  # noqa: E402
-from experiments.sweep import Backend, Task, TaskResult, ray_session, run_sweep  # noqa: E402
+from experiments.sweep import (  # noqa: E402
+    Backend,
+    Task,
+    TaskResult,
+    ray_session,
+    read_results,
+    run_sweep,
+)
 from experiments.sweep_studies import CompareStudy, EvaluateStudy, MapStudy  # noqa: E402
 
 RAY = Backend(workers=2)
@@ -115,7 +123,7 @@ def test_map_command_with_workers_writes_the_serial_csv(tmp_path: Path) -> None:
     )
     name = "stick_slip_map_z_torque.csv"
     assert (tmp_path / "ray" / name).read_text() == (tmp_path / "serial" / name).read_text()
-    assert (tmp_path / "ray" / "stick_slip_map.jsonl").is_file()  # the results, as they came
+    assert (tmp_path / "ray" / "stick_slip_map.sqlite").is_file()  # the results, as they came
 
 
 def die_once(marker: str, function: Any, **kwargs: Any) -> TaskResult:
@@ -152,19 +160,21 @@ def test_a_worker_that_dies_has_its_task_retried(tmp_path: Path) -> None:
         name = study.name
         spec = study.spec
         items = study.items
+        record_schema = study.record_schema
 
         def tasks(self, missing: Any) -> list[Task]:
             return wrapped
 
-    path = tmp_path / "map.jsonl"
+    path = tmp_path / "map.sqlite"
     outcome = run_sweep(Faulty(), Backend(workers=2, max_retries=2), path, progress=False)
     assert Path(marker).read_text().isdigit()  # the worker did die once
     runs = sorted(Path(marker + ".runs").read_text().split("\n")[:-1])
     assert runs == ["[0]", "[1]", "[2]", "[3]"]  # each task completed exactly once
     assert sorted(outcome.ran) == sorted(t.key for t in tasks)
-    entries = [json.loads(line) for line in path.read_text().splitlines()[1:]]
-    items = [k for e in entries for k in e["items"]]
+    with contextlib.closing(sqlite3.connect(path)) as db:
+        items = [item for (item,) in db.execute("SELECT item FROM results")]
     assert sorted(items) == sorted(study.items())  # nothing lost, nothing twice
+    assert read_results(path, study) == outcome.records
     serial = compute_map("soft_speed", list(wobs), list(speeds), progress=False, **kw)
     np.testing.assert_array_equal(study.maps(outcome)[0].severity, serial.severity)
 
@@ -202,4 +212,5 @@ def test_compare_and_evaluate_commands_with_workers_write_the_serial_files(tmp_p
     assert (tmp_path / "e2" / "heldout.csv").read_text() == (
         tmp_path / "e1" / "heldout.csv"
     ).read_text()
-    assert len((tmp_path / "e2" / "heldout.jsonl").read_text().splitlines()) == 3  # header, 2 tasks
+    with contextlib.closing(sqlite3.connect(tmp_path / "e2" / "heldout.sqlite")) as db:
+        assert db.execute("SELECT count(*) FROM results").fetchone() == (2,)  # 2 scenarios
