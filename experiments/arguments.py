@@ -185,7 +185,7 @@ def check_output_folder(path: str | Path) -> Path:
     folder = Path(path)
     if os.path.lexists(folder) and not folder.is_dir():
         raise ValueError(f"{str(folder)!r} is a file, not a folder: choose a folder")
-    existing = folder.absolute()
+    existing = folder
     while not os.path.lexists(existing):
         existing = existing.parent
     if not existing.is_dir():

@@ -612,6 +612,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """``drill-gym evaluate [MODEL ...]``; returns the exit code (see ``--help``)."""
     parser = _parser()
     args = parser.parse_args(list(argv) if argv is not None else None)
+    default_out = "evaluate" if args.scenario_set == "heldout" else f"evaluate_{args.scenario_set}"
+    out: Path = args.out if args.out is not None else Path("results") / default_out
+    try:
+        check_output_folder(out)
+    except ValueError as err:
+        parser.fail("--out", str(err))
 
     field = is_field(args.env)
     paths = [Path(p) for p in args.models] or shipped_models()
@@ -644,12 +650,6 @@ def main(argv: Sequence[str] | None = None) -> int:
                 f"{args.env}: allowed {held_out[0].id} to {held_out[-1].id}",
             )
         scenarios = [s for s in held_out if s.id in args.scenarios]
-    default_out = "evaluate" if args.scenario_set == "heldout" else f"evaluate_{args.scenario_set}"
-    out: Path = args.out if args.out is not None else Path("results") / default_out
-    try:
-        check_output_folder(out)
-    except ValueError as err:
-        parser.fail("--out", str(err))
     t0 = time.perf_counter()
     base_names = sorted({a.env_kwargs.get("base_controller") or BASE_CONTROLLER for a in agents})
     if field and not agents:
