@@ -342,8 +342,8 @@ def _check_header(path: Path, target: Path) -> None:
         if head.lstrip()[:1] == b"{" and b'"sweep"' in head:
             raise _refuse(
                 path,
-                "is a JSON-lines results file of an earlier version: results are now kept in "
-                "an SQLite database, which this version reads instead",
+                "is a JSON-lines results file of an earlier version (results are now kept in "
+                "an SQLite database)",
             )
         raise _refuse(path, "is not a results database (not an SQLite file)")
     application_id = int.from_bytes(head[68:72], "big")
