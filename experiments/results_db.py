@@ -314,6 +314,8 @@ def check_results_file(path: Path) -> Path:
         status = None
     except NotADirectoryError:
         raise _refuse(path, "is inside a file, not a folder") from None
+    except OSError as err:  # a loop of links, a name too long, no permission
+        raise OSError(f"--results {str(path)!r} cannot be examined: {err.strerror}") from None
     if status is not None:
         kind = _kind(status.st_mode)
         if kind is not None:
@@ -488,7 +490,7 @@ class ResultsDatabase:
                     raise _refuse(
                         self.path, f"has {', '.join(extra)}, which a results database has not"
                     )
-                for table, columns in _TABLES.items():
+                for (table, columns), statement in zip(_TABLES.items(), _CREATE, strict=True):
                     found = tuple(
                         row[1] for row in db.execute(f"PRAGMA table_info({table})").fetchall()
                     )
@@ -497,6 +499,14 @@ class ResultsDatabase:
                             self.path,
                             f"has table {table!r} with columns {list(found)}: a results "
                             f"database has {list(columns)}",
+                        )
+                    (sql,) = db.execute(
+                        "SELECT sql FROM sqlite_master WHERE type = 'table' AND name = ?",
+                        (table,),
+                    ).fetchone()
+                    if sql != statement:  # the same columns, other types or constraints
+                        raise _refuse(
+                            self.path, f"has a table {table!r} other than a results database's"
                         )
             db.execute("COMMIT")
         except BaseException:
@@ -564,6 +574,8 @@ class ResultsDatabase:
             where = f"results database {str(self.path)!r}: row {rowid} (item {_shown(item)})"
             if not isinstance(item, str) or item not in wanted:
                 raise ValueError(f"{where}: not an item of this study {self.sweep!r}")
+            if item in records:
+                raise ValueError(f"{where}: a second row of this item")
             if kind != "text":
                 raise ValueError(f"{where}: the record is {kind}, not JSON text")
             if text is None:

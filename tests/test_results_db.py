@@ -120,6 +120,22 @@ def _our_id_other_tables(path: Path) -> Path:
     return path
 
 
+def _our_columns_no_constraints(path: Path) -> Path:
+    with contextlib.closing(sqlite3.connect(path)) as db, db:
+        db.execute(f"PRAGMA application_id = {APPLICATION_ID}")
+        db.execute("PRAGMA user_version = 1")
+        db.execute("CREATE TABLE studies (settings_hash, version, sweep, settings, created_utc)")
+        db.execute(
+            "CREATE TABLE results (settings_hash, version, item, task, record, finished_utc)"
+        )
+    return path
+
+
+def _link_loop(path: Path) -> Path:
+    path.symlink_to(path)
+    return path
+
+
 def _newer_layout(path: Path) -> Path:
     with contextlib.closing(sqlite3.connect(path)) as db, db:
         db.execute(f"PRAGMA application_id = {APPLICATION_ID}")
@@ -144,6 +160,7 @@ REFUSED: dict[str, tuple[Callable[[Path], Path], str]] = {
     "other-program": (_other_program, r"is an SQLite database of another program"),
     "other-application": (_other_application, r"another program \(application id 0x4d2\)"),
     "other-tables": (_our_id_other_tables, r"has table 'studies' with columns \['x'\]: a "),
+    "no-constraints": (_our_columns_no_constraints, r"has a table 'studies' other than a "),
     "newer-layout": (_newer_layout, r"is a results database of layout 7: this version reads"),
     "short": (_short_binary, r"is not a results database \(not an SQLite file\)"),
 }
@@ -219,6 +236,13 @@ def test_new_empty_and_linked_databases_are_accepted(tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError, match=r"results database '.*missing.sqlite' does not"):
         read_results(tmp_path / "missing.sqlite", small_map())
     assert not (tmp_path / "missing.sqlite").exists()
+
+
+def test_a_loop_of_links_is_one_error(tmp_path: Path) -> None:
+    path = _link_loop(tmp_path / "loop.sqlite")
+    with pytest.raises(OSError, match=r"'.*loop.sqlite' cannot be examined: Too many levels"):
+        run_sweep(small_map(), results_path=path, progress=False)
+    assert path.is_symlink()
 
 
 def test_results_inside_a_file_are_refused(tmp_path: Path) -> None:
