@@ -285,6 +285,40 @@ def test_kill_9_mid_sweep_then_resume_gives_every_item_once(tmp_path: Path) -> N
     assert resumed.records == run_sweep(EchoStudy(n), progress=False).records
 
 
+def test_map_command_killed_mid_sweep_resumes_to_the_plain_csv(tmp_path: Path) -> None:
+    """``drill-gym map --resume`` in a process killed with SIGKILL after a few of its tasks,
+    then run again: every WOB row once in the database, the CSV of a plain run."""
+    base = ["map", "--controllers", "soft_speed", "--wob-n", "30", "--speed-n", "2"]
+    base += ["--duration", "4", "--window", "2", "--noise", "0.1", "--no-plots", "--no-progress"]
+    swept = tmp_path / "swept"
+    path = swept / "stick_slip_map.sqlite"
+    argv = [sys.executable, "-m", "experiments.cli", *base, "--task-size", "2", "--resume"]
+    process = subprocess.Popen(
+        [*argv, "--out", str(swept)],
+        cwd=Path(__file__).resolve().parents[1],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline, done = time.monotonic() + 180, 0
+    while time.monotonic() < deadline and done < 3 and process.poll() is None:
+        time.sleep(0.01)
+        if path.is_file():
+            with contextlib.suppress(sqlite3.Error):
+                done = len(rows_of(path))
+    process.kill()
+    process.communicate(timeout=60)
+    assert process.returncode == -signal.SIGKILL
+    kept = len(rows_of(path))
+    assert 3 <= kept < 30, kept
+    assert cli_main([*base, "--out", str(swept), "--resume"]) == 0
+    items = sorted(item for _, _, item, _ in rows_of(path))
+    assert items == sorted(f"soft_speed/row{r}" for r in range(30))  # each row once
+    assert cli_main([*base, "--out", str(tmp_path / "plain")]) == 0
+    name = "stick_slip_map_soft_speed.csv"
+    assert (swept / name).read_text() == (tmp_path / "plain" / name).read_text()
+
+
 # -------------------------------------------------------------------------- bad sweep specs
 @pytest.mark.parametrize(
     ("kwargs", "message"),
