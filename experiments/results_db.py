@@ -15,7 +15,8 @@ database of another program, a folder, a FIFO, a device, a dangling link) is ref
 work starts and left exactly as it was. A FIFO or device is never opened (``stat`` first).
 
 A record is read back through its study's :data:`Schema` (:class:`Fields`, :class:`Values`,
-:class:`Number`, :class:`Flag`, :class:`Name`, :class:`Text`, :class:`Exactly`): a wrong type,
+:class:`Number`, :class:`Flag`, :class:`Name`, :class:`Text`, :class:`Exactly`,
+:class:`Near`): a wrong type,
 a non-finite number, a name with control characters or a setting that is not the study's is a
 one-line error naming the file, the row and the field.
 """
@@ -44,6 +45,7 @@ __all__ = [
     "Fields",
     "Flag",
     "Name",
+    "Near",
     "Number",
     "ResultsDatabase",
     "Schema",
@@ -216,6 +218,21 @@ class Exactly:
         expected = as_json(self.value)
         if not _same(value, expected):
             raise SchemaError(f"{where} = {_shown(value)} is not this study's {_shown(expected)}")
+
+
+@dataclass(frozen=True)
+class Near:
+    """A finite number within ``tolerance`` (relative, at least absolute) of ``value``: a
+    setting the work reports after its own rounding (a duration as a whole number of steps
+    times the step)."""
+
+    value: float
+    tolerance: float = 1e-9
+
+    def check(self, value: Any, where: str) -> None:
+        Number(nullable=False).check(value, where)
+        if abs(float(value) - self.value) > self.tolerance * max(1.0, abs(self.value)):
+            raise SchemaError(f"{where} = {_shown(value)} is not this study's {self.value!r}")
 
 
 def exactly(values: Mapping[str, Any]) -> dict[str, Exactly]:

@@ -52,6 +52,7 @@ from experiments.results_db import (
     Fields,
     Flag,
     Name,
+    Near,
     Number,
     Schema,
     Text,
@@ -363,8 +364,6 @@ class MapStudy:
         speeds = len(self.reference_speed_rad_s)
         settings = {
             "controller": controller,
-            "duration_s": float(self.duration_s),
-            "window_s": float(self.window_s),
             "noise_std_rad_s": float(self.noise_std_rad_s),
             "seed": int(self.seed),
             "parameters": self.preset,
@@ -377,7 +376,13 @@ class MapStudy:
             {
                 "severity": Values(Number(low=0.0), speeds),
                 "stuck_fraction": Values(Number(low=0.0, high=1.0), speeds),
-                "map": Fields(exactly(settings)),
+                "map": Fields(
+                    {
+                        **exactly(settings),  # the run's duration and window in whole steps
+                        "duration_s": Near(float(self.duration_s)),
+                        "window_s": Near(float(self.window_s)),
+                    }
+                ),
             }
         )
 

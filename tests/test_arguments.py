@@ -94,3 +94,17 @@ def test_check_output_folder_accepts_new_and_existing_folders(tmp_path: Path) ->
     (tmp_path / "link").symlink_to(tmp_path / "missing")
     with pytest.raises(ValueError, match=r"'.*link' is a file, not a folder"):
         check_output_folder(tmp_path / "link")  # a dangling link is not a folder
+
+
+def test_train_refuses_a_run_folder_that_is_a_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``train --out`` (its ``--run-dir``) is checked by the training itself, before it
+    starts."""
+    notes = tmp_path / "notes.txt"
+    notes.write_text("mine\n")
+    before = _notes(notes)
+    assert cli_main(["train", "--out", str(notes), "--total-timesteps", "100"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"--run-dir {str(notes)!r} is a file" in err, err
+    assert _notes(notes) == before

@@ -23,6 +23,7 @@ from experiments.results_db import (
     Fields,
     Flag,
     Name,
+    Near,
     Number,
     SchemaError,
     Text,
@@ -415,6 +416,8 @@ def test_a_bad_row_on_the_command_line_is_one_line(
         (Values(Number(), 2), [1.0], r"x has 1 values: expected 2"),
         (Exactly(1.0), True, r"x = True is not this study's 1.0"),
         (Exactly([1, "a"]), [1, "b"], r"is not this study's \[1, 'a'\]"),
+        (Near(2.3), 2.31, r"x = 2.31 is not this study's 2.3"),
+        (Near(2.3), "2.3", r"x = '2.3' is not a finite number"),
         (Fields({}, rest=Number()), {"a\x00": 1.0}, r"x: field name = 'a\\x00' has control"),
     ],
 )

@@ -120,6 +120,20 @@ def test_resume_runs_only_the_missing_items_and_gives_the_clean_table(tmp_path: 
     np.testing.assert_array_equal(small_map().maps(again)[0].severity, clean.severity)
 
 
+def test_a_duration_that_is_not_a_whole_float_of_steps_resumes(tmp_path: Path) -> None:
+    """2.3 s is 23 steps of 0.1 s, which the map reports as 23 * 0.1 = 2.3000000000000003 s:
+    its rows fit the study's schema, are written and read back to the plain map."""
+    kw: dict[str, Any] = {**SHORT, "duration_s": 2.3, "window_s": 1.3}
+    study = MapStudy(("stiff_pi",), WOBS, SPEEDS, task_cells=2, **kw)
+    plain = compute_map("stiff_pi", list(WOBS), list(SPEEDS), progress=False, **kw)
+    assert plain.duration_s != 2.3  # the case this is about
+    path = tmp_path / "map.sqlite"
+    run_sweep(study, results_path=path, progress=False)
+    (resumed,) = study.maps(run_sweep(study, results_path=path, resume=True, progress=False))
+    assert resumed.severity.tobytes() == plain.severity.tobytes()
+    assert (resumed.duration_s, resumed.window_s) == (plain.duration_s, plain.window_s)
+
+
 def test_studies_share_a_database_and_never_read_each_others_rows(tmp_path: Path) -> None:
     """Two maps of other settings, and a comparison, in one file: each resume reads only its
     own rows, and a row of the same settings written by another version is not used."""
