@@ -184,7 +184,8 @@ def check_output_folder(path: str | Path) -> Path:
     """
     folder = Path(path)
     if os.path.lexists(folder) and not folder.is_dir():
-        raise ValueError(f"{str(folder)!r} is a file, not a folder: choose a folder")
+        what = "is a file" if folder.is_file() else "is a FIFO, a device or a broken link"
+        raise ValueError(f"{str(folder)!r} {what}, not a folder: choose a folder")
     existing = folder
     while not os.path.lexists(existing):
         existing = existing.parent

@@ -92,8 +92,13 @@ def test_check_output_folder_accepts_new_and_existing_folders(tmp_path: Path) ->
     assert check_output_folder(tmp_path / "a" / "b") == tmp_path / "a" / "b"
     assert not (tmp_path / "a").exists()  # checked, not made
     (tmp_path / "link").symlink_to(tmp_path / "missing")
-    with pytest.raises(ValueError, match=r"'.*link' is a file, not a folder"):
+    with pytest.raises(ValueError, match=r"'.*link' is a FIFO, a device or a broken link, not"):
         check_output_folder(tmp_path / "link")  # a dangling link is not a folder
+    os.mkfifo(tmp_path / "fifo")
+    with pytest.raises(
+        ValueError, match=r"'.*fifo' is a FIFO, a device or a broken link, not a folder"
+    ):
+        check_output_folder(tmp_path / "fifo")
 
 
 def test_train_refuses_a_run_folder_that_is_a_file(
