@@ -14,8 +14,8 @@ map, the comparison and the held-out evaluation, split into tasks, on either env
   (:func:`experiments.evaluate.evaluate` of that scenario); a task is a few scenarios.
 
 Each study's ``spec()`` holds everything its numbers depend on (the env, the cases, the
-observation modes, the depths, the controllers' model), so a resume of another sweep is
-refused. Traces for the figures travel back in memory (a task's extras), never into the
+observation modes, the depths, the controllers' model), so a study of other settings never
+reads these rows of the results database. Traces for the figures travel back in memory (a task's extras), never into the
 results database: after ``--resume`` the runs read from it have none, and the commands then
 draw no figures (they say so). Every record, made or read back, is checked against the study's
 ``record_schema`` (:mod:`experiments.results_db`).
@@ -24,6 +24,7 @@ draw no figures (they say so). Every record, made or read back, is checked again
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import inspect
 import math
@@ -355,12 +356,14 @@ class MapStudy:
         """One item per (map, WOB row)."""
         return [f"{map_key(*run)}/row{r}" for run in self.runs() for r in range(len(self.wob_n))]
 
+    @functools.cached_property
+    def _run_of_prefix(self) -> dict[str, MapRun]:
+        return {map_key(*run): run for run in self.runs()}
+
     def record_schema(self, item: str) -> Schema:
         """A WOB row: the severity (>= 0) and the stuck fraction (in [0, 1]) at each reference
         speed (``None``: diverged), and the map's settings, which must be this study's."""
-        controller, observation, depth = {map_key(*run): run for run in self.runs()}[
-            item.rpartition("/row")[0]
-        ]
+        controller, observation, depth = self._run_of_prefix[item.rpartition("/row")[0]]
         speeds = len(self.reference_speed_rad_s)
         settings = {
             "controller": controller,
@@ -615,11 +618,15 @@ class CompareStudy:
         """One item per run."""
         return [j.item for j in self.jobs()]
 
+    @functools.cached_property
+    def _job_of_item(self) -> dict[str, CompareJob]:
+        return {j.item: j for j in self.jobs()}
+
     def record_schema(self, item: str) -> Schema:
         """A run's row: the run's controller (or agent), observation mode, case and noise,
         the metrics (numbers, ``None``: not defined), ``diverged`` and the settings, each
         setting this study's."""
-        job = {j.item: j for j in self.jobs()}[item]
+        job = self._job_of_item[item]
         head: dict[str, Any] = {"controller": job.label}
         if job.observation is not None:
             head["observation"] = job.observation
