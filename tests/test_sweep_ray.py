@@ -1,7 +1,7 @@
 """The sweep runner on a local Ray cluster (the scale extra): the same numbers as the serial
 path, bit for bit, for a map (of either env), a held-out evaluation and a comparison table;
 a worker that dies mid-sweep has its task retried, with nothing lost and nothing counted
-twice.
+twice; the driver shares its results database with a sweep in another process.
 
 One local cluster of two CPUs serves the whole module (the runner joins a running session).
 """
@@ -60,6 +60,27 @@ def test_map_on_ray_equals_the_serial_map_bit_for_bit() -> None:
     swept = study.maps(outcome)[0]
     assert swept.severity.tobytes() == serial.severity.tobytes()
     assert swept.stuck_fraction.tobytes() == serial.stuck_fraction.tobytes()
+
+
+def test_ray_driver_and_another_process_write_one_database_at_once(tmp_path: Path) -> None:
+    """While a map runs on Ray (its driver writing each finished task), a serial sweep in
+    another process writes its own rows to the same file: both complete, each reads back
+    exactly its rows."""
+    from test_sweep import EchoStudy, sweep_process
+
+    path = tmp_path / "shared.sqlite"
+    other = sweep_process("fresh", path, 60, 0.02)
+    wobs, speeds = (50e3, 90e3, 130e3, 170e3), (2.0, 6.0)
+    kw: dict[str, Any] = {"duration_s": 4.0, "window_s": 2.0, "noise_std_rad_s": 0.1, "seed": 3}
+    study = MapStudy(("stiff_pi",), wobs, speeds, task_cells=2, **kw)
+    outcome = run_sweep(study, RAY, path, progress=False)
+    out, err = other.communicate(timeout=120)
+    assert other.returncode == 0, err
+    assert out.split() == ["60", "0"]
+    assert read_results(path, study) == outcome.records
+    assert read_results(path, EchoStudy(60)) == run_sweep(EchoStudy(60), progress=False).records
+    serial = compute_map("stiff_pi", list(wobs), list(speeds), progress=False, **kw)
+    assert study.maps(outcome)[0].severity.tobytes() == serial.severity.tobytes()
 
 
 def test_field_map_on_ray_equals_the_serial_map_bit_for_bit() -> None:
