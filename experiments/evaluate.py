@@ -51,7 +51,7 @@ from agents.policy import (
 from drill_env.control import controller_names
 from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
-from experiments.arguments import ArgumentParser, names_type
+from experiments.arguments import ArgumentParser, check_output_folder, names_type, output_folder
 from experiments.field import (
     ENV_IDS,
     FIELD_ENV,
@@ -583,7 +583,7 @@ def _parser() -> ArgumentParser:
     )
     parser.add_argument(
         "--out",
-        type=Path,
+        type=output_folder,
         default=None,
         metavar="DIR",
         help="output folder (default: results/evaluate, results/evaluate_corners for the "
@@ -612,6 +612,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """``drill-gym evaluate [MODEL ...]``; returns the exit code (see ``--help``)."""
     parser = _parser()
     args = parser.parse_args(list(argv) if argv is not None else None)
+    default_out = "evaluate" if args.scenario_set == "heldout" else f"evaluate_{args.scenario_set}"
+    out: Path = args.out if args.out is not None else Path("results") / default_out
+    try:
+        check_output_folder(out)
+    except ValueError as err:
+        parser.fail("--out", str(err))
 
     field = is_field(args.env)
     paths = [Path(p) for p in args.models] or shipped_models()
@@ -644,8 +650,6 @@ def main(argv: Sequence[str] | None = None) -> int:
                 f"{args.env}: allowed {held_out[0].id} to {held_out[-1].id}",
             )
         scenarios = [s for s in held_out if s.id in args.scenarios]
-    default_out = "evaluate" if args.scenario_set == "heldout" else f"evaluate_{args.scenario_set}"
-    out: Path = args.out if args.out is not None else Path("results") / default_out
     t0 = time.perf_counter()
     base_names = sorted({a.env_kwargs.get("base_controller") or BASE_CONTROLLER for a in agents})
     if field and not agents:
@@ -680,7 +684,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         ]
     keep = [*bases, *agent_labels]
     figures = not args.no_plots
-    if sweep_requested(args):  # on the sweep runner: Ray, a results file, a resume
+    if sweep_requested(args):  # on the sweep runner: Ray, a results database, a resume
         from experiments.sweep_studies import run_evaluate_sweep
 
         rows, traces, figures = run_evaluate_sweep(args, agents, controllers, scenarios, keep)
