@@ -727,6 +727,7 @@ def _simulate_kernel(
     out_tq: np.ndarray,
     out_dn: np.ndarray,
     out_regime: np.ndarray,
+    out_loss: np.ndarray,
     stats: np.ndarray,
 ) -> None:
     """Run ``n_steps`` steps of ``h`` (s) from ``U = Phi = 0``, ``Omega = om_start``,
@@ -748,6 +749,7 @@ def _simulate_kernel(
     dn, f_ax, ts, w, tq = _forces(regime, t, u, v, phi, p, ring_phi, ring_r, ring)
     out_u[0], out_v[0], out_phi[0], out_om[0] = u, v, phi, om
     out_w[0], out_tq[0], out_dn[0], out_regime[0] = w, tq, dn, regime
+    out_loss[0] = 0.0
     for k in range(n_steps):
         t_end = (k + 1) * h
         switches = 0
@@ -817,6 +819,7 @@ def _simulate_kernel(
         dn, f_ax, ts, w, tq = _forces(regime, t, u, v, phi, p, ring_phi, ring_r, ring)
         out_u[k + 1], out_v[k + 1], out_phi[k + 1], out_om[k + 1] = u, v, phi, om
         out_w[k + 1], out_tq[k + 1], out_dn[k + 1], out_regime[k + 1] = w, tq, dn, regime
+        out_loss[k + 1] = stats[_S_LOSS]
         stats[_S_DONE] = k + 1
 
 
@@ -874,8 +877,8 @@ class CoupledTrace:
         parameters: The parameter set.
         step_s: Integration step, s.
         surface: Surface rule, ``"max"`` or ``"delay"``.
-        switch_loss_j: Kinetic energy removed by the velocity resets at switches (the
-            inelastic axial stop when the bit sticks on or lands on the rock), J.
+        switch_loss_j: Kinetic energy removed so far by the velocity resets at switches (the
+            inelastic axial stop when the bit sticks on or lands on the rock), (m,), J.
         switches: Number of regime switches.
         diverged: The state stopped being finite; the trace ends at the last finite sample.
     """
@@ -898,7 +901,7 @@ class CoupledTrace:
     parameters: RgdParameters
     step_s: float
     surface: str
-    switch_loss_j: float
+    switch_loss_j: npt.NDArray[np.float64]
     switches: int
     diverged: bool
 
@@ -982,9 +985,10 @@ def simulate(
     m = n_steps + 1
     out = [np.full(m, np.nan) for _ in range(7)]
     regime = np.zeros(m, dtype=np.int8)
+    loss = np.zeros(m)
     stats = np.zeros(4)
     _simulate_kernel(  # type: ignore[call-arg]
-        kernel_p, n_steps, h, om_start, v_start, ring_phi, ring_r, ring, *out, regime, stats
+        kernel_p, n_steps, h, om_start, v_start, ring_phi, ring_r, ring, *out, regime, loss, stats
     )
     done = int(stats[_S_DONE]) + 1
     u, v, phi, om, w, tq, dn = (a[:done] for a in out)
@@ -1008,7 +1012,7 @@ def simulate(
         parameters=p,
         step_s=h,
         surface=surface,
-        switch_loss_j=float(stats[_S_LOSS]),
+        switch_loss_j=loss[:done],
         switches=int(stats[_S_SWITCHES]),
         diverged=done < m,
     )
@@ -1410,16 +1414,20 @@ def critical_speed_rad_s(
     applied_force_n: float,
     *,
     speed_range_rad_s: tuple[float, float] = (1.0, 60.0),
+    grid: int = 60,
 ) -> float:
     """The top-drive speed above which steady drilling is stable: the lower end of the first
-    stable interval of :func:`stable_speed_intervals` in ``speed_range_rad_s``, rad/s.
+    stable interval of :func:`stable_speed_intervals` in ``speed_range_rad_s`` (scanned on
+    ``grid`` speeds), rad/s.
 
     Raises:
         ValueError: when no speed of the range is stable (pure RGD, ``c_t = 0``, has none) or
             steady drilling is already stable at the lowest speed of the range.
     """
     p = _resolve(parameters)
-    intervals = stable_speed_intervals(p, applied_force_n, speed_range_rad_s=speed_range_rad_s)
+    intervals = stable_speed_intervals(
+        p, applied_force_n, speed_range_rad_s=speed_range_rad_s, grid=grid
+    )
     low, high = speed_range_rad_s
     if not intervals:
         raise ValueError(
