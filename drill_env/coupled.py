@@ -395,6 +395,129 @@ def _record(
 
 
 @njit(cache=True)
+def _from_rest(dn: float, f_ax: float, p: np.ndarray) -> int:
+    """Axial sub-regime of a bit at ``V = 0`` on the rock, from ``F_free = F_ax - k_a d_n``."""
+    f_free = f_ax - p[_P_KA] * dn
+    if f_free > p[_P_WF]:
+        return _DOWN
+    if f_free >= 0.0:
+        return _HOLD
+    return _UP
+
+
+@njit(cache=True)
+def bit_load(regime: int, dn: float, f_ax: float, ts: float, p: np.ndarray) -> tuple[float, float]:
+    """The RGD bit law: weight and torque on bit ``(W, T)`` (N, N m) in ``regime`` from the
+    depth of cut per blade ``dn`` (m), the applied axial force ``f_ax`` (N) and the string
+    torque on the bit ``ts`` (N m); reactions while stuck or held, zero off the rock. ``p`` is
+    a kernel parameter vector (its bit entries)."""
+    if regime == _DOWN:
+        return p[_P_KA] * dn + p[_P_WF], p[_P_KT] * dn + p[_P_TF]
+    if regime == _UP:
+        return p[_P_KA] * dn, p[_P_KT] * dn
+    if regime == _HOLD:
+        return f_ax, p[_P_KT] * dn + p[_P_ARM] * (f_ax - p[_P_KA] * dn)
+    if regime == _STUCK:
+        return f_ax, ts
+    return 0.0, 0.0
+
+
+@njit(cache=True)
+def switching_functions(
+    g: np.ndarray, regime: int, dn: float, f_ax: float, ts: float, v: float, om: float,
+    p: np.ndarray,
+) -> None:  # fmt: skip
+    """Write the switching functions of ``regime`` into ``g`` (4,): the regime holds while
+    each is positive and a switch happens where one turns negative (unused entries: 1).
+    ``v`` (m/s) and ``om`` (rad/s) are the bit's axial and angular speeds."""
+    g[0] = 1.0
+    g[1] = 1.0
+    g[2] = 1.0
+    g[3] = 1.0
+    if regime == _DOWN:
+        g[0] = om  # stick
+        g[1] = v  # V -> 0-
+        g[2] = dn  # lift-off
+    elif regime == _UP:
+        g[0] = om
+        g[1] = -v  # V -> 0+
+        g[2] = dn
+    elif regime == _HOLD:
+        f_free = f_ax - p[_P_KA] * dn
+        g[0] = om
+        g[1] = p[_P_WF] - f_free  # F_free above W_f_bar
+        g[2] = f_free  # F_free below 0
+        g[3] = dn
+    elif regime == _AIR:
+        g[0] = om
+        g[1] = -dn  # landing
+    elif regime == _STUCK:
+        g[0] = p[_P_KT] * max(dn, 0.0) + p[_P_TF] - ts  # release: T_s above the capacity
+    else:
+        g[0] = -dn  # landing while stuck
+        g[1] = -ts  # release: T_s > 0
+
+
+@njit(cache=True)
+def stop_rule(
+    dn: float, f_rest: float, ts: float, v: float, om: float, p: np.ndarray
+) -> tuple[int, float, float, float]:
+    """The bit reaches ``Omega = 0`` (rules S1, S4 and the immediate release): ``(regime, V,
+    Omega, kinetic energy removed, J)``; ``f_rest`` is the applied force at ``V = 0`` (N)."""
+    loss = 0.5 * p[_P_I] * om * om
+    if dn >= 0.0:
+        loss += 0.5 * p[_P_M] * v * v
+        if ts > p[_P_KT] * dn + p[_P_TF]:
+            return _from_rest(dn, f_rest, p), 0.0, 0.0, loss
+        return _STUCK, 0.0, 0.0, loss
+    if ts > 0.0:
+        return _AIR, v, 0.0, loss
+    return _STUCK_AIR, v, 0.0, loss
+
+
+@njit(cache=True)
+def switch_rule(
+    regime: int, which: int, dn: float, f_rest: float, ts: float, v: float, om: float,
+    p: np.ndarray,
+) -> tuple[int, float, float, float]:  # fmt: skip
+    """Apply switch ``which`` (an index of :func:`switching_functions`) of ``regime``: ``(new
+    regime, V, Omega, kinetic energy removed, J)``, the state set on the switching surface."""
+    if regime != _STUCK and regime != _STUCK_AIR and which == 0:
+        return stop_rule(dn, f_rest, ts, v, om, p)
+    if regime in (_DOWN, _UP):
+        if which == 2:
+            return _AIR, v, om, 0.0
+        loss = 0.5 * p[_P_M] * v * v
+        new = _from_rest(dn, f_rest, p)
+        if regime == _DOWN and new == _DOWN:
+            new = _HOLD  # V fell through 0 with F_free at W_f_bar: hold
+        if regime == _UP and new == _UP:
+            new = _HOLD
+        return new, 0.0, om, loss
+    if regime == _HOLD:
+        if which == 1:
+            return _DOWN, 0.0, om, 0.0
+        if which == 2:
+            return _UP, 0.0, om, 0.0
+        return _AIR, 0.0, om, 0.0
+    if regime == _AIR:  # landing, no impulse
+        if v > 0.0:
+            return _DOWN, v, om, 0.0
+        if v < 0.0:
+            return _UP, v, om, 0.0
+        return _from_rest(dn, f_rest, p), 0.0, om, 0.0
+    if regime == _STUCK:  # release
+        return _from_rest(dn, f_rest, p), 0.0, 0.0, 0.0
+    # stuck off the rock
+    if which == 0:  # landing while stuck: inelastic axial stop
+        loss = 0.5 * p[_P_M] * v * v
+        if ts > p[_P_KT] * max(dn, 0.0) + p[_P_TF]:
+            return _from_rest(max(dn, 0.0), f_rest, p), 0.0, 0.0, loss
+        return _STUCK, 0.0, 0.0, loss
+    return _AIR, v, 0.0, 0.0
+
+
+@njit(cache=True)
 def _forces(
     regime: int,
     t: float,
@@ -412,21 +535,7 @@ def _forces(
     dn = u - _surface(phi - p[_P_BLADE], ring_phi, ring_r, ring)
     f_ax = p[_P_W0] + p[_P_K] * (p[_P_VTOP] * t - u) - p[_P_CA] * v
     ts = p[_P_C] * (p[_P_OM0] * t + p[_P_TH0] - phi)
-    if regime == _DOWN:
-        w = p[_P_KA] * dn + p[_P_WF]
-        tq = p[_P_KT] * dn + p[_P_TF]
-    elif regime == _UP:
-        w = p[_P_KA] * dn
-        tq = p[_P_KT] * dn
-    elif regime == _HOLD:
-        w = f_ax
-        tq = p[_P_KT] * dn + p[_P_ARM] * (f_ax - p[_P_KA] * dn)
-    elif regime == _STUCK:
-        w = f_ax
-        tq = ts
-    else:
-        w = 0.0
-        tq = 0.0
+    w, tq = bit_load(regime, dn, f_ax, ts, p)
     return dn, f_ax, ts, w, tq
 
 
@@ -508,46 +617,9 @@ def _events(
     ring_r: np.ndarray,
     ring: np.ndarray,
 ) -> None:
-    """Write the switching functions of ``regime`` into ``g`` (4,): the regime holds while
-    each is positive and a switch happens where one turns negative (unused entries: 1)."""
+    """Write the switching functions of ``regime`` at this state into ``g`` (4,)."""
     dn, f_ax, ts, w, tq = _forces(regime, t, u, v, phi, p, ring_phi, ring_r, ring)
-    g[0] = 1.0
-    g[1] = 1.0
-    g[2] = 1.0
-    g[3] = 1.0
-    if regime == _DOWN:
-        g[0] = om  # stick
-        g[1] = v  # V -> 0-
-        g[2] = dn  # lift-off
-    elif regime == _UP:
-        g[0] = om
-        g[1] = -v  # V -> 0+
-        g[2] = dn
-    elif regime == _HOLD:
-        f_free = f_ax - p[_P_KA] * dn
-        g[0] = om
-        g[1] = p[_P_WF] - f_free  # F_free above W_f_bar
-        g[2] = f_free  # F_free below 0
-        g[3] = dn
-    elif regime == _AIR:
-        g[0] = om
-        g[1] = -dn  # landing
-    elif regime == _STUCK:
-        g[0] = p[_P_KT] * max(dn, 0.0) + p[_P_TF] - ts  # release: T_s above the capacity
-    else:
-        g[0] = -dn  # landing while stuck
-        g[1] = -ts  # release: T_s > 0
-
-
-@njit(cache=True)
-def _from_rest(dn: float, f_ax: float, p: np.ndarray) -> int:
-    """Axial sub-regime of a bit at ``V = 0`` on the rock, from ``F_free = F_ax - k_a d_n``."""
-    f_free = f_ax - p[_P_KA] * dn
-    if f_free > p[_P_WF]:
-        return _DOWN
-    if f_free >= 0.0:
-        return _HOLD
-    return _UP
+    switching_functions(g, regime, dn, f_ax, ts, v, om, p)
 
 
 @njit(cache=True)
@@ -562,19 +634,9 @@ def _stop(
     ring_r: np.ndarray,
     ring: np.ndarray,
 ) -> tuple[int, float, float, float]:
-    """The bit reaches ``Omega = 0``: ``(regime, V, Omega, kinetic energy removed)``; stuck on
-    the rock (``V = 0``) or off it, or released at once when the string torque exceeds what
-    the rock holds."""
-    loss = 0.5 * p[_P_I] * om * om
-    dn, f_ax, ts, w, tq = _forces(_STUCK, t, u, 0.0, phi, p, ring_phi, ring_r, ring)
-    if dn >= 0.0:
-        loss += 0.5 * p[_P_M] * v * v
-        if ts > p[_P_KT] * dn + p[_P_TF]:
-            return _from_rest(dn, f_ax, p), 0.0, 0.0, loss
-        return _STUCK, 0.0, 0.0, loss
-    if ts > 0.0:
-        return _AIR, v, 0.0, loss
-    return _STUCK_AIR, v, 0.0, loss
+    """The bit reaches ``Omega = 0``: :func:`stop_rule` at this state."""
+    dn, f_rest, ts, w, tq = _forces(_STUCK, t, u, 0.0, phi, p, ring_phi, ring_r, ring)
+    return stop_rule(dn, f_rest, ts, v, om, p)
 
 
 @njit(cache=True)
@@ -591,42 +653,9 @@ def _switch(
     ring_r: np.ndarray,
     ring: np.ndarray,
 ) -> tuple[int, float, float, float]:
-    """Apply switch ``which`` (an index of :func:`_events`) of ``regime``: ``(new regime, V,
-    Omega, kinetic energy removed by the switch)``, the state set on the switching surface."""
-    if regime != _STUCK and regime != _STUCK_AIR and which == 0:
-        return _stop(t, u, v, phi, om, p, ring_phi, ring_r, ring)
-    dn, f_ax, ts, w, tq = _forces(regime, t, u, 0.0, phi, p, ring_phi, ring_r, ring)
-    if regime in (_DOWN, _UP):
-        if which == 2:
-            return _AIR, v, om, 0.0
-        loss = 0.5 * p[_P_M] * v * v
-        new = _from_rest(dn, f_ax, p)
-        if regime == _DOWN and new == _DOWN:
-            new = _HOLD  # V fell through 0 with F_free at W_f_bar: hold
-        if regime == _UP and new == _UP:
-            new = _HOLD
-        return new, 0.0, om, loss
-    if regime == _HOLD:
-        if which == 1:
-            return _DOWN, 0.0, om, 0.0
-        if which == 2:
-            return _UP, 0.0, om, 0.0
-        return _AIR, 0.0, om, 0.0
-    if regime == _AIR:  # landing, no impulse
-        if v > 0.0:
-            return _DOWN, v, om, 0.0
-        if v < 0.0:
-            return _UP, v, om, 0.0
-        return _from_rest(dn, f_ax, p), 0.0, om, 0.0
-    if regime == _STUCK:  # release
-        return _from_rest(dn, f_ax, p), 0.0, 0.0, 0.0
-    # stuck off the rock
-    if which == 0:  # landing while stuck: inelastic axial stop
-        loss = 0.5 * p[_P_M] * v * v
-        if ts > p[_P_KT] * max(dn, 0.0) + p[_P_TF]:
-            return _from_rest(max(dn, 0.0), f_ax, p), 0.0, 0.0, loss
-        return _STUCK, 0.0, 0.0, loss
-    return _AIR, v, 0.0, 0.0
+    """Apply switch ``which`` of ``regime`` at this state (:func:`switch_rule`)."""
+    dn, f_rest, ts, w, tq = _forces(regime, t, u, 0.0, phi, p, ring_phi, ring_r, ring)
+    return switch_rule(regime, which, dn, f_rest, ts, v, om, p)
 
 
 @njit(cache=True)
