@@ -391,3 +391,30 @@ def test_standard_run_regimes() -> None:
     assert p2.frac_stick == 0 and 0.9 < p2.om_amp_rel < 1.0 and p2.frac_bounce == 0
     assert p3.frac_stick > 0.2 and p3.frac_bounce == 0
     assert p4.frac_bounce > 0 and p4.frac_stick_backtorque == pytest.approx(0.16, abs=0.02)
+
+
+@pytest.mark.parametrize(
+    "change",
+    [{"axial_damping_ns_m": 3e5}, {"axial_stiffness_n_m": 1e6}],
+    ids=["axial_damping", "hook_spring"],
+)
+def test_steady_drilling_with_axial_damping_or_a_hook_spring(change: dict[str, float]) -> None:
+    """With ``c_a > 0`` the closed form includes ``c_a V0``; with a hook spring moving at
+    ``V0`` the applied force stays ``W0``: both runs stay on steady drilling."""
+    p = dataclasses.replace(RGD_A, **change)
+    v0 = steady_state(p, 20.0, 60e3).rate_of_penetration_m_s
+    if "axial_stiffness_n_m" in change:
+        p = dataclasses.replace(p, hook_speed_m_s=v0)
+    s = steady_state(p, 20.0, 60e3)
+    trace = simulate(p, 20.0, 60e3, 1.0, initial_bit_speed_rad_s=20.0)
+    assert np.max(np.abs(trace.bit_speed_rad_s - 20.0)) < 1e-9
+    assert np.max(np.abs(trace.depth_m - s.rate_of_penetration_m_s * trace.time_s)) < 1e-12
+    assert np.max(np.abs(trace.weight_on_bit_n - s.weight_on_bit_n)) < 1e-5
+
+
+def test_a_bit_started_at_rest_is_released_by_the_steady_twist() -> None:
+    """``Omega(0) = 0`` with the string twisted for steady drilling: the twist carries
+    ``T0 + c_t Omega0``, above what the rock holds (``T0``), so the bit is released at once
+    (S2, S3) into HOLD, since ``F_free = W0 - k_a d0 = W_f_bar``."""
+    trace = simulate("rgd_a", 4.0, 60e3, 0.5, initial_bit_speed_rad_s=0.0)
+    assert trace.regime[0] == 2 and trace.bit_speed_rad_s[1] > 0
