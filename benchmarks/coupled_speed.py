@@ -13,11 +13,10 @@ from __future__ import annotations
 import argparse
 import time
 
-import gymnasium as gym
 import numpy as np
 
-import drill_env
 from drill_env.coupled import STANDARD_POINTS, simulate
+from drill_env.coupled_env import DrillStringCoupledEnv
 
 
 def lumped_cost(seconds: float) -> dict[str, float]:
@@ -33,11 +32,11 @@ def lumped_cost(seconds: float) -> dict[str, float]:
 
 def env_cost(seconds: float) -> float:
     """CPU seconds per simulated second of ``DrillStringCoupled-v0`` with a zero action."""
-    env = gym.make(drill_env.COUPLED_ENV_ID, episode_s=seconds + 1.0)
+    env = DrillStringCoupledEnv(episode_s=seconds + 1.0)
     env.reset(seed=0)
-    action = np.zeros(env.action_space.shape, dtype=np.float32)
+    action = np.zeros(2, dtype=np.float32)
     env.step(action)
-    steps = round(seconds / env.unwrapped.config.control_dt_s)
+    steps = round(seconds / env.config.control_dt_s)
     start = time.process_time()
     for _ in range(steps):
         env.step(action)

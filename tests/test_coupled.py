@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -398,7 +399,7 @@ def test_standard_run_regimes() -> None:
     [{"axial_damping_ns_m": 3e5}, {"axial_stiffness_n_m": 1e6}],
     ids=["axial_damping", "hook_spring"],
 )
-def test_steady_drilling_with_axial_damping_or_a_hook_spring(change: dict[str, float]) -> None:
+def test_steady_drilling_with_axial_damping_or_a_hook_spring(change: dict[str, Any]) -> None:
     """With ``c_a > 0`` the closed form includes ``c_a V0``; with a hook spring moving at
     ``V0`` the applied force stays ``W0``: both runs stay on steady drilling."""
     p = dataclasses.replace(RGD_A, **change)
