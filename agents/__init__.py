@@ -1,9 +1,10 @@
 """The residual PPO agent of drill-string-gym.
 
-Loading and running a trained agent needs only NumPy (the core install): the model files
-(``config.json``, ``policy.npz``, ``obs_norm.npz``; ``docs/model-files.md``) hold no code and
-the policy network runs in NumPy. Training and converting models need the ``[rl]`` extra
-(torch, Stable-Baselines3), imported only when used.
+Loading and running a trained agent needs only the core install: the model files
+(``config.json``, ``policy.safetensors``, ``obs_norm.safetensors``; ``docs/model-files.md``)
+hold no code and the policy network runs in NumPy (:mod:`agents.inference`). Training, and
+converting Stable-Baselines3 models, need the ``[rl]`` extra (torch, Stable-Baselines3),
+imported only when used.
 
 * :func:`load_policy` / :func:`load_default_policy`: a trained agent as a policy with SB3's
   ``predict()`` and the ``env_kwargs`` it needs (``gym.make("DrillString-v0", **scenario,

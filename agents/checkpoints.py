@@ -2,20 +2,24 @@
 
 A checkpoint is a folder ``{run_dir}/checkpoints/steps_{N}/`` (``N`` decisions trained):
 
-* ``config.json``, ``policy.npz``, ``obs_norm.npz``: the policy at that point as a portable
-  model (:func:`agents.policy.export_policy`; ``drill-gym evaluate`` takes the folder);
-* ``training_state.npz``: what training needs to continue: every parameter of the SB3 policy
-  (actor, value network, log-std) as ``policy/{name}``, and Adam's state per parameter
-  (``adam/{i}/step``, ``adam/{i}/exp_avg``, ``adam/{i}/exp_avg_sq``);
-* ``vecnormalize.npz``: VecNormalize's running statistics (``obs_mean``, ``obs_var``,
+* ``config.json``, ``policy.safetensors``, ``obs_norm.safetensors``: the policy at that point
+  as a portable model (:func:`agents.policy.export_policy`; ``drill-gym evaluate`` takes the
+  folder);
+* ``training_state.safetensors``: what training needs to continue: every parameter of the
+  SB3 policy (actor, value network, log-std) as ``policy/{name}``, and Adam's state per
+  parameter (``adam/{i}/step``, ``adam/{i}/exp_avg``, ``adam/{i}/exp_avg_sq``);
+* ``vecnormalize.safetensors``: VecNormalize's running statistics (``obs_mean``, ``obs_var``,
   ``obs_count``, ``ret_mean``, ``ret_var``, ``ret_count``);
-* ``training.json``: ``num_timesteps``, ``n_updates`` and whether Adam had state, written last.
+* ``training.json``: ``format`` (3), ``num_timesteps``, ``n_updates`` and whether Adam had
+  state, written last.
 
 The folder is written under a temporary name and renamed when complete. Loading builds a
 fresh PPO model from the run's settings and fills it: every array is read by
-:func:`agents.model_format.read_npz` (checked names, shapes, dtypes, sizes; no pickle). Older
-runs wrote SB3's pickled ``rl_model_{N}_steps.zip`` and ``rl_model_vecnormalize_{N}_steps.pkl``;
-they are found here and resumed only with ``--trust-pickle``.
+:func:`agents.model_format.read_safetensors` (checked names, shapes, dtypes, sizes; no
+pickle). Checkpoints of the previous format (``training.json`` of format 2, ``.npz`` arrays)
+are read by :func:`agents.legacy_format.read_npz`. Older runs wrote SB3's pickled
+``rl_model_{N}_steps.zip`` and ``rl_model_vecnormalize_{N}_steps.pkl``; they are found here
+and resumed only with ``--trust-pickle``.
 """
 
 from __future__ import annotations
@@ -26,12 +30,22 @@ import re
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Final
+from typing import Annotated, Any, Final
 
 import numpy as np
 import numpy.typing as npt
+from pydantic import BaseModel, Field
 
-from agents.model_format import _Fields, read_json, read_npz, write_npz
+from agents.legacy_format import PREVIOUS_FORMAT, read_npz
+from agents.model_format import (
+    FORMAT_VERSION,
+    STRICT,
+    Count,
+    read_json,
+    read_safetensors,
+    validate_json,
+    write_safetensors,
+)
 
 __all__ = [
     "CHECKPOINT_DIR",
@@ -44,8 +58,10 @@ __all__ = [
 CHECKPOINT_DIR: Final = "checkpoints"
 PREFIX: Final = "steps_"
 TRAINING_FILE: Final = "training.json"
-STATE_FILE: Final = "training_state.npz"
-VECNORM_FILE: Final = "vecnormalize.npz"
+STATE_FILE: Final = "training_state.safetensors"
+VECNORM_FILE: Final = "vecnormalize.safetensors"
+LEGACY_STATE_FILE: Final = "training_state.npz"
+LEGACY_VECNORM_FILE: Final = "vecnormalize.npz"
 LEGACY_PREFIX: Final = "rl_model"
 _ADAM_KEYS: Final = ("step", "exp_avg", "exp_avg_sq")
 
@@ -145,9 +161,9 @@ def save_checkpoint(
     with_adam = bool(opt_state)
     if with_adam and len(opt_state) != len(params):
         raise ValueError("cannot checkpoint an optimizer with state for only some parameters")
-    write_npz(tmp / STATE_FILE, arrays)
+    write_safetensors(tmp / STATE_FILE, arrays)
     obs_rms, ret_rms = _running_stats(venv)
-    write_npz(
+    write_safetensors(
         tmp / VECNORM_FILE,
         {
             "obs_mean": obs_rms.mean,
@@ -159,7 +175,7 @@ def save_checkpoint(
         },
     )
     record = {
-        "format": 2,
+        "format": FORMAT_VERSION,
         "num_timesteps": int(model.num_timesteps),
         "n_updates": int(model._n_updates),
         "optimizer_state": with_adam,
@@ -171,16 +187,19 @@ def save_checkpoint(
     return folder
 
 
-def _read_training_record(folder: Path) -> dict[str, Any]:
+class _TrainingRecord(BaseModel):
+    """``training.json``: how far training went (format 2: ``.npz`` arrays beside it)."""
+
+    model_config = STRICT
+    format: Annotated[int, Field(ge=PREVIOUS_FORMAT, le=FORMAT_VERSION)]
+    num_timesteps: Count
+    n_updates: Count
+    optimizer_state: bool
+
+
+def _read_training_record(folder: Path) -> _TrainingRecord:
     path = folder / TRAINING_FILE
-    f = _Fields(str(path), read_json(path))
-    f.known(("format", "num_timesteps", "n_updates", "optimizer_state"))
-    f.choice("format", (2,))
-    return {
-        "num_timesteps": f.integer("num_timesteps", 0, 2**53),
-        "n_updates": f.integer("n_updates", 0, 2**53),
-        "optimizer_state": f.choice("optimizer_state", (True, False)),
-    }
+    return validate_json(_TrainingRecord, read_json(path), str(path))
 
 
 def load_checkpoint(model: Any, venv: Any, folder: Path) -> int:
@@ -199,20 +218,24 @@ def load_checkpoint(model: Any, venv: Any, folder: Path) -> int:
 
     record = _read_training_record(folder)
     match = re.fullmatch(rf"{PREFIX}(\d+)", folder.name)
-    if match and int(match.group(1)) != record["num_timesteps"]:
+    if match and int(match.group(1)) != record.num_timesteps:
         raise ValueError(
-            f"{str(folder / TRAINING_FILE)!r}: field num_timesteps = {record['num_timesteps']} "
+            f"{str(folder / TRAINING_FILE)!r}: field num_timesteps = {record.num_timesteps} "
             f"does not match the folder name {folder.name!r}"
         )
+    legacy = record.format == PREVIOUS_FORMAT
+    read = read_npz if legacy else read_safetensors
+    state_file = folder / (LEGACY_STATE_FILE if legacy else STATE_FILE)
+    vecnorm_file = folder / (LEGACY_VECNORM_FILE if legacy else VECNORM_FILE)
     state, params = _parameters(model)
     expected = {f"policy/{k}": tuple(v.shape) for k, v in state.items()}
-    if record["optimizer_state"]:
+    if record.optimizer_state:
         for i, p in enumerate(params):
             expected[f"adam/{i}/step"] = ()
             expected[f"adam/{i}/exp_avg"] = tuple(p.shape)
             expected[f"adam/{i}/exp_avg_sq"] = tuple(p.shape)
     what = "training state (policy parameters and Adam state) for this run's settings"
-    arrays = read_npz(folder / STATE_FILE, expected, what)
+    arrays = read(state_file, expected, what)
     size = int(model.observation_space.shape[0])
     vec_shapes = {
         "obs_mean": (size,),
@@ -222,8 +245,8 @@ def load_checkpoint(model: Any, venv: Any, folder: Path) -> int:
         "ret_var": (),
         "ret_count": (),
     }
-    stats = read_npz(folder / VECNORM_FILE, vec_shapes, "VecNormalize statistics")
-    where = str(folder / VECNORM_FILE)
+    stats = read(vecnorm_file, vec_shapes, "VecNormalize statistics")
+    where = str(vecnorm_file)
     for key in ("obs_var", "ret_var"):
         if np.any(stats[key] < 0):
             raise ValueError(f"{where!r}: array {key} has negative entries: allowed >= 0")
@@ -236,7 +259,7 @@ def load_checkpoint(model: Any, venv: Any, folder: Path) -> int:
         )
     optimizer = model.policy.optimizer
     opt_state: dict[int, dict[str, Any]] = {}
-    if record["optimizer_state"]:
+    if record.optimizer_state:
         for i, p in enumerate(params):
             opt_state[i] = {
                 "step": th.tensor(float(arrays[f"adam/{i}/step"]), dtype=th.float32),
@@ -253,6 +276,6 @@ def load_checkpoint(model: Any, venv: Any, folder: Path) -> int:
     ret_rms.mean = np.float64(stats["ret_mean"])
     ret_rms.var = np.float64(stats["ret_var"])
     ret_rms.count = float(stats["ret_count"])
-    model.num_timesteps = record["num_timesteps"]
-    model._n_updates = record["n_updates"]
-    return int(record["num_timesteps"])
+    model.num_timesteps = record.num_timesteps
+    model._n_updates = record.n_updates
+    return record.num_timesteps

@@ -94,7 +94,7 @@ class TrainConfig:
     """Folder of the run: TensorBoard logs, progress.csv, checkpoints and the final model.
     Empty: ``runs/{exp_name}__{seed}``."""
     save_dir: str = ""
-    """Where the final model goes (config.json, policy.npz, obs_norm.npz). Empty:
+    """Where the final model goes (config.json, policy.safetensors, obs_norm.safetensors). Empty:
     ``{run_dir}/model``."""
     checkpoint_every: int = 500_000
     """Save a checkpoint (policy, value network, optimizer state and normalisation statistics,

@@ -1,93 +1,99 @@
-"""Portable model files: a trained policy as JSON and ``.npz`` arrays, read without running code.
+"""Portable model files: a trained policy as JSON and safetensors, read without running code.
 
 A model folder holds three files (``docs/model-files.md`` describes them and the schema):
 
-* ``config.json``: the architecture (:class:`PolicySpec`), the ``DrillString-v0`` keywords the
-  policy needs, its name and the training record, validated by :func:`validate_config`
-  against an explicit schema (known keys only, typed, bounded, finite);
-* ``policy.npz``: the actor network's weights, biases and log standard deviation
+* ``config.json``: the architecture (:class:`~agents.inference.PolicySpec`), the env keywords
+  the policy needs, its name and the training record, validated by :func:`validate_config`:
+  the schema is a set of pydantic models (strict types, known fields only, bounded, finite)
+  and the env keywords are checked by the env's own :class:`drill_env.options.EnvConfig`;
+* ``policy.safetensors``: the actor network's weights, biases and log standard deviation
   (:meth:`PolicySpec.weight_shapes`);
-* ``obs_norm.npz``: the observation normalisation: ``mean`` and ``var`` of shape
-  ``(observation_size,)``, ``clip_obs`` and ``epsilon`` (0-d).
+* ``obs_norm.safetensors``: the observation normalisation: ``mean`` and ``var`` of shape
+  ``(input_size,)``, ``clip_obs`` and ``epsilon`` (0-d).
 
-Every ``.npz`` is read by :func:`read_npz`: the zip directory is checked first (entry names,
-count, declared uncompressed sizes, the ``.npy`` header of each entry: dtype float32 or
-float64, the expected shape), then the arrays are read with ``np.load(allow_pickle=False)``
-and checked to be finite. Nothing here imports torch, calls pickle or evaluates text; this
-module needs only NumPy and the standard library.
+Every safetensors file is read by :func:`read_safetensors`: its size is bounded before it is
+read (the arrays' float64 size plus a bounded header), the header is parsed by the
+``safetensors`` library, then every array must be float32 or float64, of the shape the config
+implies, and finite. Folders of the previous format (2, ``.npz`` arrays) are read by
+:mod:`agents.legacy_format`. Nothing here imports torch, calls pickle or evaluates text.
 """
 
 from __future__ import annotations
 
-import io
 import json
 import math
 import os
 import re
-import zipfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Final, NoReturn
+from typing import Annotated, Any, Final, Literal, NoReturn, TypeVar
 
 import numpy as np
 import numpy.typing as npt
+import safetensors
+import safetensors.numpy
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError
+
+from agents.inference import (
+    ACTIVATIONS,
+    NOISE_TYPES,
+    Activation,
+    GaussianMlp,
+    Noise,
+    ObsNorm,
+    PolicySpec,
+    stack_frames,
+)
+from agents.legacy_format import LEGACY_NORM_FILE, LEGACY_WEIGHTS_FILE, PREVIOUS_FORMAT, read_npz
+from drill_env import ENV_ID, FIELD_ENV_ID
+from drill_env.layout import OBSERVATION_MODES
+from drill_env.options import EnvConfig, FieldEnvConfig
 
 __all__ = [
     "ACTIVATIONS",
     "CONFIG_FILE",
-    "FORMAT_VERSION",
     "DEFAULT_ENV_ID",
     "ENV_IDS",
-    "FIELD_ENV_KEYWORDS",
+    "FORMAT_VERSION",
     "MAX_FRAME_STACK",
     "MAX_INPUT_SIZE",
     "NOISE_TYPES",
     "NORM_FILE",
-    "POLICY_ENV_KEYWORDS",
+    "PREVIOUS_FORMAT",
     "RECORD_FIELDS",
+    "STRICT",
     "WEIGHTS_FILE",
+    "Count",
     "GaussianMlp",
+    "ModelConfig",
     "ObsNorm",
     "PolicySpec",
+    "array_files",
+    "check_obs_norm",
+    "read_arrays",
+    "read_config",
     "read_json",
-    "read_npz",
-    "read_model_files",
+    "read_safetensors",
     "split_env_id",
     "stack_frames",
     "validate_config",
+    "validate_json",
     "write_model_files",
+    "write_safetensors",
 ]
 
-FORMAT_VERSION: Final = 2
-"""Version of the model folder format (1 was a Stable-Baselines3 ``model.zip``)."""
+FORMAT_VERSION: Final = 3
+"""Version of the model folder format (1: a Stable-Baselines3 ``model.zip``; 2: ``.npz``
+arrays; 3: safetensors arrays)."""
 CONFIG_FILE: Final = "config.json"
-WEIGHTS_FILE: Final = "policy.npz"
-NORM_FILE: Final = "obs_norm.npz"
+WEIGHTS_FILE: Final = "policy.safetensors"
+NORM_FILE: Final = "obs_norm.safetensors"
 
-ACTIVATIONS: Final = ("tanh", "relu")
-"""Activation functions of the hidden layers."""
-NOISE_TYPES: Final = ("diagonal", "state_dependent")
-"""Exploration noise of the Gaussian: a log-std per action (``log_std`` of shape
-``(action_size,)``), or gSDE (``log_std`` of shape ``(last hidden size, action_size)``)."""
-
-POLICY_ENV_KEYWORDS: Final = (
-    "base_controller",
-    "control_dt_s",
-    "residual_scale_nm",
-    "min_torque_nm",
-    "max_torque_nm",
-)
-"""The ``DrillString-v0`` keywords a model folder records (``env_kwargs`` in config.json)."""
-
-ENV_IDS: Final = ("DrillString-v0", "DrillStringField-v0")
+ENV_IDS: Final = (ENV_ID, FIELD_ENV_ID)
 """The envs a model can be for (``env_kwargs.env_id`` in config.json)."""
-DEFAULT_ENV_ID: Final = "DrillString-v0"
-"""The env of a model whose ``env_kwargs`` name none (every model of format 2 before the field
-string)."""
-FIELD_ENV_KEYWORDS: Final = ("observation",)
-"""Optional ``env_kwargs`` of a model for ``DrillStringField-v0``: the keywords that shape its
-observation besides the base controller (default: the env's)."""
+DEFAULT_ENV_ID: Final = ENV_ID
+"""The env of a model whose ``env_kwargs`` name none."""
 
 MAX_JSON_BYTES: Final = 1_000_000
 MAX_OBSERVATION_SIZE: Final = 1024
@@ -98,12 +104,19 @@ MAX_INPUT_SIZE: Final = 4096
 MAX_ACTION_SIZE: Final = 16
 MAX_HIDDEN_LAYERS: Final = 8
 MAX_HIDDEN_SIZE: Final = 1024
-MAX_TORQUE_NM: Final = 1e6
-MAX_CLIP_OBS: Final = 1e9
+MAX_BOUND: Final = 1e9
+"""Largest action bound and ``clip_obs``."""
 MAX_JSON_INT: Final = 2**53
 MAX_STRING: Final = 10_000
-MAX_NPY_HEADER: Final = 16_384
-"""Bytes allowed per ``.npy`` entry on top of its float64 data (header and padding)."""
+MAX_RECORD_DEPTH: Final = 4
+MAX_RECORD_ITEMS: Final = 1000
+MAX_HEADER_BYTES_PER_ARRAY: Final = 512
+"""Bytes a safetensors header may spend per array (its name, dtype, shape and offsets); the
+header may have 4096 bytes more (its ``__metadata__``, padding)."""
+_SAFETENSORS_DTYPES: Final[dict[str, np.dtype[Any]]] = {
+    "F32": np.dtype("<f4"),
+    "F64": np.dtype("<f8"),
+}
 
 
 # ----------------------------------------------------------------------------- JSON reading
@@ -119,7 +132,7 @@ def _no_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for key, value in pairs:
         if key in out:
-            raise _Rejected(f"the key {key!r} appears twice")
+            raise _Rejected(f"the key {_show(key)} appears twice")
         out[key] = value
     return out
 
@@ -135,11 +148,13 @@ def read_json(path: Path, max_bytes: int = MAX_JSON_BYTES) -> dict[str, Any]:
     where = str(path)
     if not path.is_file():
         raise FileNotFoundError(f"{where!r}: no such file")
-    size = path.stat().st_size
-    if size > max_bytes:
+    with path.open("rb") as f:
+        raw = f.read(max_bytes + 1)
+    if len(raw) > max_bytes:
+        size = max(path.stat().st_size, len(raw))
         raise ValueError(f"{where!r}: {size} bytes is too large: allowed at most {max_bytes}")
     try:
-        text = path.read_bytes().decode("utf-8")
+        text = raw.decode("utf-8")
     except UnicodeDecodeError as err:
         raise ValueError(f"{where!r} is not UTF-8 text: {err.reason} at byte {err.start}") from None
     try:
@@ -163,294 +178,175 @@ def _one_line(text: str, limit: int = 200) -> str:
 
 
 def _show(value: Any) -> str:
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) > 10**40:
+        return f"an integer of {len(str(abs(value)))} digits"
     return _one_line(repr(value), 60)
 
 
-# ------------------------------------------------------------------------- schema checking
-class _Fields:
-    """Typed access to the fields of one JSON object; every error names the file and field."""
+# ---------------------------------------------------------------------------------- schema
+def _printable(value: str) -> str:
+    if not value.isprintable():
+        raise ValueError(f" = {_show(value)}: allowed printable characters only")
+    return value
 
-    def __init__(self, where: str, data: Any, prefix: str = "") -> None:
-        self.where = where
-        self.prefix = prefix
-        if not isinstance(data, dict):
-            self.fail(prefix.rstrip(".") or "(top level)", f"is {_show(data)}: expected an object")
-        self.data: dict[str, Any] = data
 
-    def fail(self, name: str, message: str) -> NoReturn:
-        raise ValueError(f"{self.where!r}: field {name} {message}")
+def _record_value(value: Any, depth: int = 0, path: str = "") -> Any:
+    """Free JSON of the training record: bounded depth, sizes and integers, plain keys.
 
-    def name(self, key: Any) -> str:
-        if self.prefix.endswith("["):
-            return f"{self.prefix}{key}]"
-        return f"{self.prefix}{key}"
-
-    def known(self, required: Sequence[str], optional: Sequence[str] = ()) -> None:
-        allowed = [*required, *optional]
-        for key in self.data:
-            if key not in allowed:
-                self.fail(
-                    self.name(str(key)), f"is not known: allowed fields are {', '.join(allowed)}"
-                )
-        for key in required:
-            if key not in self.data:
-                self.fail(self.name(key), "is missing")
-
-    def integer(self, key: Any, low: int, high: int) -> int:
-        value = self.data[key]
-        if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-            self.fail(
-                self.name(key),
-                f"= {_show(value)} is out of range: allowed an integer in [{low}, {high}]",
-            )
+    Raises:
+        ValueError: ``"{path} ..."``, the entry (below the validated field) and the problem.
+    """
+    if isinstance(value, bool) or value is None:
         return value
-
-    def number(self, key: Any, low: float, high: float, *, open_low: bool = False) -> float:
-        value = self.data[key]
-        ok = (
-            not isinstance(value, bool)
-            and isinstance(value, (int, float))
-            and math.isfinite(value)
-            and (low < value if open_low else low <= value)
-            and value <= high
-        )
-        if not ok:
-            bracket = "(" if open_low else "["
-            self.fail(
-                self.name(key),
-                f"= {_show(value)} is out of range: allowed a finite number in "
-                f"{bracket}{low:g}, {high:g}]",
-            )
-        return float(value)
-
-    def choice(self, key: Any, allowed: Sequence[Any]) -> Any:
-        value = self.data[key]
-        if not any(value == a and type(value) is type(a) for a in allowed):
-            self.fail(self.name(key), f"= {_show(value)} is not valid: allowed {list(allowed)}")
+    if isinstance(value, float) and not math.isfinite(value):  # 1e400 (NaN: the JSON reader)
+        raise ValueError(f"{path} = {value!r}: allowed a finite number")
+    if isinstance(value, int) and abs(value) > MAX_JSON_INT:
+        raise ValueError(f"{path} = {_show(value)}: allowed an integer in [-2**53, 2**53]")
+    if isinstance(value, str) and len(value) > MAX_STRING:
+        raise ValueError(f"{path} is a string of {len(value)} characters: allowed {MAX_STRING}")
+    if not isinstance(value, (list, dict)):
         return value
-
-    def text(self, key: Any, max_len: int = 200) -> str:
-        value = self.data[key]
-        if not isinstance(value, str) or not 0 < len(value) <= max_len or not value.isprintable():
-            self.fail(
-                self.name(key),
-                f"= {_show(value)} is not valid: allowed a printable string of 1 to {max_len} "
-                "characters",
-            )
-        return value
-
-    def numbers(self, key: Any, length: int, bound: float) -> tuple[float, ...]:
-        value = self.data[key]
-        if not isinstance(value, list) or len(value) != length:
-            self.fail(self.name(key), f"= {_show(value)} is not valid: allowed a list of {length}")
-        inner = _Fields(self.where, dict(enumerate(value)), f"{self.name(key)}[")
-        return tuple(inner.number(i, -bound, bound) for i in range(length))
-
-
-def _check_json_value(f: _Fields, key: Any, value: Any, depth: int) -> None:
-    """Free JSON (the training record): finite numbers, bounded sizes, no ``:``-keys."""
-    name = f.name(str(key))
-    if value is None or isinstance(value, bool):
-        return
-    if isinstance(value, int):
-        if abs(value) > MAX_JSON_INT:
-            f.fail(name, f"= {_show(value)} is out of range: allowed |x| <= 2**53")
-        return
-    if isinstance(value, float):
-        if not math.isfinite(value):
-            f.fail(name, f"= {value!r} is out of range: allowed a finite number")
-        return
-    if isinstance(value, str):
-        if len(value) > MAX_STRING:
-            f.fail(name, f"is a string of {len(value)} characters: allowed at most {MAX_STRING}")
-        return
-    if depth >= 4:
-        f.fail(name, "is nested too deeply: allowed at most 4 levels")
+    if depth >= MAX_RECORD_DEPTH:
+        raise ValueError(f"{path} is nested too deeply: allowed {MAX_RECORD_DEPTH} levels")
+    if len(value) > MAX_RECORD_ITEMS:
+        raise ValueError(f"{path} has {len(value)} items: allowed at most {MAX_RECORD_ITEMS}")
     if isinstance(value, list):
-        if len(value) > 1000:
-            f.fail(name, f"is a list of {len(value)} items: allowed at most 1000")
-        for i, item in enumerate(value):
-            _check_json_value(_Fields(f.where, {}, f"{name}["), i, item, depth + 1)
-        return
-    if isinstance(value, dict):
-        inner = _Fields(f.where, value, name + ".")
-        if len(value) > 1000:
-            f.fail(name, f"is an object of {len(value)} fields: allowed at most 1000")
-        for k, v in value.items():
-            _check_key(inner, k)
-            _check_json_value(inner, k, v, depth + 1)
-        return
-    f.fail(name, f"= {_show(value)} is not a JSON value")  # pragma: no cover - from json.loads
+        return [_record_value(v, depth + 1, f"{path}[{i}]") for i, v in enumerate(value)]
+    for key in value:
+        if not _KEY.fullmatch(key):
+            raise ValueError(
+                f"{path}.{_field_name([key])} is not a valid field name: allowed letters, "
+                "digits, '_', '.', '-', starting with a letter or '_' (entries such as "
+                "':serialized:' are refused)"
+            )
+    return {k: _record_value(v, depth + 1, f"{path}.{k}") for k, v in value.items()}
 
 
 _KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_.\-]{0,99}")
+STRICT: Final = ConfigDict(strict=True, extra="forbid", allow_inf_nan=False, frozen=True)
+Name = Annotated[str, Field(min_length=1, max_length=100), AfterValidator(_printable)]
+Text = Annotated[str, Field(min_length=1, max_length=1000), AfterValidator(_printable)]
+Bound = Annotated[float, Field(ge=-MAX_BOUND, le=MAX_BOUND)]
+Count = Annotated[int, Field(ge=0, le=MAX_JSON_INT)]
+Threads = Annotated[int, Field(ge=1, le=1_000_000)]
+Record = Annotated[dict[str, Any], AfterValidator(_record_value)]
+Model = TypeVar("Model", bound=BaseModel)
 
 
-def _check_key(f: _Fields, key: str) -> None:
-    if not _KEY.fullmatch(key):
-        f.fail(
-            f.name(_one_line(key, 40)),
-            "is not a valid field name: allowed letters, digits, '_', '.', '-', starting with "
-            "a letter or '_' (entries such as ':serialized:' or ':type:' are refused)",
-        )
+class _PolicySchema(BaseModel):
+    """The ``policy`` field of config.json (:class:`PolicySpec`)."""
+
+    model_config = STRICT
+    type: Annotated[str, Field(pattern="^gaussian_mlp$")]
+    hidden_sizes: Annotated[
+        list[Annotated[int, Field(ge=1, le=MAX_HIDDEN_SIZE)]], Field(max_length=MAX_HIDDEN_LAYERS)
+    ]
+    activation: Activation
+    action_size: Annotated[int, Field(ge=1, le=MAX_ACTION_SIZE)]
+    action_low: list[Bound]
+    action_high: list[Bound]
+    noise: Noise = "diagonal"
+    frame_stack: Annotated[int, Field(ge=1, le=MAX_FRAME_STACK)] = 1
 
 
-# ---------------------------------------------------------------------------- architecture
-@dataclass(frozen=True)
-class PolicySpec:
-    """The architecture of a Gaussian MLP policy (``config.json``, field ``policy``).
+class _EnvKwargsSchema(BaseModel):
+    """The ``env_kwargs`` field: their types here, their ranges in the env's ``EnvConfig``."""
 
-    The action mean is ``W_k act(... act(W_0 z + b_0) ...) + b_k``, clipped to
-    ``[action_low, action_high]``; ``z`` is the normalised network input: the observation, or
-    with ``frame_stack = k > 1`` the last ``k`` observations concatenated, oldest first
-    (:func:`stack_frames`), ``observation_size * k`` numbers.
+    model_config = STRICT
+    base_controller: Name | None
+    control_dt_s: float
+    residual_scale_nm: float
+    min_torque_nm: float
+    max_torque_nm: float
+    env_id: Literal[ENV_IDS] = DEFAULT_ENV_ID  # type: ignore[valid-type]
+    observation: Literal[OBSERVATION_MODES] | None = None  # type: ignore[valid-type]
 
-    Attributes:
-        observation_size: Length of the observation.
-        hidden_sizes: Sizes of the hidden layers (0 to 8 layers of 1 to 1024 units).
-        activation: ``"tanh"`` or ``"relu"``, after every hidden layer.
-        action_size: Length of the action.
-        action_low: Lower clipping bound per action entry.
-        action_high: Upper clipping bound per action entry.
-        noise: ``"diagonal"`` or ``"state_dependent"`` (:data:`NOISE_TYPES`).
-        frame_stack: Observations in the network input (1 to :data:`MAX_FRAME_STACK`).
-    """
 
-    observation_size: int
-    hidden_sizes: tuple[int, ...]
-    activation: str = "tanh"
-    action_size: int = 1
-    action_low: tuple[float, ...] = (-1.0,)
-    action_high: tuple[float, ...] = (1.0,)
-    noise: str = "diagonal"
-    frame_stack: int = 1
+class _ConfigSchema(BaseModel):
+    """config.json: the model and its training record (never interpreted)."""
 
-    def __post_init__(self) -> None:
-        # The same checks as a config.json (programming errors surface the same way).
-        validate_policy_spec(self.to_json(), "PolicySpec", self.observation_size)
+    model_config = STRICT
+    format: Annotated[int, Field(ge=PREVIOUS_FORMAT, le=FORMAT_VERSION)]
+    name: Name
+    env_kwargs: _EnvKwargsSchema
+    observation_size: Annotated[int, Field(ge=1, le=MAX_OBSERVATION_SIZE)]
+    policy: _PolicySchema
+    train_config: Record | None = None
+    timesteps: Count | None = None
+    run_timesteps: Count | None = None
+    resumed_from: Count | None = None
+    selected: Text | None = None
+    validation_score: Annotated[float, Field(ge=-1e9, le=1e9)] | None = None
+    wall_time_s: Annotated[float, Field(ge=0.0, le=1e9)] | None = None
+    cpu_count: Threads | None = None
+    torch_threads: Threads | None = None
+    source: Text | None = None
 
-    @property
-    def input_size(self) -> int:
-        """Length of the network input: ``observation_size * frame_stack`` (also the length
-        of the normalisation statistics)."""
-        return self.observation_size * self.frame_stack
 
-    def layer_sizes(self) -> list[int]:
-        """Input, hidden and output sizes."""
-        return [self.input_size, *self.hidden_sizes, self.action_size]
+RECORD_FIELDS: Final = tuple(_ConfigSchema.model_fields)[5:]
+"""Optional top-level fields of config.json: the training record (never interpreted)."""
 
-    def weight_shapes(self) -> dict[str, tuple[int, ...]]:
-        """The arrays of ``policy.npz`` and their shapes.
 
-        ``hidden.{i}.weight`` ``(out, in)`` and ``hidden.{i}.bias`` ``(out,)`` per hidden
-        layer, ``action.weight``, ``action.bias``, and ``log_std``: ``(action_size,)``, or
-        ``(last hidden size, action_size)`` for state-dependent noise.
-        """
-        sizes = self.layer_sizes()
-        shapes: dict[str, tuple[int, ...]] = {}
-        for i in range(len(self.hidden_sizes)):
-            shapes[f"hidden.{i}.weight"] = (sizes[i + 1], sizes[i])
-            shapes[f"hidden.{i}.bias"] = (sizes[i + 1],)
-        shapes["action.weight"] = (self.action_size, sizes[-2])
-        shapes["action.bias"] = (self.action_size,)
-        if self.noise == "diagonal":
-            shapes["log_std"] = (self.action_size,)
+def _field_name(loc: Sequence[int | str]) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
         else:
-            shapes["log_std"] = (sizes[-2], self.action_size)
-        return shapes
-
-    def to_json(self) -> dict[str, Any]:
-        """The ``policy`` field of config.json (``frame_stack`` only when above 1, so a
-        memoryless policy's file is as before)."""
-        out: dict[str, Any] = {
-            "type": "gaussian_mlp",
-            "hidden_sizes": list(self.hidden_sizes),
-            "activation": self.activation,
-            "action_size": self.action_size,
-            "action_low": [float(x) for x in self.action_low],
-            "action_high": [float(x) for x in self.action_high],
-            "noise": self.noise,
-        }
-        if self.frame_stack != 1:
-            out["frame_stack"] = self.frame_stack
-        return out
+            text = part if _KEY.fullmatch(part) or part.isprintable() else repr(part)
+            out += ("." if out else "") + _one_line(text, 40)
+    return out or "(top level)"
 
 
-def validate_policy_spec(data: Any, where: str, observation_size: int) -> PolicySpec:
-    """The ``policy`` field of a config.json as a :class:`PolicySpec` (every error is a
-    one-line ``ValueError`` naming ``where`` and the field)."""
-    f = _Fields(where, data, "policy.")
-    f.known(
-        ("type", "hidden_sizes", "activation", "action_size", "action_low", "action_high"),
-        ("noise", "frame_stack"),
-    )
-    f.choice("type", ("gaussian_mlp",))
-    hidden = f.data["hidden_sizes"]
-    if not isinstance(hidden, list) or len(hidden) > MAX_HIDDEN_LAYERS:
-        f.fail(
-            "policy.hidden_sizes",
-            f"= {_show(hidden)} is not valid: allowed a list of at most {MAX_HIDDEN_LAYERS} sizes",
-        )
-    sizes = _Fields(where, dict(enumerate(hidden)), "policy.hidden_sizes[")
-    hidden_sizes = tuple(sizes.integer(i, 1, MAX_HIDDEN_SIZE) for i in range(len(hidden)))
-    activation = f.choice("activation", ACTIVATIONS)
-    action_size = f.integer("action_size", 1, MAX_ACTION_SIZE)
-    low = f.numbers("action_low", action_size, MAX_CLIP_OBS)
-    high = f.numbers("action_high", action_size, MAX_CLIP_OBS)
-    if not all(a < b for a, b in zip(low, high, strict=True)):
-        f.fail("policy.action_low", f"= {list(low)} must be below action_high = {list(high)}")
-    noise = f.choice("noise", NOISE_TYPES) if "noise" in f.data else "diagonal"
-    if noise == "state_dependent" and not hidden_sizes:
-        f.fail("policy.noise", "= 'state_dependent' needs at least one hidden layer")
-    frame_stack = f.integer("frame_stack", 1, MAX_FRAME_STACK) if "frame_stack" in f.data else 1
-    if observation_size * frame_stack > MAX_INPUT_SIZE:
-        f.fail(
-            "policy.frame_stack",
-            f"= {frame_stack} is out of range: observation_size {observation_size} x "
-            f"frame_stack {frame_stack} = {observation_size * frame_stack} network inputs, "
-            f"allowed at most {MAX_INPUT_SIZE}",
-        )
-    spec = object.__new__(PolicySpec)  # skip __post_init__: these values are checked
-    for name, value in (
-        ("observation_size", observation_size),
-        ("hidden_sizes", hidden_sizes),
-        ("activation", activation),
-        ("action_size", action_size),
-        ("action_low", low),
-        ("action_high", high),
-        ("noise", noise),
-        ("frame_stack", frame_stack),
-    ):
-        object.__setattr__(spec, name, value)
-    return spec
+def _schema_error(
+    where: str, error: ValidationError, root: type[BaseModel], prefix: str = ""
+) -> ValueError:
+    """The first error of a pydantic validation as one line naming the file and field."""
+    errors = error.errors(include_url=False)
+    unknown = [e for e in errors if e["type"] == "extra_forbidden"]
+    first = (unknown or errors)[0]  # an unknown field first: it names a hostile entry
+    loc = list(first["loc"])
+    name = prefix + _field_name(loc)
+    kind, message = first["type"], first["msg"]
+    if kind == "extra_forbidden":
+        model = root
+        for part in loc[:-1]:
+            annotation = model.model_fields[str(part)].annotation
+            if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+                model = annotation
+        allowed = ", ".join(model.model_fields)
+        return ValueError(f"{where!r}: field {name} is not known: allowed fields are {allowed}")
+    if kind == "missing":
+        return ValueError(f"{where!r}: field {name} is missing")
+    if kind == "model_type":
+        message = "expected an object"
+    elif kind == "value_error":  # our validators: the entry below the field, and the problem
+        return ValueError(f"{where!r}: field {name}{message.removeprefix('Value error, ')}")
+    else:
+        message = "allowed " + message.removeprefix("Input should be ")
+    return ValueError(f"{where!r}: field {name} = {_show(first['input'])}: {message}")
+
+
+def validate_json(schema: type[Model], data: Any, where: str) -> Model:
+    """``data`` (parsed JSON) validated by the pydantic model ``schema``.
+
+    Raises:
+        ValueError: One line naming ``where`` and the first field in error.
+    """
+    try:
+        return schema.model_validate(data)
+    except ValidationError as err:
+        raise _schema_error(where, err, schema) from None
 
 
 # -------------------------------------------------------------------------------- config.json
-RECORD_FIELDS: Final = (
-    "train_config",
-    "timesteps",
-    "run_timesteps",
-    "resumed_from",
-    "selected",
-    "validation_score",
-    "wall_time_s",
-    "cpu_count",
-    "torch_threads",
-    "source",
-)
-"""Optional top-level fields of config.json: the training record (never interpreted)."""
-_REQUIRED_FIELDS: Final = ("format", "name", "env_kwargs", "observation_size", "policy")
-
-
 @dataclass(frozen=True)
 class ModelConfig:
     """A validated ``config.json``.
 
     Attributes:
         name: The agent's name.
-        env_kwargs: The env keywords (:data:`POLICY_ENV_KEYWORDS`, and for
-            ``DrillStringField-v0`` those of :data:`FIELD_ENV_KEYWORDS` it gives), without
-            ``env_id``.
+        env_kwargs: The env keywords the model records, without ``env_id``.
         spec: The architecture.
         record: The rest of the file (``format``, ``observation_size``, ``policy`` and the
             training record: ``train_config``, ``timesteps``, ...).
@@ -464,6 +360,11 @@ class ModelConfig:
     record: dict[str, Any] = field(default_factory=dict)
     env_id: str = DEFAULT_ENV_ID
 
+    @property
+    def format(self) -> int:
+        """The format version of the file (2: ``.npz`` arrays, 3: safetensors)."""
+        return int(self.record.get("format", FORMAT_VERSION))
+
 
 def split_env_id(env_kwargs: Mapping[str, Any]) -> tuple[str, dict[str, Any]]:
     """``(env id, the env keywords without it)`` of validated ``env_kwargs``."""
@@ -472,34 +373,30 @@ def split_env_id(env_kwargs: Mapping[str, Any]) -> tuple[str, dict[str, Any]]:
 
 
 def validate_env_kwargs(data: Any, where: str) -> dict[str, Any]:
-    """The ``env_kwargs`` field: exactly the keywords of :data:`POLICY_ENV_KEYWORDS`, typed
-    and in range (whether the base controller is registered is checked by the loader)."""
-    f = _Fields(where, data, "env_kwargs.")
-    f.known(POLICY_ENV_KEYWORDS, ("env_id", *FIELD_ENV_KEYWORDS))
-    base = f.data["base_controller"]
-    if base is not None:
-        f.text("base_controller", 100)
-    out: dict[str, Any] = {"base_controller": base}
-    out["control_dt_s"] = f.number("control_dt_s", 0.0, 10.0, open_low=True)
-    out["residual_scale_nm"] = f.number("residual_scale_nm", 0.0, MAX_TORQUE_NM)
-    out["min_torque_nm"] = f.number("min_torque_nm", -MAX_TORQUE_NM, MAX_TORQUE_NM)
-    out["max_torque_nm"] = f.number("max_torque_nm", -MAX_TORQUE_NM, MAX_TORQUE_NM)
-    if not out["min_torque_nm"] < out["max_torque_nm"]:
-        f.fail(
-            "env_kwargs.min_torque_nm",
-            f"= {out['min_torque_nm']!r} must be below max_torque_nm = {out['max_torque_nm']!r}",
+    """The ``env_kwargs`` field: the keywords of ``_EnvKwargsSchema`` (``env_id`` and
+    ``observation`` for ``DrillStringField-v0`` only), typed there and checked by the env's
+    own ``EnvConfig`` (whether the base controller is registered is checked by the loader).
+
+    Raises:
+        ValueError: One line naming ``where`` and the field.
+    """
+    try:
+        schema = _EnvKwargsSchema.model_validate(data)
+    except ValidationError as err:
+        raise _schema_error(where, err, _EnvKwargsSchema, "env_kwargs.") from None
+    keywords = schema.model_dump(exclude_unset=True)
+    env_id, env_keywords = split_env_id(keywords)
+    if "observation" in keywords and env_id != FIELD_ENV_ID:
+        raise ValueError(
+            f"{where!r}: field env_kwargs.observation is a keyword of {FIELD_ENV_ID}: set "
+            "env_kwargs.env_id to it"
         )
-    if "env_id" in f.data:
-        out["env_id"] = f.choice("env_id", ENV_IDS)
-    field_only = [k for k in FIELD_ENV_KEYWORDS if k in f.data]
-    if field_only and out.get("env_id") != "DrillStringField-v0":
-        f.fail(
-            f"env_kwargs.{field_only[0]}",
-            "is a keyword of DrillStringField-v0: set env_kwargs.env_id to it",
-        )
-    if "observation" in f.data:
-        out["observation"] = f.choice("observation", ("state", "surface"))
-    return out
+    config = FieldEnvConfig if env_id == FIELD_ENV_ID else EnvConfig
+    try:
+        config.from_kwargs(env_keywords)
+    except (ValueError, TypeError) as err:
+        raise ValueError(f"{where!r}: field env_kwargs.{_one_line(str(err))}") from None
+    return keywords
 
 
 def validate_config(data: Any, where: str) -> ModelConfig:
@@ -512,58 +409,62 @@ def validate_config(data: Any, where: str) -> ModelConfig:
     Raises:
         ValueError: One line naming ``where``, the field and what is wrong: an unknown or
             missing field, a wrong type, a number out of range or not finite, a key such as
-            ``:serialized:``.
+            ``:serialized:`` in the training record.
     """
-    f = _Fields(where, data)
-    if isinstance(f.data.get("format"), int) and f.data["format"] == 1:
-        f.fail(
-            "format",
-            "= 1: this is a Stable-Baselines3 model (model.zip, a pickle); load it with "
-            "trust_pickle=True or convert it with 'python -m agents.convert'",
+    if isinstance(data, dict) and data.get("format") == 1 and type(data["format"]) is int:
+        raise ValueError(
+            f"{where!r}: field format = 1: this is a Stable-Baselines3 model (model.zip, a "
+            "pickle); load the model.zip itself with trust_pickle=True or convert it with "
+            "'drill-gym convert' (agents.convert)"
         )
-    for key in f.data:
-        _check_key(f, str(key))
-    f.known(_REQUIRED_FIELDS, RECORD_FIELDS)
-    f.choice("format", (FORMAT_VERSION,))
-    name = f.text("name", 100)
-    env_id, env_kwargs = split_env_id(validate_env_kwargs(f.data["env_kwargs"], where))
-    observation_size = f.integer("observation_size", 1, MAX_OBSERVATION_SIZE)
-    spec = validate_policy_spec(f.data["policy"], where, observation_size)
-    for key in ("timesteps", "run_timesteps", "resumed_from"):
-        if key in f.data:
-            f.integer(key, 0, MAX_JSON_INT)
-    for key in ("cpu_count", "torch_threads"):
-        if key in f.data and f.data[key] is not None:
-            f.integer(key, 1, 1_000_000)
-    if "wall_time_s" in f.data:
-        f.number("wall_time_s", 0.0, 1e9)
-    if "validation_score" in f.data:
-        f.number("validation_score", -1e9, 1e9)
-    for key in ("selected", "source"):
-        if key in f.data:
-            f.text(key, 1000)
-    if "train_config" in f.data:
-        inner = _Fields(where, f.data["train_config"], "train_config.")
-        for k, v in inner.data.items():
-            _check_key(inner, k)
-            _check_json_value(inner, k, v, 1)
-    record = {k: v for k, v in f.data.items() if k not in ("name", "env_kwargs")}
-    return ModelConfig(name=name, env_kwargs=env_kwargs, spec=spec, record=record, env_id=env_id)
+    schema = validate_json(_ConfigSchema, data, where)
+    env_id, env_kwargs = split_env_id(validate_env_kwargs(data["env_kwargs"], where))
+    policy = schema.policy
+    for key in ("action_low", "action_high"):
+        if len(getattr(policy, key)) != policy.action_size:
+            raise ValueError(
+                f"{where!r}: field policy.{key} = {getattr(policy, key)}: allowed a list of "
+                f"{policy.action_size} (policy.action_size)"
+            )
+    if not all(a < b for a, b in zip(policy.action_low, policy.action_high, strict=True)):
+        raise ValueError(
+            f"{where!r}: field policy.action_low = {policy.action_low} must be below "
+            f"action_high = {policy.action_high}"
+        )
+    if policy.noise == "state_dependent" and not policy.hidden_sizes:
+        raise ValueError(f"{where!r}: field policy.noise = 'state_dependent' needs a hidden layer")
+    inputs = schema.observation_size * policy.frame_stack
+    if inputs > MAX_INPUT_SIZE:
+        raise ValueError(
+            f"{where!r}: field policy.frame_stack = {policy.frame_stack} is out of range: "
+            f"observation_size {schema.observation_size} x frame_stack {policy.frame_stack} = "
+            f"{inputs} network inputs, allowed at most {MAX_INPUT_SIZE}"
+        )
+    spec = PolicySpec(
+        observation_size=schema.observation_size,
+        hidden_sizes=tuple(policy.hidden_sizes),
+        activation=policy.activation,
+        action_size=policy.action_size,
+        action_low=tuple(policy.action_low),
+        action_high=tuple(policy.action_high),
+        noise=policy.noise,
+        frame_stack=policy.frame_stack,
+    )
+    record = {k: v for k, v in data.items() if k not in ("name", "env_kwargs")}
+    return ModelConfig(schema.name, env_kwargs, spec, record, env_id)
 
 
-# ------------------------------------------------------------------------------ .npz reading
-_FLOAT_DTYPES: Final = (np.dtype("<f4"), np.dtype("<f8"), np.dtype(">f4"), np.dtype(">f8"))
-
-
-def read_npz(
+# ------------------------------------------------------------------------- safetensors files
+def read_safetensors(
     path: Path, expected: Mapping[str, tuple[int, ...]], what: str
 ) -> dict[str, npt.NDArray[np.float64]]:
-    """Arrays of an ``.npz`` file, each float32 or float64 of the expected shape, all finite.
+    """Arrays of a safetensors file, each float32 or float64 of the expected shape, finite.
 
-    The zip directory is checked before anything is decompressed: only ``NAME.npy`` entries
-    for the expected names, at most their float64 size plus a header each (a zip bomb
-    declares far more), stored or deflated, not encrypted; each entry's ``.npy`` header must
-    declare a float dtype and the expected shape. Then ``np.load(allow_pickle=False)``.
+    The header length (the file's first 8 bytes) must be at most
+    :data:`MAX_HEADER_BYTES_PER_ARRAY` per array plus 4096; the ``safetensors`` library then
+    parses the header (names, dtypes, shapes, offsets that tile the data), which is checked
+    against ``expected`` before the data is read. The file may hold at most the arrays'
+    float64 size plus that header; it is read once and parsed again from those bytes.
 
     Args:
         path: The file.
@@ -580,302 +481,130 @@ def read_npz(
     where = str(path)
     if not path.is_file():
         raise FileNotFoundError(f"{where!r}: no such file (expected {what})")
-    allowed = sum(8 * math.prod(s) + MAX_NPY_HEADER for s in expected.values())
-    max_file = allowed + 1024 * (len(expected) + 1)
-    with path.open("rb") as f:  # read once: the checks and np.load see the same bytes
+    bad = f"{where!r} is not valid {what} (a safetensors file of float arrays)"
+    max_header = MAX_HEADER_BYTES_PER_ARRAY * len(expected) + 4096
+    with path.open("rb") as f:
+        head = f.read(8)
+    header = int.from_bytes(head, "little") if len(head) == 8 else -1
+    if not 0 < header <= max_header:
+        found = "no header length" if header < 0 else f"a header of {header} bytes"
+        raise ValueError(f"{bad}: {found}: allowed 1 to {max_header} bytes")
+    try:
+        with safetensors.safe_open(where, framework="np") as file:
+            layout = {
+                name: (file.get_slice(name).get_dtype(), tuple(file.get_slice(name).get_shape()))
+                for name in file.keys()  # noqa: SIM118 - a safetensors handle, not a dict
+            }
+    except (safetensors.SafetensorError, OSError, ValueError, OverflowError) as err:
+        raise ValueError(f"{bad}: {_one_line(str(err))}") from None
+    _check_layout(where, layout, expected, what)
+    max_file = 8 + header + sum(8 * math.prod(s) for s in expected.values())
+    with path.open("rb") as f:  # read once: the parser below sees exactly these bytes
         data = f.read(max_file + 1)
     if len(data) > max_file:
         size = max(path.stat().st_size, len(data))
-        raise ValueError(
-            f"{where!r}: {size} bytes is too large for {what}: allowed at most {max_file}"
-        )
-    bad = f"{where!r} is not valid {what} (an .npz archive of float arrays)"
+        raise ValueError(f"{where!r}: {size} bytes is too large for {what}: allowed {max_file}")
     try:
-        with zipfile.ZipFile(io.BytesIO(data)) as archive:
-            infos = archive.infolist()
-            if len(infos) > len(expected):
-                raise ValueError(
-                    f"{where!r}: {len(infos)} entries: expected {len(expected)} "
-                    f"({', '.join(expected)})"
-                )
-            declared = sum(i.file_size for i in infos)
-            if declared > allowed:
-                raise ValueError(
-                    f"{where!r}: its entries declare {declared} bytes uncompressed: allowed at "
-                    f"most {allowed} for {what} (a zip bomb?)"
-                )
-            names: list[str] = []
-            for info in infos:
-                name = info.filename[:-4] if info.filename.endswith(".npy") else ""
-                if name not in expected or name in names:
-                    raise ValueError(
-                        f"{where!r}: unexpected entry {info.filename!r}: expected one each of "
-                        f"{', '.join(k + '.npy' for k in expected)}"
-                    )
-                names.append(name)
-                if info.flag_bits & 0x1 or info.compress_type not in (
-                    zipfile.ZIP_STORED,
-                    zipfile.ZIP_DEFLATED,
-                ):
-                    raise ValueError(
-                        f"{where!r}: entry {info.filename!r} is encrypted or uses an unsupported "
-                        "compression: allowed stored or deflated"
-                    )
-                with archive.open(info) as entry:
-                    _check_npy_header(entry, where, name, expected[name])
-            missing = [k for k in expected if k not in names]
-            if missing:
-                raise ValueError(f"{where!r}: missing array(s) {', '.join(missing)} ({what})")
-    except ValueError:
-        raise
-    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError, RuntimeError) as err:
+        tensors = dict(safetensors.deserialize(data))
+    except (safetensors.SafetensorError, ValueError, OverflowError) as err:
         raise ValueError(f"{bad}: {_one_line(str(err))}") from None
-    try:
-        with np.load(io.BytesIO(data), allow_pickle=False) as archive:
-            arrays = {k: np.asarray(archive[k]) for k in expected}
-    except (ValueError, zipfile.BadZipFile, OSError, EOFError, KeyError) as err:
-        raise ValueError(f"{bad}: {_one_line(str(err))}") from None
+    _check_layout(
+        where, {k: (t["dtype"], tuple(t["shape"])) for k, t in tensors.items()}, expected, what
+    )
     out: dict[str, npt.NDArray[np.float64]] = {}
-    for name, array in arrays.items():
-        if array.dtype not in _FLOAT_DTYPES or array.shape != tuple(expected[name]):
-            raise ValueError(  # pragma: no cover - the headers were checked
-                f"{where!r}: array {name} has dtype {array.dtype} and shape {array.shape}: "
-                f"expected float32/float64 of shape {tuple(expected[name])}"
-            )
+    for name, shape in expected.items():
+        dtype = _SAFETENSORS_DTYPES[tensors[name]["dtype"]]
+        array = np.frombuffer(tensors[name]["data"], dtype=dtype).reshape(shape)
         if not np.all(np.isfinite(array)):
             raise ValueError(f"{where!r}: array {name} has non-finite values (NaN or inf)")
         out[name] = array.astype(np.float64)
     return out
 
 
-def _check_npy_header(entry: Any, where: str, name: str, shape: tuple[int, ...]) -> None:
-    fmt = np.lib.format
-    try:
-        version = fmt.read_magic(entry)
-        if version == (1, 0):
-            found, _, dtype = fmt.read_array_header_1_0(entry)
-        elif version == (2, 0):
-            found, _, dtype = fmt.read_array_header_2_0(entry)
-        else:
-            raise ValueError(f"unsupported .npy version {version}")
-    except (ValueError, OSError, EOFError, SyntaxError, TypeError):
+def _check_layout(
+    where: str,
+    layout: Mapping[str, tuple[str, tuple[int, ...]]],
+    expected: Mapping[str, tuple[int, ...]],
+    what: str,
+) -> None:
+    """The arrays' names, dtypes and shapes as a safetensors header declares them."""
+    unexpected = [name for name in layout if name not in expected]
+    if unexpected:
         raise ValueError(
-            f"{where!r}: entry {name}.npy is not a valid .npy array: its header cannot be read "
-            "(expected the .npy magic, a version and a dict of descr, fortran_order, shape)"
-        ) from None
-    if dtype not in _FLOAT_DTYPES:
-        raise ValueError(
-            f"{where!r}: array {name} has dtype {dtype}: allowed float32 or float64 "
-            "(object and other dtypes are refused)"
+            f"{where!r}: unexpected array {_show(unexpected[0])}: expected one each of "
+            f"{', '.join(expected)}"
         )
-    if tuple(found) != tuple(shape):
-        raise ValueError(f"{where!r}: array {name} has shape {tuple(found)}: expected {shape}")
+    missing = [name for name in expected if name not in layout]
+    if missing:
+        raise ValueError(f"{where!r}: missing array(s) {', '.join(missing)} ({what})")
+    for name in expected:
+        dtype, shape = layout[name]
+        if dtype not in _SAFETENSORS_DTYPES:
+            raise ValueError(
+                f"{where!r}: array {name} has dtype {_show(dtype)}: allowed F32 or F64 "
+                "(float32 or float64)"
+            )
+        if shape != expected[name]:
+            raise ValueError(
+                f"{where!r}: array {name} has shape {shape}: expected {expected[name]}"
+            )
 
 
-def write_npz(path: Path, arrays: Mapping[str, npt.ArrayLike]) -> None:
-    """Write float arrays uncompressed to ``path`` (via a temporary file, then renamed)."""
-    tmp = path.with_name(path.name + ".tmp.npz")
-    clean = {}
-    for k, v in arrays.items():
-        a = np.asarray(v)
-        if a.dtype not in _FLOAT_DTYPES:
-            a = a.astype(np.float64)
-        clean[k] = a
-    np.savez(tmp, **clean)  # type: ignore[arg-type]
+def write_safetensors(path: Path, arrays: Mapping[str, npt.ArrayLike]) -> None:
+    """Write float arrays (float32 and float64 kept, other dtypes as float64) to ``path`` as
+    safetensors (via a temporary file, then renamed)."""
+    clean: dict[str, npt.NDArray[Any]] = {}
+    for name, value in arrays.items():
+        array = np.asarray(value)
+        if array.dtype not in (np.float32, np.float64):
+            array = array.astype(np.float64)
+        clean[name] = np.array(array, dtype=array.dtype.newbyteorder("<"), order="C")
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_bytes(safetensors.numpy.save(clean))
     os.replace(tmp, path)
 
 
-# --------------------------------------------------------------------------- normalisation
-@dataclass(frozen=True)
-class ObsNorm:
-    """Observation normalisation ``clip((obs - mean) / sqrt(var + epsilon), +-clip_obs)``.
-
-    Attributes:
-        mean: Running mean, shape ``(observation_size,)``.
-        var: Running variance (>= 0), same shape.
-        clip_obs: Clipping bound of the normalised observation (> 0).
-        epsilon: Added to the variance (>= 0; ``var + epsilon > 0``).
-    """
-
-    mean: npt.NDArray[np.float64]
-    var: npt.NDArray[np.float64]
-    clip_obs: float = 10.0
-    epsilon: float = 1e-8
-
-    @classmethod
-    def identity(cls, size: int) -> ObsNorm:
-        """No normalisation (mean 0, variance 1, no clipping in practice)."""
-        return cls(np.zeros(size), np.ones(size), 1e6, 0.0)
-
-    @staticmethod
-    def shapes(size: int) -> dict[str, tuple[int, ...]]:
-        """The arrays of ``obs_norm.npz``."""
-        return {"mean": (size,), "var": (size,), "clip_obs": (), "epsilon": ()}
-
-    def check(self, where: str) -> None:
-        """Ranges (the arrays are already finite)."""
-        if np.any(self.var < 0):
-            raise ValueError(f"{where!r}: array var has negative entries: allowed >= 0")
-        if not 0 < self.clip_obs <= MAX_CLIP_OBS:
-            raise ValueError(
-                f"{where!r}: clip_obs = {self.clip_obs!r} is out of range: allowed (0, 1e9]"
-            )
-        if not 0 <= self.epsilon <= 1.0:
-            raise ValueError(f"{where!r}: epsilon = {self.epsilon!r} is out of range: [0, 1]")
-        if np.any(self.var + self.epsilon <= 0):
-            raise ValueError(f"{where!r}: var + epsilon must be > 0 in every entry")
-
-    def arrays(self) -> dict[str, npt.NDArray[np.float64]]:
-        """The arrays of ``obs_norm.npz``."""
-        return {
-            "mean": np.asarray(self.mean, np.float64),
-            "var": np.asarray(self.var, np.float64),
-            "clip_obs": np.asarray(self.clip_obs, np.float64),
-            "epsilon": np.asarray(self.epsilon, np.float64),
-        }
-
-
-# --------------------------------------------------------------------------- frame stacking
-def stack_frames(
-    history: npt.ArrayLike | None,
-    observation: npt.ArrayLike,
-    episode_start: npt.ArrayLike | None,
-    frame_stack: int,
-) -> npt.NDArray[np.float32]:
-    """The network input after one more observation: the last ``frame_stack`` observations
-    concatenated, oldest first, zeros for the instants before the episode's start.
-
-    This is Stable-Baselines3's ``VecFrameStack`` on a vector of observations (the history
-    shifted left by one observation, the rows that start an episode cleared, the new
-    observation written at the end), so a policy trained behind that wrapper sees at inference
-    exactly what it saw in training.
-
-    Args:
-        history: The previous input, shape ``(n, m * frame_stack)``; ``None`` at the start.
-        observation: The new observations, shape ``(n, m)``.
-        episode_start: Per row, whether the observation is the first of an episode (its
-            history is then cleared), shape ``(n,)``; ``None``: no row starts.
-        frame_stack: Observations kept, ``k >= 1``.
-
-    Returns:
-        The new input, float32, shape ``(n, m * frame_stack)``.
-
-    Raises:
-        ValueError: ``history`` or ``episode_start`` of another shape.
-    """
-    obs = np.asarray(observation, dtype=np.float32)
-    n, m = obs.shape
-    width = m * frame_stack
-    if history is None:
-        stacked = np.zeros((n, width), dtype=np.float32)
-    else:
-        stacked = np.array(history, dtype=np.float32)
-        if stacked.shape != (n, width):
-            raise ValueError(
-                f"state has shape {stacked.shape}: expected ({n}, {width}), the history of "
-                f"{frame_stack} observations of {m} (pass None at the start of an episode)"
-            )
-    stacked = np.roll(stacked, -m, axis=1)
-    if episode_start is not None:
-        start = np.asarray(episode_start, dtype=bool).reshape(-1)
-        if start.shape != (n,):
-            raise ValueError(f"episode_start has {start.size} entries: expected {n}")
-        stacked[start] = 0.0
-    stacked[:, width - m :] = obs
-    return stacked
-
-
-# ------------------------------------------------------------------------------- the network
-class GaussianMlp:
-    """The actor of a Gaussian MLP policy in NumPy (float64 arithmetic).
-
-    Args:
-        spec: The architecture.
-        weights: The arrays of :meth:`PolicySpec.weight_shapes` (any float dtype; stored as
-            float64).
-
-    Raises:
-        ValueError: A missing, extra, misshapen or non-finite array.
-    """
-
-    def __init__(self, spec: PolicySpec, weights: Mapping[str, npt.ArrayLike]) -> None:
-        shapes = spec.weight_shapes()
-        extra = sorted(set(weights) - set(shapes))
-        missing = [k for k in shapes if k not in weights]
-        if extra or missing:
-            raise ValueError(
-                f"policy weights: missing {missing}, unexpected {extra}; expected {list(shapes)}"
-            )
-        self.spec = spec
-        self.weights: dict[str, npt.NDArray[np.float64]] = {}
-        for name, shape in shapes.items():
-            array = np.asarray(weights[name], dtype=np.float64)
-            if array.shape != shape or not np.all(np.isfinite(array)):
-                raise ValueError(
-                    f"policy weights: {name} has shape {array.shape}, expected {shape}, and must "
-                    "be finite"
-                )
-            self.weights[name] = array
-        n = len(spec.hidden_sizes)
-        self._layers = [
-            (self.weights[f"hidden.{i}.weight"], self.weights[f"hidden.{i}.bias"]) for i in range(n)
-        ]
-        self._low = np.asarray(spec.action_low, np.float64)
-        self._high = np.asarray(spec.action_high, np.float64)
-
-    def latent(self, z: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        """Output of the last hidden layer, shape ``(n, last hidden size)``."""
-        h = z
-        for weight, bias in self._layers:
-            h = h @ weight.T + bias
-            h = np.tanh(h) if self.spec.activation == "tanh" else np.maximum(h, 0.0)
-        return h
-
-    def mean_action(self, latent: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        """The Gaussian's mean (unclipped), shape ``(n, action_size)``."""
-        return latent @ self.weights["action.weight"].T + self.weights["action.bias"]
-
-    def action_std(self, latent: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        """Standard deviation of the action noise, shape ``(n, action_size)``: ``exp(log_std)``,
-        or for state-dependent noise ``sqrt(latent^2 @ exp(log_std)^2)`` (the marginal of
-        gSDE with a fresh noise matrix at every call)."""
-        std = np.exp(self.weights["log_std"])
-        if self.spec.noise == "diagonal":
-            return np.broadcast_to(std, (latent.shape[0], self.spec.action_size))
-        return np.sqrt((latent * latent) @ (std * std))
-
-    def clip(self, action: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        """Clip to the action bounds."""
-        return np.clip(action, self._low, self._high)
+def check_obs_norm(norm: ObsNorm, where: str) -> None:
+    """Ranges of the normalisation statistics (their arrays already finite)."""
+    if np.any(norm.var < 0):
+        raise ValueError(f"{where!r}: array var has negative entries: allowed >= 0")
+    if not 0 < norm.clip_obs <= MAX_BOUND:
+        raise ValueError(
+            f"{where!r}: clip_obs = {norm.clip_obs!r} is out of range: allowed (0, 1e9]"
+        )
+    if not 0 <= norm.epsilon <= 1.0:
+        raise ValueError(f"{where!r}: epsilon = {norm.epsilon!r} is out of range: allowed [0, 1]")
+    if np.any(norm.var + norm.epsilon <= 0):
+        raise ValueError(f"{where!r}: var + epsilon must be > 0 in every entry")
 
 
 # --------------------------------------------------------------------------- folder read/write
-@dataclass(frozen=True)
-class ModelFiles:
-    """The validated contents of a model folder."""
-
-    config: ModelConfig
-    weights: dict[str, npt.NDArray[np.float64]]
-    obs_norm: ObsNorm
+def array_files(format_version: int) -> tuple[str, str]:
+    """``(weights file, normalisation file)`` of a model folder of ``format_version``."""
+    if format_version == PREVIOUS_FORMAT:
+        return LEGACY_WEIGHTS_FILE, LEGACY_NORM_FILE
+    return WEIGHTS_FILE, NORM_FILE
 
 
-def read_model_files(folder: Path) -> ModelFiles:
-    """Read and check ``config.json``, ``obs_norm.npz`` and ``policy.npz`` of ``folder``.
+def read_config(folder: Path) -> ModelConfig:
+    """``config.json`` of ``folder``, checked against the schema."""
+    path = folder / CONFIG_FILE
+    return validate_config(read_json(path), str(path))
 
-    Raises:
-        FileNotFoundError: A file is missing.
-        ValueError: A file breaks the schema (one line naming the file and the field).
-    """
-    config = validate_config(read_json(folder / CONFIG_FILE), str(folder / CONFIG_FILE))
-    size = config.spec.input_size
-    norm_file = folder / NORM_FILE
-    stats = read_npz(norm_file, ObsNorm.shapes(size), "observation normalisation statistics")
-    obs_norm = ObsNorm(
-        stats["mean"], stats["var"], float(stats["clip_obs"]), float(stats["epsilon"])
-    )
-    obs_norm.check(str(norm_file))
-    weights = read_npz(folder / WEIGHTS_FILE, config.spec.weight_shapes(), "policy network weights")
-    return ModelFiles(config, weights, obs_norm)
+
+def read_arrays(
+    folder: Path, config: ModelConfig
+) -> tuple[ObsNorm, dict[str, npt.NDArray[np.float64]]]:
+    """The normalisation statistics and the weights of ``folder`` (safetensors, or ``.npz``
+    for format 2), checked against ``config``."""
+    weights_name, norm_name = array_files(config.format)
+    read = read_npz if config.format == PREVIOUS_FORMAT else read_safetensors
+    norm_file = folder / norm_name
+    shapes = ObsNorm.shapes(config.spec.input_size)
+    norm = ObsNorm.from_arrays(read(norm_file, shapes, "observation normalisation statistics"))
+    check_obs_norm(norm, str(norm_file))
+    weights = read(folder / weights_name, config.spec.weight_shapes(), "policy network weights")
+    return norm, weights
 
 
 def write_model_files(
@@ -888,7 +617,7 @@ def write_model_files(
     obs_norm: ObsNorm,
     record: Mapping[str, Any] | None = None,
 ) -> Path:
-    """Write a model folder (the arrays first, ``config.json`` last).
+    """Write a model folder of the current format (the arrays first, ``config.json`` last).
 
     ``record`` holds the optional training-record fields (``train_config``, ``timesteps``,
     ...); the whole config is checked against the schema before anything is written.
@@ -902,19 +631,15 @@ def write_model_files(
         "env_kwargs": dict(env_kwargs),
         "observation_size": spec.observation_size,
         "policy": spec.to_json(),
-        **{
-            k: v
-            for k, v in (record or {}).items()
-            if k not in ("format", "observation_size", "policy")
-        },
+        **{k: v for k, v in (record or {}).items() if k in RECORD_FIELDS},
     }
     text = json.dumps(config, indent=2, allow_nan=False) + "\n"
     validate_config(json.loads(text), str(folder / CONFIG_FILE))
     GaussianMlp(spec, weights)  # shapes and finiteness
-    obs_norm.check(str(folder / NORM_FILE))
+    check_obs_norm(obs_norm, str(folder / NORM_FILE))
     folder.mkdir(parents=True, exist_ok=True)
-    write_npz(folder / WEIGHTS_FILE, {k: np.asarray(v) for k, v in weights.items()})
-    write_npz(folder / NORM_FILE, obs_norm.arrays())
+    write_safetensors(folder / WEIGHTS_FILE, weights)
+    write_safetensors(folder / NORM_FILE, obs_norm.arrays())
     tmp = folder / (CONFIG_FILE + ".tmp")
     tmp.write_text(text)
     os.replace(tmp, folder / CONFIG_FILE)

@@ -8,15 +8,16 @@ A model folder holds three files that can be read without running any code
   ``DrillStringField-v0`` for a model of the field string, with its ``observation``),
   ``observation_size``, the architecture (``policy``, with ``frame_stack`` for a policy that
   sees its last observations) and the training record;
-* ``policy.npz``: the actor's weights, biases and log standard deviation;
-* ``obs_norm.npz``: the observation normalisation (``mean``, ``var``, ``clip_obs``,
+* ``policy.safetensors``: the actor's weights, biases and log standard deviation;
+* ``obs_norm.safetensors``: the observation normalisation (``mean``, ``var``, ``clip_obs``,
   ``epsilon``: VecNormalize's statistics at the end of training).
 
 :func:`load_policy` checks the files against the schema, against each other and against the
 environment they describe, and returns a :class:`ResidualPolicy`; neither torch nor
 Stable-Baselines3 is imported. :func:`export_policy` converts a Stable-Baselines3 PPO model
-(and its normalisation statistics) to this format; it needs torch. An SB3 ``model.zip`` (the
-format of earlier versions) is a pickle and loads only with ``trust_pickle=True``.
+(and its normalisation statistics) to this format; it needs torch. Folders of the previous
+format (``.npz`` arrays) still load; an SB3 ``model.zip`` (the first format) is a pickle and
+loads only when named with ``trust_pickle=True``.
 """
 
 from __future__ import annotations
@@ -28,21 +29,21 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 import numpy.typing as npt
 
+from agents.inference import GaussianMlp, ObsNorm, PolicySpec, stack_frames
+from agents.legacy_format import LEGACY_NORM_FILE, LEGACY_WEIGHTS_FILE, read_npz
 from agents.model_format import (
     CONFIG_FILE,
     DEFAULT_ENV_ID,
+    FORMAT_VERSION,
     NORM_FILE,
     RECORD_FIELDS,
     WEIGHTS_FILE,
-    GaussianMlp,
     ModelConfig,
-    ObsNorm,
-    PolicySpec,
+    array_files,
+    read_arrays,
+    read_config,
     read_json,
-    read_npz,
     split_env_id,
-    stack_frames,
-    validate_config,
     validate_env_kwargs,
     write_model_files,
 )
@@ -78,12 +79,12 @@ PICKLE_RISK: Final = (
     "loading it unpickles Python objects, which runs any code the file's author put in it"
 )
 CONVERT_HINT: Final = (
-    "if you trust its source, load it with trust_pickle=True (drill-gym evaluate "
-    "--trust-pickle), or convert it once to the safe format with 'python -m agents.convert "
-    "OLD_FOLDER NEW_FOLDER --trust-pickle' (agents.convert.convert_sb3_model)"
+    "if you trust its source, name that file itself: load_policy(FILE, trust_pickle=True) "
+    "(drill-gym evaluate FILE --trust-pickle), or convert it once to the safe format with "
+    "'drill-gym convert FILE NEW_FOLDER --trust-pickle' (agents.convert.convert_model)"
 )
 _FILES: Final = (CONFIG_FILE, WEIGHTS_FILE, NORM_FILE)
-_EXPECTED: Final = f"a model folder with {', '.join(_FILES)}"
+_LEGACY_FILES: Final = (CONFIG_FILE, LEGACY_WEIGHTS_FILE, LEGACY_NORM_FILE)
 
 
 class ResidualPolicy:
@@ -94,7 +95,7 @@ class ResidualPolicy:
     ``spec.frame_stack = k > 1`` sees its last ``k`` observations: the history is the
     ``state`` of ``predict`` (as for SB3's recurrent policies: pass back the state it returned,
     ``None`` or ``episode_start=True`` at the start of an episode; ``rollout`` does), built by
-    :func:`agents.model_format.stack_frames` as SB3's ``VecFrameStack`` built it in training.
+    :func:`agents.inference.stack_frames` as SB3's ``VecFrameStack`` built it in training.
     The deterministic
     action is the Gaussian's mean, computed in float64 from the stored weights (the same
     arithmetic as SB3's forward pass, equal to float32 rounding). A stochastic action adds
@@ -147,8 +148,8 @@ class ResidualPolicy:
         self.env_id = env_id
         self.env_kwargs = dict(env_kwargs)
         self.metadata: dict[str, Any] = {
+            "format": FORMAT_VERSION,  # the format of the files read (``save`` writes today's)
             **dict(metadata or {}),
-            "format": 2,
             "observation_size": spec.observation_size,
             "policy": spec.to_json(),
         }
@@ -169,7 +170,7 @@ class ResidualPolicy:
 
     @property
     def weights(self) -> dict[str, npt.NDArray[np.float64]]:
-        """The network's arrays by name (``policy.npz``)."""
+        """The network's arrays by name (``policy.safetensors``)."""
         return self.network.weights
 
     def seed(self, seed: int | None = None) -> None:
@@ -226,7 +227,8 @@ class ResidualPolicy:
         return self.network.clip(action).astype(np.float32), state
 
     def save(self, folder: str | Path) -> Path:
-        """Write the model folder (``config.json``, ``policy.npz``, ``obs_norm.npz``)."""
+        """Write the model folder in the current format (``config.json``, ``policy.safetensors``,
+        ``obs_norm.safetensors``)."""
         env_kwargs = dict(self.env_kwargs)
         if self.env_id != DEFAULT_ENV_ID:
             env_kwargs["env_id"] = self.env_id
@@ -401,8 +403,10 @@ def export_policy(
 
 # ---------------------------------------------------------------------------------- loading
 def is_model_folder(folder: Path) -> bool:
-    """Whether ``folder`` has the three files of a portable model."""
-    return all((folder / name).is_file() for name in _FILES)
+    """Whether ``folder`` has the files of a portable model (this format or the previous)."""
+    return any(
+        all((folder / name).is_file() for name in files) for files in (_FILES, _LEGACY_FILES)
+    )
 
 
 def _check_environment(config: ModelConfig, where: str, path: Path, base_controller: Any) -> None:
@@ -459,52 +463,64 @@ def load_policy(
 ) -> ResidualPolicy:
     """Load a saved agent from its model folder (or a file in it).
 
-    Reads ``config.json`` (checked against the schema), then ``obs_norm.npz`` and
-    ``policy.npz`` (``np.load(allow_pickle=False)`` after checking the archives); imports
-    neither torch nor Stable-Baselines3.
+    Reads ``config.json`` (checked against the schema), then ``obs_norm.safetensors`` and
+    ``policy.safetensors`` (or the ``.npz`` files of a folder of the previous format, format
+    2); imports neither torch nor Stable-Baselines3, unpickles nothing.
 
     Args:
-        path: The model folder, or one of its files.
+        path: The model folder, or one of its files; or, with ``trust_pickle``, a
+            Stable-Baselines3 ``.zip`` file (the earlier format, with the ``config.json`` and
+            ``obs_norm.npz`` written beside it).
         base_controller: When given, the base controller the caller expects (``None`` for a
             from-scratch agent); a model trained on another one is an error.
-        trust_pickle: Also load a Stable-Baselines3 ``model.zip`` (the earlier format). It is
-            a pickle: loading it runs any code its author put in it. Only for files you
-            made yourself or got from a source you trust; needs torch and SB3.
+        trust_pickle: Load the Stable-Baselines3 ``.zip`` that ``path`` names. It is a
+            pickle: loading it runs any code its author put in it. Only for files you made
+            yourself or got from a source you trust; needs torch and SB3. It covers that file
+            only: a folder holding a ``model.zip`` is refused.
 
     Raises:
         FileNotFoundError: The path or one of the files does not exist.
         ValueError: A file is corrupt or breaks the schema, the files disagree with each
             other or with the environment (observation size, unknown or unexpected base
-            controller), or the model is a pickle and ``trust_pickle`` is False; one line
-            naming the file and what is wrong.
+            controller), or the model is a pickle that ``trust_pickle`` does not cover; one
+            line naming the file and what is wrong.
     """
     path = Path(path)
+    expected = f"a model folder with {', '.join(_FILES)}"
     if not path.exists():
-        raise FileNotFoundError(f"no model at {str(path)!r}: expected {_EXPECTED}")
-    folder = path if path.is_dir() else path.parent
-    if path.is_file() and path.name not in (*_FILES, LEGACY_MODEL_FILE):
-        raise ValueError(f"{str(path)!r} is not a model file: expected {_EXPECTED}")
-    legacy = (folder / LEGACY_MODEL_FILE).is_file() and (
-        path.name == LEGACY_MODEL_FILE or not (folder / WEIGHTS_FILE).is_file()
-    )
-    if legacy:
-        zip_file = folder / LEGACY_MODEL_FILE
+        raise FileNotFoundError(f"no model at {str(path)!r}: expected {expected}")
+    if path.is_file() and path.suffix == ".zip":
         if not trust_pickle:
             raise ValueError(
-                f"{str(zip_file)!r} is a Stable-Baselines3 model (a pickle): {PICKLE_RISK}; "
+                f"{str(path)!r} is a Stable-Baselines3 model (a pickle): {PICKLE_RISK}; "
                 f"{CONVERT_HINT}"
             )
-        return _load_sb3(zip_file, base_controller)
-    missing = [name for name in _FILES if not (folder / name).is_file()]
-    if missing:
+        return _load_sb3(path, base_controller)
+    folder = path if path.is_dir() else path.parent
+    if path.is_file() and path.name not in (*_FILES, *_LEGACY_FILES):
+        raise ValueError(f"{str(path)!r} is not a model file: expected {expected}")
+    zip_file = folder / LEGACY_MODEL_FILE
+    if zip_file.is_file() and not is_model_folder(folder):
+        raise ValueError(
+            f"{str(zip_file)!r} is a Stable-Baselines3 model (a pickle): {PICKLE_RISK}; "
+            f"{CONVERT_HINT}"
+        )
+    if not (folder / CONFIG_FILE).is_file():
+        missing = [name for name in _FILES if not (folder / name).is_file()]
         raise FileNotFoundError(
-            f"incomplete model in {str(folder)!r}: expected {_EXPECTED}; missing "
+            f"incomplete model in {str(folder)!r}: expected {expected}; missing "
             f"{', '.join(missing)}"
         )
-    config_file = folder / CONFIG_FILE
-    config = validate_config(read_json(config_file), str(config_file))
-    _check_environment(config, str(config_file), path, base_controller)
-    norm, weights = _read_arrays(folder, config.spec)
+    config = read_config(folder)
+    missing = [name for name in array_files(config.format) if not (folder / name).is_file()]
+    if missing:
+        raise FileNotFoundError(
+            f"incomplete model in {str(folder)!r}: its config.json is of format "
+            f"{config.format}, which needs {', '.join(array_files(config.format))}; missing "
+            f"{', '.join(missing)}"
+        )
+    _check_environment(config, str(folder / CONFIG_FILE), path, base_controller)
+    norm, weights = read_arrays(folder, config)
     return ResidualPolicy(
         config.spec,
         weights,
@@ -516,31 +532,19 @@ def load_policy(
     )
 
 
-def _read_arrays(
-    folder: Path, spec: PolicySpec
-) -> tuple[ObsNorm, dict[str, npt.NDArray[np.float64]]]:
-    norm_file = folder / NORM_FILE
-    stats = read_npz(
-        norm_file, ObsNorm.shapes(spec.input_size), "observation normalisation statistics"
-    )
-    norm = ObsNorm(stats["mean"], stats["var"], float(stats["clip_obs"]), float(stats["epsilon"]))
-    norm.check(str(norm_file))
-    weights = read_npz(folder / WEIGHTS_FILE, spec.weight_shapes(), "policy network weights")
-    return norm, weights
-
-
 def _load_sb3(zip_file: Path, base_controller: Any) -> ResidualPolicy:
-    """A Stable-Baselines3 ``model.zip`` with the ``config.json`` (format 1) and
-    ``obs_norm.npz`` beside it, converted by :func:`policy_from_sb3` (unpickles: opt-in)."""
+    """The Stable-Baselines3 ``zip_file`` (exactly that file) with the ``config.json``
+    (format 1) and ``obs_norm.npz`` beside it, converted by :func:`policy_from_sb3`
+    (unpickles: opt-in)."""
     import zipfile
 
     folder = zip_file.parent
-    config_file, norm_file = folder / CONFIG_FILE, folder / NORM_FILE
+    config_file, norm_file = folder / CONFIG_FILE, folder / LEGACY_NORM_FILE
     for needed in (config_file, norm_file):
         if not needed.is_file():
             raise FileNotFoundError(
-                f"incomplete model in {str(folder)!r}: a {LEGACY_MODEL_FILE} needs "
-                f"{CONFIG_FILE} and {NORM_FILE} beside it; missing {needed.name}"
+                f"incomplete model in {str(folder)!r}: a Stable-Baselines3 {zip_file.name} needs "
+                f"{CONFIG_FILE} and {LEGACY_NORM_FILE} beside it; missing {needed.name}"
             )
     record = read_json(config_file)
     env_id, env_kwargs = split_env_id(
@@ -552,8 +556,11 @@ def _load_sb3(zip_file: Path, base_controller: Any) -> ResidualPolicy:
             f"model.zip is always for {DEFAULT_ENV_ID}"
         )
     name = record.get("name", folder.name)
-    if not isinstance(name, str) or not name:
-        raise ValueError(f"{str(config_file)!r}: field name = {name!r}: expected a string")
+    if not isinstance(name, str) or not name or not name.isprintable() or len(name) > 100:
+        raise ValueError(
+            f"{str(config_file)!r}: field name = {name!r}: expected a printable string of 1 to "
+            "100 characters"
+        )
     found = env_kwargs["base_controller"]
     size = observation_size(found is not None)
     spec_stub = PolicySpec(observation_size=size, hidden_sizes=())
@@ -572,7 +579,7 @@ def _load_sb3(zip_file: Path, base_controller: Any) -> ResidualPolicy:
     except Exception as err:  # SB3 raises many types on a bad archive
         raise ValueError(
             f"{str(zip_file)!r} is not a valid Stable-Baselines3 PPO model: "
-            f"{type(err).__name__}: {err}"
+            f"{type(err).__name__}: {' '.join(str(err).split())[:200]}"
         ) from None
     if model.observation_space.shape != (size,):
         raise ValueError(

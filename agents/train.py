@@ -12,7 +12,7 @@ stack in plain view, then PPO. Everything of a run goes to ``runs/{exp_name}__{s
                            statistics (no pickle) every ``--checkpoint-every`` decisions and
                            at the end; ``--resume`` continues from the last one
     best/                  the best model on the validation scenarios
-    model/                 the final model: config.json, policy.npz, obs_norm.npz
+    model/                 the final model: config.json, policy.safetensors, obs_norm.safetensors
 
 PPO trains in whole rollouts of ``n_steps * num_envs`` decisions, so ``--total-timesteps`` is
 rounded up to a whole number of rollouts (the start line says so). An existing run folder is

@@ -38,6 +38,7 @@ from drill_env.scenarios import Randomization, Scenario, SpeedProfile, WobProfil
 
 __all__ = [
     "DEFAULT_TORQUE_LIMITS",
+    "COUPLED_ENV_ID",
     "ENV_ID",
     "FIELD_ENV_ID",
     "DISTRIBUTED_PRESETS",
@@ -66,6 +67,7 @@ __version__ = "0.1.0"
 
 ENV_ID = "DrillString-v0"
 FIELD_ENV_ID = "DrillStringField-v0"
+COUPLED_ENV_ID = "DrillStringCoupled-v0"
 
 # No registered step limit: the envs truncate themselves after ``episode_s`` and report the
 # number of decisions that takes as ``env.spec.max_episode_steps``.
@@ -76,3 +78,6 @@ for _id, _name in ((ENV_ID, "DrillString"), (FIELD_ENV_ID, "DrillStringField")):
             entry_point=f"drill_env.env:{_name}Env",
             vector_entry_point=f"drill_env.vector:{_name}VectorEnv",
         )
+
+if COUPLED_ENV_ID not in registry:
+    register(id=COUPLED_ENV_ID, entry_point="drill_env.coupled_env:DrillStringCoupledEnv")

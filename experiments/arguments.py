@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any, Final, NoReturn
 
 __all__ = [
@@ -20,9 +22,11 @@ __all__ = [
     "ArgumentParser",
     "HelpFormatter",
     "error_line",
+    "check_output_folder",
     "names_type",
     "number_type",
     "one_line",
+    "output_folder",
     "run_command",
     "seed_option",
     "seed_type",
@@ -167,6 +171,41 @@ def names_type(valid: Callable[[], Sequence[str]], what: str) -> Callable[[str],
 
     parse.__name__ = what
     return parse
+
+
+def check_output_folder(path: str | Path) -> Path:
+    """``path`` as the output folder of a command, after checking that the command can write
+    there: an existing folder that is writable, or a missing one whose nearest existing parent
+    is a writable folder (it is not created here).
+
+    Raises:
+        ValueError: ``path`` is an existing file (or lies inside one), or the folder it is or
+            would be made in is not writable.
+    """
+    folder = Path(path)
+    if os.path.lexists(folder) and not folder.is_dir():
+        what = "is a file" if folder.is_file() else "is a FIFO, a device or a broken link"
+        raise ValueError(f"{str(folder)!r} {what}, not a folder: choose a folder")
+    existing = folder
+    while not os.path.lexists(existing):
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ValueError(f"{str(folder)!r} lies inside {str(existing)!r}, which is a file")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise ValueError(f"{str(folder)!r}: the folder {str(existing)!r} is not writable")
+    return folder
+
+
+def output_folder(text: str) -> Path:
+    """The argparse ``type`` of ``--out``: :func:`check_output_folder` (give the option's
+    default as a string, so that the default is checked too)."""
+    try:
+        return check_output_folder(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
+output_folder.__name__ = "folder"
 
 
 def run_command(prog: str, main: Callable[[], int], debug: bool) -> int:

@@ -61,7 +61,13 @@ import numpy as np
 from drill_env.evaluation import Policy, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
 from drill_env.scenarios import WobProfile
-from experiments.arguments import ArgumentParser, number_type, one_line, seed_option
+from experiments.arguments import (
+    ArgumentParser,
+    number_type,
+    one_line,
+    output_folder,
+    seed_option,
+)
 from experiments.controllers import (
     CONTROLLERS_HELP,
     controller_type,
@@ -965,7 +971,11 @@ def _parser() -> ArgumentParser:
         "default: the latest version of every shipped suite",
     )
     parser.add_argument(
-        "--out", type=Path, default=Path("results/benchmark"), metavar="DIR", help="output folder"
+        "--out",
+        type=output_folder,
+        default="results/benchmark",
+        metavar="DIR",
+        help="output folder",
     )
     parser.add_argument(
         "--resamples",

@@ -2,7 +2,7 @@
 
 Subcommands, each a module with ``main(argv)`` imported only when used (so the core needs no
 torch): ``compare``, ``map``, ``probability-map``, ``train``, ``sweep-train``, ``evaluate``,
-``convert``, ``waves``, ``realism``, ``tune``, ``benchmark``. Every user error ends with
+``convert``, ``waves``, ``realism``, ``tune``, ``coupled``, ``benchmark``. Every user error ends with
 one line on standard error and exit code 2 (:mod:`experiments.arguments`); ``DRILL_GYM_DEBUG=1``
 shows the traceback instead.
 """
@@ -55,6 +55,10 @@ SUBCOMMANDS = {
     "tune": (
         "experiments.tune_baselines",
         "tune the speed loops' factors with the agent's budget, scenarios and selection rule",
+    ),
+    "coupled": (
+        "experiments.coupled",
+        "the coupled axial-torsional string with the regenerative bit: standard run, stability map",
     ),
     "benchmark": (
         "experiments.benchmark",

@@ -46,7 +46,12 @@ from drill_env.evaluation import Trace, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
 from drill_env.parameters import PLANT_DT_S, resolve_parameters
 from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, WobProfile
-from experiments.arguments import ArgumentParser, number_type, seed_option
+from experiments.arguments import (
+    ArgumentParser,
+    number_type,
+    output_folder,
+    seed_option,
+)
 from experiments.controllers import CONTROLLERS_HELP, controller_type, refuse_on_ray
 from experiments.field import (
     COMPARE_CONDITIONS,
@@ -817,7 +822,9 @@ def _parser() -> ArgumentParser:
         help="length of every run, s (a multiple of the 1 ms plant step)",
     )
     seed_option(p, "reset seed of every run (it drives the measurement noise)")
-    p.add_argument("--out", type=Path, default=Path("results"), metavar="DIR", help="output folder")
+    p.add_argument(
+        "--out", type=output_folder, default="results", metavar="DIR", help="output folder"
+    )
     p.add_argument(
         "--reading",
         choices=("plant", "controller"),
@@ -881,7 +888,7 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
     agent = None if args.no_agent else load_agent(agent_loader)
     start = time.perf_counter()
     figures = not args.no_plots
-    if sweep_requested(args):  # on the sweep runner: Ray, a results file, a resume
+    if sweep_requested(args):  # on the sweep runner: Ray, a results database, a resume
         from experiments.sweep_studies import run_compare_sweep
 
         rows, traces, figures = run_compare_sweep(

@@ -1,5 +1,5 @@
-"""``drill-gym convert OLD NEW --trust-pickle``: an old Stable-Baselines3 ``model.zip`` to the
-portable model format (:func:`agents.convert.convert_sb3_model`)."""
+"""``drill-gym convert OLD NEW``: a model of an earlier format to the current one
+(:func:`agents.convert.convert_model`)."""
 
 from __future__ import annotations
 
@@ -12,16 +12,21 @@ from experiments.arguments import ArgumentParser
 __all__ = ["DESCRIPTION", "main"]
 
 DESCRIPTION: Final = """\
-Convert a model folder of an earlier version (a Stable-Baselines3 model.zip with its
-config.json and obs_norm.npz) to the portable model format (config.json, policy.npz,
-obs_norm.npz), which loads without running any code and needs only NumPy.
+Convert a model of an earlier format to the current one (config.json, policy.safetensors,
+obs_norm.safetensors), which loads without running any code and needs only NumPy:
 
-model.zip is a pickle: reading it runs any code its author put in it. Convert only files you
-made yourself or got from a source you trust; the result can then be shared safely. NEW may be
-OLD itself (model.zip is then left in place). Needs the rl extra (torch, Stable-Baselines3).
+  - a model folder of the previous format (config.json, policy.npz, obs_norm.npz): read
+    without running code, the arrays copied bit for bit;
+  - a Stable-Baselines3 .zip file of the first format, with the config.json and obs_norm.npz
+    beside it: a pickle, read only with --trust-pickle, and only the file you name (a
+    folder is never searched for one). Needs the rl extra (torch, Stable-Baselines3).
 
-example:
-  drill-gym convert runs/old/model runs/old/model_portable --trust-pickle
+NEW may be OLD's folder itself (the old files are left in place), a new or empty folder, or a
+model folder (its model files are replaced); any other folder is refused.
+
+examples:
+  drill-gym convert runs/old/model runs/old/model_v3
+  drill-gym convert runs/older/model/model.zip runs/older/model_v3 --trust-pickle
 """
 
 
@@ -29,12 +34,14 @@ def _parser() -> ArgumentParser:
     from agents.policy import PICKLE_RISK
 
     parser = ArgumentParser(prog="drill-gym convert", description=DESCRIPTION)
-    parser.add_argument("old", metavar="OLD", help="the old model folder (with model.zip)")
-    parser.add_argument("new", metavar="NEW", help="the new model folder (may be OLD)")
+    parser.add_argument(
+        "old", metavar="OLD", help="the old model folder, or a Stable-Baselines3 .zip file"
+    )
+    parser.add_argument("new", metavar="NEW", help="the new model folder (may be OLD's folder)")
     parser.add_argument(
         "--trust-pickle",
         action="store_true",
-        help=f"required: model.zip is a pickle, and {PICKLE_RISK}; pass it only for a file "
+        help=f"read the .zip file OLD names, a pickle: {PICKLE_RISK}; pass it only for a file "
         "you made yourself or got from a source you trust",
     )
     return parser
@@ -44,24 +51,26 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Convert; returns the exit code.
 
     Raises:
-        ValueError: The source is not a valid Stable-Baselines3 model.
-        FileNotFoundError: No model.zip in OLD.
+        ValueError: OLD is not a valid model, a pickle not covered by --trust-pickle, or NEW
+            holds other files.
+        FileNotFoundError: OLD or one of its files does not exist.
     """
     from agents.policy import PICKLE_RISK
 
     parser = _parser()
     args = parser.parse_args(list(argv) if argv is not None else None)
-    if not args.trust_pickle:
-        parser.fail("--trust-pickle", f"is required: model.zip is a pickle, and {PICKLE_RISK}")
-    old = Path(args.old)
-    if not (old.is_dir() or old.is_file()):
-        parser.error(
-            f"OLD = {args.old!r} does not exist: expected an old model folder (with model.zip) "
-            "or its model.zip"
+    if args.old.endswith(".zip") and not Path(args.old).is_dir() and not args.trust_pickle:
+        parser.fail(
+            "--trust-pickle", f"is required to read OLD = {args.old!r}: a pickle, and {PICKLE_RISK}"
         )
-    from agents.convert import convert_sb3_model
+    if not Path(args.old).exists():
+        parser.error(
+            f"OLD = {args.old!r} does not exist: expected a model folder or a Stable-Baselines3 "
+            ".zip file"
+        )
+    from agents.convert import convert_model
 
-    policy = convert_sb3_model(args.old, args.new, trust_pickle=True)
+    policy = convert_model(args.old, args.new, trust_pickle=args.trust_pickle)
     print(f"converted {policy.name} from {args.old} to {args.new}")
     return 0
 

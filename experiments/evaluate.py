@@ -51,7 +51,7 @@ from agents.policy import (
 from drill_env.control import controller_names
 from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
-from experiments.arguments import ArgumentParser, names_type
+from experiments.arguments import ArgumentParser, check_output_folder, names_type, output_folder
 from experiments.controllers import CONTROLLERS_HELP, controller_type, refuse_on_ray
 from experiments.field import (
     ENV_IDS,
@@ -552,8 +552,8 @@ def _parser() -> ArgumentParser:
         "models",
         nargs="*",
         metavar="MODEL",
-        help="model folders (config.json, policy.npz, obs_norm.npz; default: every model "
-        "shipped in agents/models/)",
+        help="model folders (config.json, policy.safetensors, obs_norm.safetensors; default: "
+        "every model shipped in agents/models/)",
     )
     parser.add_argument(
         "--controllers",
@@ -585,7 +585,7 @@ def _parser() -> ArgumentParser:
     )
     parser.add_argument(
         "--out",
-        type=Path,
+        type=output_folder,
         default=None,
         metavar="DIR",
         help="output folder (default: results/evaluate, results/evaluate_corners for the "
@@ -599,8 +599,8 @@ def _parser() -> ArgumentParser:
     parser.add_argument(
         "--trust-pickle",
         action="store_true",
-        help=f"also load Stable-Baselines3 model.zip files (older models): {PICKLE_RISK}; "
-        "only for files you made yourself or got from a source you trust",
+        help=f"also load the Stable-Baselines3 .zip files (older models) named as MODEL: "
+        f"{PICKLE_RISK}; only for files you made yourself or got from a source you trust",
     )
     add_sweep_options(
         parser,
@@ -614,6 +614,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """``drill-gym evaluate [MODEL ...]``; returns the exit code (see ``--help``)."""
     parser = _parser()
     args = parser.parse_args(list(argv) if argv is not None else None)
+    default_out = "evaluate" if args.scenario_set == "heldout" else f"evaluate_{args.scenario_set}"
+    out: Path = args.out if args.out is not None else Path("results") / default_out
+    try:
+        check_output_folder(out)
+    except ValueError as err:
+        parser.fail("--out", str(err))
 
     field = is_field(args.env)
     paths = [Path(p) for p in args.models] or shipped_models()
@@ -646,8 +652,6 @@ def main(argv: Sequence[str] | None = None) -> int:
                 f"{args.env}: allowed {held_out[0].id} to {held_out[-1].id}",
             )
         scenarios = [s for s in held_out if s.id in args.scenarios]
-    default_out = "evaluate" if args.scenario_set == "heldout" else f"evaluate_{args.scenario_set}"
-    out: Path = args.out if args.out is not None else Path("results") / default_out
     t0 = time.perf_counter()
     base_names = sorted({a.env_kwargs.get("base_controller") or BASE_CONTROLLER for a in agents})
     if field and not agents:
@@ -683,7 +687,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         ]
     keep = [*bases, *agent_labels]
     figures = not args.no_plots
-    if sweep_requested(args):  # on the sweep runner: Ray, a results file, a resume
+    if sweep_requested(args):  # on the sweep runner: Ray, a results database, a resume
         from experiments.sweep_studies import run_evaluate_sweep
 
         rows, traces, figures = run_evaluate_sweep(args, agents, controllers, scenarios, keep)

@@ -62,7 +62,14 @@ from drill_env.limits import MAX_REFERENCE_RAD_S, MAX_WOB_N
 from drill_env.metrics import WindowStatistics
 from drill_env.parameters import PLANT_DT_S, PRESETS
 from drill_env.scenarios import FieldRandomization, Randomization
-from experiments.arguments import ArgumentParser, names_type, number_type, seed_option
+from experiments.arguments import (
+    ArgumentParser,
+    names_type,
+    number_type,
+    output_folder,
+    seed_option,
+)
+from experiments.results_db import Fields, Number, Schema, Values
 from experiments.stick_slip_map import DEFAULT_WINDOW_S, grid_values, stick_slip
 from experiments.sweep import (
     PROBABILITY_TASK_CELLS,
@@ -445,6 +452,16 @@ class ProbabilityStudy:
             for j in range(len(self.reference_speed_rad_s))
         ]
 
+    def record_schema(self, item: str) -> Schema:
+        """A cell: the severity (>= 0) and the stuck fraction (in [0, 1]) of each draw
+        (``None``: diverged)."""
+        return Fields(
+            {
+                "severity": Values(Number(low=0.0), self.draws),
+                "stuck_fraction": Values(Number(low=0.0, high=1.0), self.draws),
+            }
+        )
+
     def tasks(self, missing: Sequence[str]) -> list[Task]:
         """``task_cells`` missing cells of one controller per task."""
         wanted = set(missing)
@@ -655,7 +672,9 @@ def _parser() -> ArgumentParser:
         choices=sorted(PRESETS) + sorted(DISTRIBUTED_PRESETS),
         help="plant preset (default: zribi2024 on DrillString-v0, field_2500m on the field env)",
     )
-    p.add_argument("--out", type=Path, default=Path("results"), metavar="DIR", help="output folder")
+    p.add_argument(
+        "--out", type=output_folder, default="results", metavar="DIR", help="output folder"
+    )
     seed_option(p, "draw k of every cell is reset with seed + k", base=True)
     p.add_argument("--no-plots", action="store_true", help="write the CSV files only")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -730,13 +749,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     study = study_from_args(parser, args)
     backend = backend_from_args(args)
-    path = results_path_from_args(args, Path(args.out) / "stick_slip_probability.jsonl")
+    path = results_path_from_args(args, Path(args.out) / "stick_slip_probability.sqlite")
     started = time.perf_counter()
-    outcome = run_sweep(study, backend, path, resume=args.resume, progress=not args.no_progress)
+    outcome = run_sweep(
+        study, backend, path, args.resume, not args.no_progress, overwrite=args.overwrite
+    )
     print(
         f"{study.name} on {backend.describe()}: {len(study.items())} cells x {study.draws} draws "
         f"x {study.duration_s:g} s ({len(outcome.ran)} tasks run, {outcome.loaded} cells read "
-        f"from the results file) in {time.perf_counter() - started:.1f} s"
+        f"from the results database) in {time.perf_counter() - started:.1f} s"
         + (f"; results in {path}" if path else "")
     )
     for result in study.maps(outcome):

@@ -63,9 +63,16 @@ from drill_env.control import controller_names
 from drill_env.distributed import Chain, chain_from_parameters
 from drill_env.evaluation import ZeroAction, episode_metrics
 from drill_env.options import REALISM_KEYWORDS, EnvConfig, FieldEnvConfig, realism_keywords
-from experiments.arguments import ArgumentParser, names_type, number_type, seed_option
+from experiments.arguments import (
+    ArgumentParser,
+    names_type,
+    number_type,
+    output_folder,
+    seed_option,
+)
 from experiments.evaluate import FIELD_HELD_OUT, HELD_OUT, HeldOutScenario
 from experiments.field import ENV_IDS, FIELD_ENV, PAPER_ENV, run_on
+from experiments.results_db import Fields, Flag, Number, Schema
 from experiments.sweep import (
     Task,
     TaskResult,
@@ -498,6 +505,12 @@ class RealismStudy:
     def items(self) -> list[str]:
         """Every item key."""
         return [r["item"] for r in self.runs()]
+
+    def record_schema(self, item: str) -> Schema:
+        """A run's metrics: numbers (``None``: not defined) and ``diverged``."""
+        return Fields(
+            {"diverged": Flag(), "torque_at_limit": Number(low=0.0, high=1.0)}, rest=Number()
+        )
 
     def tasks(self, missing: Sequence[str]) -> list[Task]:
         """The missing runs in tasks of :attr:`task_runs`."""
@@ -995,7 +1008,7 @@ def _parser() -> ArgumentParser:
     )
     seed_option(parser, "added to every scenario's own reset seed (it drives the noise)", base=True)
     parser.add_argument(
-        "--out", type=Path, default=Path("results/realism"), metavar="DIR", help="output folder"
+        "--out", type=output_folder, default="results/realism", metavar="DIR", help="output folder"
     )
     parser.add_argument("--no-plots", action="store_true", help="write no figures")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -1040,8 +1053,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         study,
         progress=not args.no_progress,
         backend=backend_from_args(args),
-        results_path=results_path_from_args(args, out / "results.jsonl"),
+        results_path=results_path_from_args(args, out / "realism.sqlite"),
         resume=bool(args.resume),
+        overwrite=bool(args.overwrite),
     )
     summary = {
         "seconds": round(seconds, 1),

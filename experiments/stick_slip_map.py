@@ -51,7 +51,12 @@ from drill_env.metrics import WindowStatistics
 from drill_env.options import REALISM_LEVELS, realism_keywords
 from drill_env.parameters import PLANT_DT_S, PRESETS
 from drill_env.scenarios import RPM
-from experiments.arguments import ArgumentParser, number_type, seed_option
+from experiments.arguments import (
+    ArgumentParser,
+    number_type,
+    output_folder,
+    seed_option,
+)
 from experiments.controllers import CONTROLLERS_HELP, controller_type, refuse_on_ray
 from experiments.field import (
     ENV_IDS,
@@ -696,7 +701,7 @@ def _parser() -> ArgumentParser:
         f"used; files end in _LEVEL; default: the env's own, which is ideal on {PAPER_ENV})",
     )
     parser.add_argument(
-        "--out", type=Path, default=Path("results"), metavar="DIR", help="output folder"
+        "--out", type=output_folder, default="results", metavar="DIR", help="output folder"
     )
     seed_option(
         parser,
@@ -757,7 +762,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             parser.fail(
                 "--models",
                 "maps of models run serially: without --workers, --ray, "
-                "--address, --results and --resume",
+                "--address, --results, --resume and --overwrite",
             )
         from agents.policy import load_policy
 
@@ -790,7 +795,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         runs = [(name, None, None) for name in dict.fromkeys(args.controllers)]
         runs += [(policy, None, None) for policy in policies]
     computed: Iterable[tuple[StickSlipMap, float | None]]
-    if sweep_requested(args):  # on the sweep runner: Ray, a results file, a resume
+    if sweep_requested(args):  # on the sweep runner: Ray, a results database, a resume
         from experiments.sweep_studies import run_map_sweep
 
         named = [(name, obs, depth) for name, obs, depth in runs if isinstance(name, str)]

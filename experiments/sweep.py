@@ -26,11 +26,14 @@ record passes through its JSON encoding (non-finite floats as ``null``; Python's
 ``repr`` round-trips exactly), on every path, so a resumed sweep assembles exactly the tables
 of a clean one.
 
-The results file (JSON lines): a header ``{"sweep": NAME, "spec": SPEC, "spec_hash": H,
-"format": 1}``, then one line ``{"task": KEY, "items": {ITEM: RECORD, ...}}`` per finished
-task, appended (and flushed) as it arrives. With ``resume=True`` the items already in the
-file (written by the same spec; another spec is an error) are not run again; a last line cut
-short by an interruption is ignored. Without it, the file is started anew.
+The results database (:mod:`experiments.results_db`, SQLite): one row per finished item,
+keyed by the study's settings hash (:func:`spec_hash`), the package version and the item,
+each finished task written in one transaction as it arrives. Several studies (and several
+processes) share one file, each with its own rows. With ``resume=True`` the items of the same
+settings and version already in the file are not run again (each read back through the
+study's :meth:`Study.record_schema`); without it, a file that already holds rows of these
+settings is refused, unless ``overwrite``, which deletes just those rows. A file that is not a
+results database is refused before any work starts and never written.
 
 Ray is imported only when a sweep runs on it (the ``[scale]`` extra).
 """
@@ -51,6 +54,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final, NamedTuple, Protocol
 
 from experiments.arguments import number_type
+from experiments.results_db import ResultsDatabase, Schema, SchemaError, as_json
 from experiments.tables import json_clean
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -63,7 +67,6 @@ __all__ = [
     "EVALUATE_TASK_SCENARIOS",
     "MAP_TASK_CELLS",
     "PROBABILITY_TASK_CELLS",
-    "RESULTS_FORMAT",
     "WORKER_ENV",
     "Backend",
     "Study",
@@ -92,8 +95,6 @@ ADDRESS_VARIABLE: Final = "RAY_ADDRESS"
 """Environment variable with the address of a Ray cluster to join (``--address`` wins)."""
 DEFAULT_MAX_RETRIES: Final = 3
 """Times a task is run again when its worker process dies."""
-RESULTS_FORMAT: Final = 1
-"""Version of the results file's layout."""
 MAP_TASK_CELLS: Final = 80
 """Default cells per map task (rounded down to whole WOB rows, at least one row): enough
 strings per compiled call to amortise the cost of a task (``benchmarks/sweep_scaling.py``:
@@ -112,7 +113,7 @@ class TaskResult(NamedTuple):
     Attributes:
         records: One JSON-able record per item the task produced, by item key.
         extras: Anything else the driver needs in memory (traces for figures); never written
-            to the results file (``None``: nothing).
+            to the results database (``None``: nothing).
     """
 
     records: dict[str, dict[str, Any]]
@@ -143,7 +144,7 @@ class Study(Protocol):
 
     @property
     def name(self) -> str:
-        """Name of the sweep, in the results file's header and the progress bar."""
+        """Name of the sweep, in the results database and the progress bar."""
         ...
 
     def spec(self) -> dict[str, Any]:
@@ -156,6 +157,11 @@ class Study(Protocol):
 
     def tasks(self, missing: Sequence[str]) -> list[Task]:
         """Tasks that produce exactly the items ``missing`` (in item order)."""
+        ...
+
+    def record_schema(self, item: str) -> Schema:
+        """What the record of ``item`` must be (:mod:`experiments.results_db`); every record,
+        made now or read back from the results database, is checked against it."""
         ...
 
 
@@ -208,9 +214,11 @@ class SweepOutcome:
         records: Item key -> record, for every item, in the study's item order.
         extras: Task key -> the extras of the tasks run this time (none for loaded items).
         ran: Keys of the tasks run this time, in the order they finished.
-        loaded: Items read from the results file (resume).
+        loaded: Items read from the results database (resume).
         wall_time_s: Wall-clock time of the sweep, s.
-        results_path: The results file (``None``: none written).
+        results_path: The results database (``None``: none written).
+        other_rows: Rows of other studies (other settings or versions) in the results database,
+            left as they are.
     """
 
     records: dict[str, dict[str, Any]]
@@ -219,6 +227,7 @@ class SweepOutcome:
     loaded: int = 0
     wall_time_s: float = 0.0
     results_path: Path | None = None
+    other_rows: int = 0
 
 
 def spec_hash(name: str, spec: Mapping[str, Any]) -> str:
@@ -229,88 +238,27 @@ def spec_hash(name: str, spec: Mapping[str, Any]) -> str:
 
 def _encoded(record: Mapping[str, Any]) -> dict[str, Any]:
     """``record`` as it reads back from JSON (the same on every path)."""
-    decoded: dict[str, Any] = json.loads(json.dumps(json_clean(dict(record)), allow_nan=False))
+    decoded: dict[str, Any] = as_json(dict(record))
     return decoded
 
 
-def read_results(path: Path, name: str, spec: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
-    """The item records in the results file ``path`` of the sweep ``name`` with ``spec``.
+def read_results(path: Path, study: Study) -> dict[str, dict[str, Any]]:
+    """The records of ``study`` (its settings and the package version) in the results
+    database ``path``, by item, each read through the study's schema; nothing is written.
 
     Raises:
-        ValueError: The file is not a results file, or another sweep or spec wrote it.
+        ValueError: ``path`` is not a results database, or a row of the study does not fit
+            its schema (the message names the file and the row).
+        OSError: ``path`` does not exist or cannot be read.
     """
-    records: dict[str, dict[str, Any]] = {}
-    text = path.read_text()
-    lines = text.split("\n")
+    spec = study.spec()
+    database = ResultsDatabase.open(
+        path, study.name, spec, spec_hash(study.name, spec), read_only=True
+    )
     try:
-        header = json.loads(lines[0])
-    except ValueError:
-        raise ValueError(
-            f"results file {str(path)!r} does not start with a sweep header: not a results "
-            "file of drill-gym; delete it or choose another --results"
-        ) from None
-    if not isinstance(header, dict) or header.get("format") != RESULTS_FORMAT:
-        raise ValueError(
-            f"results file {str(path)!r}: expected a header with format {RESULTS_FORMAT}, got "
-            f"{str(header)[:80]!r}"
-        )
-    if header.get("spec_hash") != spec_hash(name, spec):
-        raise ValueError(
-            f"results file {str(path)!r} was written by another sweep ({header.get('sweep')!r} "
-            "with other settings): --resume continues only the same sweep; run without "
-            "--resume to start again, or choose another --results"
-        )
-    last = len(lines) - 1
-    for k, line in enumerate(lines[1:], 1):
-        if not line.strip():
-            continue
-        try:
-            entry = json.loads(line)
-        except ValueError:
-            if k == last:  # the last line, cut short by an interruption (no newline yet)
-                break
-            raise ValueError(f"results file {str(path)!r}: line {k + 1} is not JSON") from None
-        items = entry.get("items") if isinstance(entry, dict) else None
-        if not isinstance(items, dict):
-            raise ValueError(f"results file {str(path)!r}: line {k + 1} has no items")
-        records.update(items)
-    return records
-
-
-class _ResultsFile:
-    """The JSON-lines results file, appended to as tasks finish."""
-
-    def __init__(self, path: Path, name: str, spec: Mapping[str, Any], resume: bool) -> None:
-        self.path = path
-        path.parent.mkdir(parents=True, exist_ok=True)
-        if resume and path.is_file() and path.stat().st_size:
-            self.loaded = read_results(path, name, spec)
-            # An interrupted write leaves a partial last line: cut it off, then append.
-            data = path.read_bytes()
-            complete = data.rfind(b"\n") + 1
-            if complete < len(data):
-                with path.open("r+b") as f:
-                    f.truncate(complete)
-            self._file = path.open("a")
-        else:
-            self.loaded = {}
-            self._file = path.open("w")
-            header = {
-                "sweep": name,
-                "spec": json_clean(dict(spec)),
-                "spec_hash": spec_hash(name, spec),
-                "format": RESULTS_FORMAT,
-            }
-            self._file.write(json.dumps(header, allow_nan=False) + "\n")
-        self._file.flush()
-
-    def append(self, task: str, records: Mapping[str, Any]) -> None:
-        line = json.dumps({"task": task, "items": records}, allow_nan=False)
-        self._file.write(line + "\n")
-        self._file.flush()
-
-    def close(self) -> None:
-        self._file.close()
+        return database.load(study.items(), study.record_schema)
+    finally:
+        database.close()
 
 
 def chunks(values: Sequence[Any], size: int) -> Iterator[list[Any]]:
@@ -333,23 +281,30 @@ def run_sweep(
     results_path: Path | None = None,
     resume: bool = False,
     progress: bool = True,
+    overwrite: bool = False,
 ) -> SweepOutcome:
     """Run the missing items of ``study`` on ``backend`` and collect every record.
 
     Args:
         study: The study.
         backend: Where the tasks run (default: serially in this process).
-        results_path: The JSON-lines results file (``None``: none is written and nothing can
-            be resumed).
-        resume: Keep the items already in ``results_path`` (same spec) and run only the rest.
+        results_path: The results database (:mod:`experiments.results_db`; a missing file is
+            made; ``None``: none is written and nothing can be resumed).
+        resume: Keep the items of the same settings and version already in ``results_path``
+            and run only the rest.
         progress: Show a progress bar of finished tasks on standard error.
+        overwrite: Delete the rows of the same settings and version from ``results_path``
+            first (without it, and without ``resume``, such rows are an error).
 
     Returns:
         The :class:`SweepOutcome`.
 
     Raises:
-        ValueError: ``resume`` without ``results_path``, a results file of another spec, a
-            study without items, or tasks that do not produce their items.
+        ValueError: ``resume`` or ``overwrite`` without ``results_path``, a file that is not a
+            results database, rows of the same settings without ``resume`` or ``overwrite``,
+            a row that does not fit the study's schema, a study without items, or tasks that
+            do not produce their items.
+        OSError: The results database cannot be made or written.
     """
     backend = backend or Backend()
     started = time.perf_counter()
@@ -359,42 +314,66 @@ def run_sweep(
         raise ValueError(f"sweep {study.name!r} has no items: the grid is empty")
     if resume and results_path is None:
         raise ValueError("resume needs a results file (--results)")
+    if overwrite and results_path is None:
+        raise ValueError("overwrite needs a results file (--results)")
     if backend.distributed:
         import ray  # noqa: F401  (a missing scale extra fails here, before any file is written)
-    results = None if results_path is None else _ResultsFile(results_path, study.name, spec, resume)
-    loaded = {} if results is None else {k: v for k, v in results.loaded.items() if k in items}
-    missing = [k for k in items if k not in loaded]
-    tasks = study.tasks(missing) if missing else []
-    produced = [i for t in tasks for i in t.items]
-    if sorted(produced) != sorted(missing):
-        raise ValueError(f"sweep {study.name!r}: its tasks do not produce the missing items")
-    outcome = SweepOutcome(records=dict(loaded), loaded=len(loaded), results_path=results_path)
-
-    from tqdm import tqdm
-
-    bar = tqdm(
-        total=len(tasks),
-        desc=f"{study.name} ({backend.describe()})",
-        unit="task",
-        file=sys.stderr,
-        disable=not progress,
-        leave=False,
-    )
-
-    def finished(task: Task, result: TaskResult) -> None:
-        if set(result.records) != set(task.items):
-            raise ValueError(f"task {task.key!r} returned items other than its own")
-        encoded = {k: _encoded(result.records[k]) for k in task.items}
-        if results is not None:
-            results.append(task.key, encoded)
-        outcome.records.update(encoded)
-        if result.extras is not None:
-            outcome.extras[task.key] = result.extras
-        outcome.ran.append(task.key)
-        bar.set_postfix_str(task.key, refresh=False)
-        bar.update()
-
+    database = None
+    if results_path is not None:
+        database = ResultsDatabase.open(
+            results_path,
+            study.name,
+            spec,
+            spec_hash(study.name, spec),
+            resume=resume,
+            overwrite=overwrite,
+        )
     try:
+        loaded = {} if database is None else database.load(items, study.record_schema)
+        missing = [k for k in items if k not in loaded]
+        tasks = study.tasks(missing) if missing else []
+        produced = [i for t in tasks for i in t.items]
+        if sorted(produced) != sorted(missing):
+            raise ValueError(f"sweep {study.name!r}: its tasks do not produce the missing items")
+        outcome = SweepOutcome(
+            records=dict(loaded),
+            loaded=len(loaded),
+            results_path=results_path,
+            other_rows=0 if database is None else database.other_rows,
+        )
+
+        from tqdm import tqdm
+
+        bar = tqdm(
+            total=len(tasks),
+            desc=f"{study.name} ({backend.describe()})",
+            unit="task",
+            file=sys.stderr,
+            disable=not progress,
+            leave=False,
+        )
+
+        def finished(task: Task, result: TaskResult) -> None:
+            if set(result.records) != set(task.items):
+                raise ValueError(f"task {task.key!r} returned items other than its own")
+            encoded = {k: _encoded(result.records[k]) for k in task.items}
+            for item, record in encoded.items():
+                try:
+                    study.record_schema(item).check(record, "")
+                except SchemaError as err:
+                    raise ValueError(
+                        f"sweep {study.name!r}: task {task.key!r} made a record of item "
+                        f"{item!r} that does not fit the study's schema: {err}"
+                    ) from None
+            if database is not None:
+                database.add(task.key, encoded)
+            outcome.records.update(encoded)
+            if result.extras is not None:
+                outcome.extras[task.key] = result.extras
+            outcome.ran.append(task.key)
+            bar.set_postfix_str(task.key, refresh=False)
+            bar.update()
+
         with bar:
             if backend.distributed and tasks:
                 _run_on_ray(tasks, backend, finished)
@@ -402,8 +381,8 @@ def run_sweep(
                 for task in tasks:
                     finished(task, _execute(task.function, task.kwargs))
     finally:
-        if results is not None:
-            results.close()
+        if database is not None:
+            database.close()
     outcome.records = {k: outcome.records[k] for k in items}
     outcome.wall_time_s = time.perf_counter() - started
     return outcome
@@ -471,7 +450,7 @@ def _run_on_ray(
 # ---------------------------------------------------------------------------- command line
 def add_sweep_options(parser: argparse.ArgumentParser, task_size_help: str) -> None:
     """The options of a study on the runner: ``--workers``, ``--ray``, ``--address``,
-    ``--task-size``, ``--results``, ``--resume``, ``--max-retries``."""
+    ``--task-size``, ``--results``, ``--resume``, ``--overwrite``, ``--max-retries``."""
     group = parser.add_argument_group("sweeps (Ray: the scale extra)")
     group.add_argument(
         "--workers",
@@ -503,14 +482,21 @@ def add_sweep_options(parser: argparse.ArgumentParser, task_size_help: str) -> N
         type=Path,
         default=None,
         metavar="FILE",
-        help="JSON-lines file each finished task is appended to (default: a file in --out "
-        "when the sweep runs on Ray or with --resume; none for a plain serial run)",
+        help="SQLite results database each finished task is written to; several studies may "
+        "share one (default: a file in --out when the sweep runs on Ray or with --resume or "
+        "--overwrite; none for a plain serial run)",
     )
     group.add_argument(
         "--resume",
         action="store_true",
-        help="keep the tasks already in the results file (written by the same settings) and "
-        "run only the missing ones",
+        help="keep the items of the same settings already in the results database and run "
+        "only the missing ones",
+    )
+    group.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="delete the results of the same settings from the results database and run them "
+        "again (without it and --resume, such results are an error; other rows stay)",
     )
     group.add_argument(
         "--max-retries",
@@ -522,13 +508,14 @@ def add_sweep_options(parser: argparse.ArgumentParser, task_size_help: str) -> N
 
 
 def sweep_requested(args: argparse.Namespace) -> bool:
-    """Whether the options ask for the sweep runner (Ray, a results file or a resume)."""
+    """Whether the options ask for the sweep runner (Ray, a results database, a resume)."""
     return bool(
         args.workers > 1
         or args.ray
         or args.address
         or args.results is not None
         or args.resume
+        or args.overwrite
         or args.task_size is not None
     )
 
@@ -544,10 +531,10 @@ def backend_from_args(args: argparse.Namespace) -> Backend:
 
 
 def results_path_from_args(args: argparse.Namespace, default: Path) -> Path | None:
-    """The results file: ``--results``, else ``default`` when the sweep is on Ray or resumes,
-    else ``None``."""
+    """The results database: ``--results``, else ``default`` when the sweep is on Ray, resumes
+    or overwrites, else ``None``."""
     if args.results is not None:
         return Path(args.results)
-    if args.resume or backend_from_args(args).distributed:
+    if args.resume or args.overwrite or backend_from_args(args).distributed:
         return default
     return None

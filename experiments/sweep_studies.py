@@ -14,15 +14,17 @@ map, the comparison and the held-out evaluation, split into tasks, on either env
   (:func:`experiments.evaluate.evaluate` of that scenario); a task is a few scenarios.
 
 Each study's ``spec()`` holds everything its numbers depend on (the env, the cases, the
-observation modes, the depths, the controllers' model), so a resume of another sweep is
-refused. Traces for the figures travel back in memory (a task's extras), never into the
-results file: after ``--resume`` the runs read from the file have none, and the commands then
-draw no figures (they say so).
+observation modes, the depths, the controllers' model), so a study of other settings never
+reads these rows of the results database. Traces for the figures travel back in memory (a task's extras), never into the
+results database: after ``--resume`` the runs read from it have none, and the commands then
+draw no figures (they say so). Every record, made or read back, is checked against the study's
+``record_schema`` (:mod:`experiments.results_db`).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import inspect
 import math
@@ -34,6 +36,7 @@ import numpy as np
 
 from drill_env.control import controller_names
 from drill_env.distributed import DISTRIBUTED_PRESETS, with_measured_depth
+from drill_env.metrics import METRIC_KEYS
 from drill_env.options import realism_keywords
 from drill_env.parameters import PRESETS
 from experiments.field import (
@@ -44,6 +47,18 @@ from experiments.field import (
     is_field,
     observations_of,
     run_label,
+)
+from experiments.results_db import (
+    Exactly,
+    Fields,
+    Flag,
+    Name,
+    Near,
+    Number,
+    Schema,
+    Text,
+    Values,
+    exactly,
 )
 from experiments.stick_slip_map import DEFAULT_WINDOW_S, StickSlipMap, compute_map, map_realism
 from experiments.stick_slip_map import DEFAULTS as MAP_DEFAULTS
@@ -341,6 +356,39 @@ class MapStudy:
         """One item per (map, WOB row)."""
         return [f"{map_key(*run)}/row{r}" for run in self.runs() for r in range(len(self.wob_n))]
 
+    @functools.cached_property
+    def _run_of_prefix(self) -> dict[str, MapRun]:
+        return {map_key(*run): run for run in self.runs()}
+
+    def record_schema(self, item: str) -> Schema:
+        """A WOB row: the severity (>= 0) and the stuck fraction (in [0, 1]) at each reference
+        speed (``None``: diverged), and the map's settings, which must be this study's."""
+        controller, observation, depth = self._run_of_prefix[item.rpartition("/row")[0]]
+        speeds = len(self.reference_speed_rad_s)
+        settings = {
+            "controller": controller,
+            "noise_std_rad_s": float(self.noise_std_rad_s),
+            "seed": int(self.seed),
+            "parameters": self.preset,
+            "env_id": self.env_id,
+            "observation": observation,
+            "measured_depth_m": depth,
+            "realism": map_realism(self.env_id, self.keywords.get("realism")),
+        }
+        return Fields(
+            {
+                "severity": Values(Number(low=0.0), speeds),
+                "stuck_fraction": Values(Number(low=0.0, high=1.0), speeds),
+                "map": Fields(
+                    {
+                        **exactly(settings),  # the run's duration and window in whole steps
+                        "duration_s": Near(float(self.duration_s)),
+                        "window_s": Near(float(self.window_s)),
+                    }
+                ),
+            }
+        )
+
     def tasks(self, missing: Sequence[str]) -> list[Task]:
         """Blocks of consecutive missing rows of one map, ``task_cells`` cells each."""
         per_task = max(1, self.task_cells // len(self.reference_speed_rad_s))
@@ -570,6 +618,32 @@ class CompareStudy:
         """One item per run."""
         return [j.item for j in self.jobs()]
 
+    @functools.cached_property
+    def _job_of_item(self) -> dict[str, CompareJob]:
+        return {j.item: j for j in self.jobs()}
+
+    def record_schema(self, item: str) -> Schema:
+        """A run's row: the run's controller (or agent), observation mode, case and noise,
+        the metrics (numbers, ``None``: not defined), ``diverged`` and the settings, each
+        setting this study's."""
+        job = self._job_of_item[item]
+        head: dict[str, Any] = {"controller": job.label}
+        if job.observation is not None:
+            head["observation"] = job.observation
+        head.update(job.case.head)
+        head["noise_std_rad_s"] = float(job.noise)
+        return Fields(
+            {
+                **exactly(head),
+                **{key: Number() for key in (*METRIC_KEYS, "static_error_rad_s")},
+                "diverged": Flag(),
+                "gains": Name(),
+                **exactly(job.case.tail),
+                "seed": Exactly(int(self.seed)),
+                "duration_s": Exactly(float(self.duration_s)),
+            }
+        )
+
     def tasks(self, missing: Sequence[str]) -> list[Task]:
         """``task_runs`` missing runs per task."""
         wanted = set(missing)
@@ -685,6 +759,18 @@ class EvaluateStudy:
         """One item per held-out scenario."""
         return [s.id for s in self.scenarios]
 
+    def record_schema(self, item: str) -> Schema:
+        """A scenario's rows, one per controller and agent: the scenario's own columns, the
+        run's name (and observation mode), the metrics (numbers, ``None``: not defined),
+        ``diverged`` and, on the field string, a note."""
+        scenario = next(s for s in self.scenarios if s.id == item)
+        row = Fields(
+            {**exactly(scenario.row()), "controller": Name(), "diverged": Flag()},
+            optional={"observation": Name(), "note": Text()},
+            rest=Number(),
+        )
+        return Fields({"rows": Values(row)})
+
     def tasks(self, missing: Sequence[str]) -> list[Task]:
         """``task_scenarios`` missing scenarios per task."""
         wanted = set(missing)
@@ -720,7 +806,7 @@ class EvaluateStudy:
 # ------------------------------------------------------------------------- command lines
 def _report(study_name: str, outcome: SweepOutcome, backend: Any) -> None:
     where = f"; results in {outcome.results_path}" if outcome.results_path else ""
-    loaded = f", {outcome.loaded} items read from the results file" if outcome.loaded else ""
+    loaded = f", {outcome.loaded} items read from the results database" if outcome.loaded else ""
     print(
         f"sweep {study_name} on {backend.describe()}: {len(outcome.ran)} tasks run in "
         f"{outcome.wall_time_s:.1f} s{loaded}{where}"
@@ -757,8 +843,10 @@ def run_map_sweep(
     )
     assert study.runs() == [tuple(run) for run in runs], "the maps of drill-gym map, in order"
     backend = backend_from_args(args)
-    path = results_path_from_args(args, Path(args.out) / "stick_slip_map.jsonl")
-    outcome = run_sweep(study, backend, path, resume=args.resume, progress=not args.no_progress)
+    path = results_path_from_args(args, Path(args.out) / "stick_slip_map.sqlite")
+    outcome = run_sweep(
+        study, backend, path, args.resume, not args.no_progress, overwrite=args.overwrite
+    )
     _report(study.name, outcome, backend)
     return study.maps(outcome)
 
@@ -794,8 +882,10 @@ def run_compare_sweep(
         observations=tuple(dict.fromkeys(args.observations)),
     )
     backend = backend_from_args(args)
-    path = results_path_from_args(args, Path(args.out) / "compare.jsonl")
-    outcome = run_sweep(study, backend, path, resume=args.resume, progress=not args.no_progress)
+    path = results_path_from_args(args, Path(args.out) / "compare.sqlite")
+    outcome = run_sweep(
+        study, backend, path, args.resume, not args.no_progress, overwrite=args.overwrite
+    )
     _report(study.name, outcome, backend)
     rows, traces = study.results(outcome)
     return rows, traces, outcome.loaded == 0
@@ -824,8 +914,10 @@ def run_evaluate_sweep(
         observations=tuple(dict.fromkeys(args.observations)),
     )
     backend = backend_from_args(args)
-    path = results_path_from_args(args, Path(args.out) / "heldout.jsonl")
-    outcome = run_sweep(study, backend, path, resume=args.resume, progress=not args.no_progress)
+    path = results_path_from_args(args, Path(args.out) / "heldout.sqlite")
+    outcome = run_sweep(
+        study, backend, path, args.resume, not args.no_progress, overwrite=args.overwrite
+    )
     _report(study.name, outcome, backend)
     rows, traces = study.results(outcome)
     return rows, traces, outcome.loaded == 0

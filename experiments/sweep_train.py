@@ -50,7 +50,13 @@ from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final
 
-from experiments.arguments import ArgumentParser, names_type, number_type, seed_type
+from experiments.arguments import (
+    ArgumentParser,
+    names_type,
+    number_type,
+    output_folder,
+    seed_type,
+)
 from experiments.sweep import ADDRESS_VARIABLE, Backend, ray_session
 from experiments.tables import Column, markdown_table, write_csv, write_json
 
@@ -676,7 +682,11 @@ def _parser() -> ArgumentParser:
         help=f"join the Ray cluster at ADDR (default: ${ADDRESS_VARIABLE}, else a local one)",
     )
     p.add_argument(
-        "--out", type=Path, default=Path("results/sweep-train"), metavar="DIR", help="output folder"
+        "--out",
+        type=output_folder,
+        default="results/sweep-train",
+        metavar="DIR",
+        help="output folder",
     )
     p.add_argument("--no-progress", action="store_true", help="no Tune progress output")
     return p

@@ -34,7 +34,7 @@ otherwise):
     checkpoints/steps_N/   checkpoints (no pickle) every --checkpoint-every decisions and at
                            the end; --resume continues from the last one
     best/                  the best model on the validation scenarios
-    model/                 the final model: config.json, policy.npz, obs_norm.npz
+    model/                 the final model: config.json, policy.safetensors, obs_norm.safetensors
 
 PPO trains in whole rollouts of n_steps x num_envs decisions, so --total-timesteps is rounded
 up to whole rollouts (the first line printed says so). A run folder that already holds files

@@ -27,9 +27,9 @@ A candidate whose run diverges in any episode is out (score infinite). On
 signals, mud-pulse telemetry, the actuator with its rate limit) with the same seeds, and the
 reference is the proposed SMC on the same env (with its observer on the surface signals).
 
-Outputs in ``--out`` (default ``results/tune/ENV``): the sweep runner's JSON-lines results
-(``tune_round0.jsonl``, ``tune_round1.jsonl``, ``tune_validation.jsonl``; ``--resume``
-continues them), ``candidates.csv`` (every candidate: factors, training and validation ratios
+Outputs in ``--out`` (default ``results/tune/ENV``): the sweep runner's results database
+``tune.sqlite`` (the three stages, rounds 0 and 1 and the validation; ``--resume`` continues
+them), ``candidates.csv`` (every candidate: factors, training and validation ratios
 and scores), ``tune.json`` (per loop: the selected and default factors, the gains they give on
 the nominal string, their scores, the budget in simulated and wall seconds) and a table on
 standard output. ``--write`` stores the selected factors in ``baselines/tuned_gains.json``
@@ -68,7 +68,8 @@ from baselines.tuned import (
 )
 from drill_env.control import make_controller
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout
-from experiments.arguments import ArgumentParser, number_type
+from experiments.arguments import ArgumentParser, check_output_folder, number_type, output_folder
+from experiments.results_db import Exactly, Fields, Flag, Number, Schema, Values
 from experiments.sweep import (
     Backend,
     SweepOutcome,
@@ -106,6 +107,8 @@ REFERENCE: Final = "proposed"
 """The controller every score is relative to (the agent's base controller)."""
 NOMINAL_PRESETS: Final = {drill_env.ENV_ID: "zribi2024", drill_env.FIELD_ENV_ID: "field_2500m"}
 """The nominal string of each env, on which the derived gains are reported."""
+RESULTS_FILE: Final = "tune.sqlite"
+"""The results database of the three stages in ``--out``."""
 METRICS: Final = ("iae", "rmsd_nm", "stick_slip_severity")
 """The episode metrics a record keeps (with ``diverged``)."""
 
@@ -316,6 +319,22 @@ class CandidateStudy:
     def items(self) -> list[str]:
         """One item per candidate."""
         return [c[0] for c in self.candidates]
+
+    def record_schema(self, item: str) -> Schema:
+        """A candidate's record: its controller and factors (this study's), the metrics and
+        whether it diverged on each episode, the simulated and the wall seconds."""
+        _, controller, factors = next(c for c in self.candidates if c[0] == item)
+        episodes = len(self.episodes)
+        return Fields(
+            {
+                "controller": Exactly(controller),
+                "factors": Exactly(dict(factors)),
+                **{k: Values(Number(), episodes) for k in METRICS},
+                "diverged": Values(Flag(), episodes),
+                "simulated_s": Number(nullable=False, low=0.0),
+                "wall_s": Number(nullable=False, low=0.0),
+            }
+        )
 
     def tasks(self, missing: Sequence[str]) -> list[Task]:
         """``task_candidates`` missing candidates per task."""
@@ -529,12 +548,6 @@ def _study(
     )
 
 
-def _results(out: Path | None, base: Path | None, stage: str) -> Path | None:
-    if base is not None:
-        return base.with_name(f"{base.stem}_{stage}{base.suffix or '.jsonl'}")
-    return None if out is None else out / f"tune_{stage}.jsonl"
-
-
 def run_tuning(
     settings: TuneSettings,
     backend: Backend | None = None,
@@ -542,18 +555,19 @@ def run_tuning(
     results: Path | None = None,
     resume: bool = False,
     progress: bool = True,
+    overwrite: bool = False,
 ) -> TuneResult:
     """Search, validate and select (see the module docstring).
 
     Args:
         settings: The search.
         backend: Where the runs go (default serial).
-        out: Folder of the results files ``tune_round0.jsonl``, ``tune_round1.jsonl`` and
-            ``tune_validation.jsonl`` (``None``: none written, unless ``results``).
-        results: A results file name whose stem the three stages extend
-            (``x.jsonl`` -> ``x_round0.jsonl``...); wins over ``out``.
-        resume: Keep what the results files already hold.
+        out: Folder of the results database ``tune.sqlite`` of the three stages (``None``:
+            none written, unless ``results``).
+        results: The results database of the three stages; wins over ``out``.
+        resume: Keep what the results database already holds of these stages.
         progress: Progress bars on standard error.
+        overwrite: Delete the rows of these stages from the results database first.
     """
     started = time.perf_counter()
     train = training_episodes(settings.episodes)
@@ -563,8 +577,8 @@ def run_tuning(
 
     def sweep(stage: str, episodes: Any, candidates: Any) -> SweepOutcome:
         study = _study(f"tune-{stage}", settings, episodes, candidates)
-        path = _results(out, results, stage)
-        outcome = run_sweep(study, backend, path, resume=resume, progress=progress)
+        path = results if results is not None else None if out is None else out / RESULTS_FILE
+        outcome = run_sweep(study, backend, path, resume, progress, overwrite=overwrite)
         outcomes.append(outcome)
         return outcome
 
@@ -789,8 +803,8 @@ Latin hypercube over log-spaced ranges; round 1: a Latin hypercube around round 
 --top candidates by training score (and the defaults) then run 32 validation scenarios
 (reset seeds 20000 + k: the agent's 16 and the 16 after them); the one with the lowest validation score is selected.
 
-Writes into --out: tune_round0.jsonl, tune_round1.jsonl, tune_validation.jsonl (results of the
-sweep runner; --resume continues them), candidates.csv, tune.json; --write stores the selected
+Writes into --out: tune.sqlite (the results database of the three stages; --resume continues
+them), candidates.csv, tune.json; --write stores the selected
 factors in baselines/tuned_gains.json (read by stiff_pi_tuned, soft_speed_tuned,
 z_torque_tuned). Runs serially, or on Ray with --workers N (the scale extra).
 
@@ -870,7 +884,7 @@ def _parser() -> ArgumentParser:
     )
     p.add_argument(
         "--out",
-        type=Path,
+        type=output_folder,
         default=None,
         metavar="DIR",
         help="output folder (default: results/tune/ENV)",
@@ -891,7 +905,7 @@ def _parser() -> ArgumentParser:
     add_sweep_options(
         p,
         "candidates per task (default: 1); does not change the numbers. The results always go "
-        "to --out (or to files named after --results)",
+        "to --out/tune.sqlite (or to --results)",
     )
     return p
 
@@ -918,6 +932,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.write and args.gains_file.is_file():
         load_tuned_gains(args.gains_file)  # a malformed file fails now, not after the search
     out = args.out if args.out is not None else Path("results") / "tune" / args.env
+    try:
+        check_output_folder(out)
+    except ValueError as err:
+        parser.fail("--out", str(err))
     backend = backend_from_args(args)
     result = run_tuning(
         settings,
@@ -926,6 +944,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         results=args.results,
         resume=args.resume,
         progress=not args.no_progress,
+        overwrite=args.overwrite,
     )
     rows = [row for lr in result.loops for row in lr.rows]
     keys = list(dict.fromkeys(k for row in rows for k in row))

@@ -58,7 +58,13 @@ from drill_env.modes import (
 )
 from drill_env.parameters import PLANT_DT_S, PRESETS, DrillStringParameters
 from drill_env.scenarios import WobProfile
-from experiments.arguments import ArgumentParser, names_type, number_type, seed_option
+from experiments.arguments import (
+    ArgumentParser,
+    names_type,
+    number_type,
+    output_folder,
+    seed_option,
+)
 from experiments.field import (
     FIELD_CONDITIONS,
     FIELD_ENV,
@@ -628,7 +634,7 @@ def _parser() -> ArgumentParser:
     )
     seed_option(p, "reset seed of every run (it drives the noise)")
     p.add_argument(
-        "--out", type=Path, default=Path("results/waves"), metavar="DIR", help="output folder"
+        "--out", type=output_folder, default="results/waves", metavar="DIR", help="output folder"
     )
     p.add_argument("--no-equivalent", action="store_true", help="skip table 4")
     p.add_argument("--no-plots", action="store_true", help="write no figures")

@@ -19,6 +19,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
+import safetensors.numpy
 
 pytest.importorskip("stable_baselines3")
 pytest.importorskip("torch")
@@ -40,7 +41,7 @@ from drill_env.evaluation import ZeroAction, episode_metrics, rollout  # noqa: E
 from experiments.cli import main as cli_main  # noqa: E402
 from experiments.evaluate import main as evaluate_main  # noqa: E402
 
-MODEL_FILES = ("config.json", "policy.npz", "obs_norm.npz")
+MODEL_FILES = ("config.json", "policy.safetensors", "obs_norm.safetensors")
 
 
 def tiny_config(tmp_path: Path, **changes: Any) -> TrainConfig:
@@ -327,17 +328,18 @@ def _old_sb3_model_folder(config: TrainConfig, folder: Path) -> tuple[Any, Any]:
 
 
 def test_old_sb3_model_loads_and_converts_with_the_opt_in(tmp_path: Path) -> None:
-    from agents.convert import convert_sb3_model
+    from agents.convert import convert_model
 
     model, venv = _old_sb3_model_folder(tiny_config(tmp_path), tmp_path / "old")
-    with pytest.raises(ValueError, match=r"model.zip' is a Stable-Baselines3 model \(a pickle\)"):
-        load_policy(tmp_path / "old")
+    for trust in (False, True):  # a folder is never searched for a pickle to trust
+        with pytest.raises(ValueError, match=r"model.zip' is a Stable-Baselines3 model \(a pickle"):
+            load_policy(tmp_path / "old", trust_pickle=trust)
     obs = np.random.default_rng(5).normal(size=(64, 11)).astype(np.float32)
-    policy = load_policy(tmp_path / "old", trust_pickle=True)
+    policy = load_policy(tmp_path / "old" / "model.zip", trust_pickle=True)
     expected = _sb3_reference(model, policy, obs)
     assert np.ptp(expected) > 0.5
     np.testing.assert_allclose(policy.predict(obs)[0], expected, atol=1e-5)
-    convert_sb3_model(tmp_path / "old", tmp_path / "new", trust_pickle=True)
+    convert_model(tmp_path / "old" / "model.zip", tmp_path / "new", trust_pickle=True)
     assert {p.name for p in (tmp_path / "new").iterdir()} == set(MODEL_FILES)
     converted = load_policy(tmp_path / "new")
     np.testing.assert_array_equal(converted.predict(obs)[0], policy.predict(obs)[0])
@@ -395,16 +397,16 @@ def test_resume_continues_from_the_last_checkpoint(tmp_path: Path) -> None:
     assert {p.name for p in last.path.iterdir()} == {
         *MODEL_FILES,
         "training.json",
-        "training_state.npz",
-        "vecnormalize.npz",
+        "training_state.safetensors",
+        "vecnormalize.safetensors",
     }
     # The checkpoint loads into a fresh model: the weights are the saved ones.
     venv = make_training_env(config)
     model = make_model(config, venv)
     assert load_checkpoint(model, venv, last.path) == 256 and model.num_timesteps == 256
-    with np.load(last.path / "training_state.npz") as saved:
-        for name, tensor in model.policy.state_dict().items():
-            np.testing.assert_array_equal(tensor.numpy(), saved[f"policy/{name}"])
+    saved = safetensors.numpy.load_file(last.path / "training_state.safetensors")
+    for name, tensor in model.policy.state_dict().items():
+        np.testing.assert_array_equal(tensor.numpy(), saved[f"policy/{name}"])
     final = load_policy(out)  # the last model, exported separately at the end of the run
     np.testing.assert_array_equal(
         model.policy.action_net.weight.detach().numpy(), final.weights["action.weight"]
@@ -543,8 +545,8 @@ def test_load_missing_path(tmp_path: Path) -> None:
 def test_load_incomplete_folder(trained: Path, tmp_path: Path) -> None:
     folder = tmp_path / "m"
     folder.mkdir()
-    (folder / "policy.npz").write_bytes((trained / "policy.npz").read_bytes())
-    with pytest.raises(FileNotFoundError, match=r"missing config.json, obs_norm.npz"):
+    (folder / "policy.safetensors").write_bytes((trained / "policy.safetensors").read_bytes())
+    with pytest.raises(FileNotFoundError, match=r"missing config.json, obs_norm.safetensors"):
         load_policy(folder)
 
 
@@ -567,7 +569,7 @@ def test_load_wrong_observation_size(trained: Path, tmp_path: Path) -> None:
     record["observation_size"] = 9
     (folder / "config.json").write_text(json.dumps(record))
     with pytest.raises(
-        ValueError, match=r"obs_norm.npz': array mean has shape \(11,\): expected \(9,\)"
+        ValueError, match=r"obs_norm.safetensors': array mean has shape \(11,\): expected \(9,\)"
     ):
         load_policy(folder)
 

@@ -56,14 +56,14 @@ def test_every_subcommand_module_has_a_main_and_a_parser(name: str) -> None:
 def _corrupt_model(tmp_path: Path) -> Path:
     folder = tmp_path / "corrupt"
     shutil.copytree(SHIPPED, folder)
-    (folder / "policy.npz").write_bytes(b"PK\x03\x04 not really a zip archive")
+    (folder / "policy.safetensors").write_bytes(b"\x10\x00\x00\x00\x00\x00\x00\x00not a header....")
     return folder
 
 
 USER_ERRORS = [
     (["evaluate", "--controllers", "foo"], "argument --controllers: unknown controller 'foo': allowed csmc, msmc"),
     (["evaluate", "/nonexistent"], "no model at '/nonexistent'"),
-    (["evaluate", "CORRUPT"], "policy.npz' is not valid policy network weights"),
+    (["evaluate", "CORRUPT"], "policy.safetensors' is not valid policy network weights"),
     (["evaluate", "--scenarios", "h99"], "unknown scenario 'h99': allowed h01, h02"),
     (["train", "--total-timesteps", "-5"], "--total-timesteps = -5 is out of range: allowed an integer >= 1"),
     (["train", "--resume", "--run-dir", "RUN"], "--resume: no checkpoint in"),
@@ -76,8 +76,9 @@ USER_ERRORS = [
     (["map", "--wob-min", "-3"], "argument --wob-min: -3 is out of range: allowed (0, 1e+06] N"),
     (["map", "--controller", "foo"], "unknown controller 'foo': allowed csmc"),
     (["map", "--controllers", "foo"], "unknown controller 'foo': allowed csmc"),
-    (["convert", "OLD", "NEW"], "argument --trust-pickle: is required: model.zip is a pickle"),
-    (["convert", "/nonexistent", "NEW", "--trust-pickle"], "OLD = '/nonexistent' does not exist"),
+    (["convert", "OLD.zip", "NEW"], "argument --trust-pickle: is required to read OLD = 'OLD.zip'"),
+    (["convert", "/nonexistent", "NEW"], "OLD = '/nonexistent' does not exist"),
+    (["convert", "/nonexistent.zip", "NEW", "--trust-pickle"], "OLD = '/nonexistent.zip' does not"),
     *[([name, "--bogus"], "unrecognized arguments: --bogus") for name in SUBCOMMANDS if name != "convert"],
     (["convert", "OLD", "NEW", "--bogus"], "unrecognized arguments: --bogus"),
 ]  # fmt: skip
@@ -109,7 +110,7 @@ def test_an_unknown_command_is_one_line(
     assert code == 2 and err.count("\n") == 1
     assert re.match(
         r"drill-gym: error: unknown (command|option) '.*': allowed commands compare, map, "
-        r"probability-map, train, sweep-train, evaluate, convert, waves, realism, tune, "
+        r"probability-map, train, sweep-train, evaluate, convert, waves, realism, tune, coupled, "
         r"benchmark \(see drill-gym --help\)\n$",
         err,
     )
@@ -206,8 +207,8 @@ def test_conditions_are_explained(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_convert_an_old_model(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """``drill-gym convert OLD NEW --trust-pickle`` writes the portable files, which load
-    without the opt-in and act as the old model did."""
+    """``drill-gym convert OLD/model.zip NEW --trust-pickle`` writes the portable files, which
+    load without the opt-in and act as the old model did."""
     pytest.importorskip("stable_baselines3")
     import numpy as np
 
@@ -216,18 +217,19 @@ def test_convert_an_old_model(tmp_path: Path, capsys: pytest.CaptureFixture[str]
 
     _, venv = _old_sb3_model_folder(tiny_config(tmp_path), tmp_path / "old")
     venv.close()
+    zip_file = tmp_path / "old" / "model.zip"
     code, out, err = run(
-        ["convert", str(tmp_path / "old"), str(tmp_path / "new"), "--trust-pickle"], capsys
+        ["convert", str(zip_file), str(tmp_path / "new"), "--trust-pickle"], capsys
     )
     assert code == 0, err
-    assert out == f"converted old from {tmp_path / 'old'} to {tmp_path / 'new'}\n"
+    assert out == f"converted old from {zip_file} to {tmp_path / 'new'}\n"
     assert {p.name for p in (tmp_path / "new").iterdir()} == {
         "config.json",
-        "policy.npz",
-        "obs_norm.npz",
+        "policy.safetensors",
+        "obs_norm.safetensors",
     }
     obs = np.random.default_rng(5).normal(size=(16, 11)).astype(np.float32)
-    old = load_policy(tmp_path / "old", trust_pickle=True)
+    old = load_policy(zip_file, trust_pickle=True)
     np.testing.assert_array_equal(
         load_policy(tmp_path / "new").predict(obs)[0], old.predict(obs)[0]
     )

@@ -101,9 +101,9 @@ def test_train_with_its_defaults(command: list[str], tmp_path: Path) -> None:
     assert "training 2,000 decisions: 2 rollouts of 1,000 (500 steps x 2 envs)" in result.stdout
     assert "residual_ppo: 1,000/2,000 decisions" in result.stdout
     assert f"model saved to {Path('runs/residual_ppo__1/model')}: last" in result.stdout
-    for name in ("config.json", "policy.npz", "obs_norm.npz"):
+    for name in ("config.json", "policy.safetensors", "obs_norm.safetensors"):
         assert (run / "model" / name).is_file(), name
-    assert (run / "checkpoints" / "steps_2000" / "training_state.npz").is_file()
+    assert (run / "checkpoints" / "steps_2000" / "training_state.safetensors").is_file()
     assert (run / "progress.csv").is_file() and any((run / "tb").rglob("events.out.tfevents*"))
     assert json.loads((run / "config.json").read_text())["n_epochs"] == 10
 
@@ -117,7 +117,7 @@ def test_train_without_progress_into_out(command: list[str], tmp_path: Path) -> 
     lines = result.stdout.splitlines()
     assert lines[0].startswith("training 200 decisions") and lines[-1].startswith("model saved")
     assert len(lines) == 2 and result.stderr == ""
-    assert (tmp_path / "mine" / "model" / "policy.npz").is_file()
+    assert (tmp_path / "mine" / "model" / "policy.safetensors").is_file()
 
 
 def test_evaluate_the_shipped_models(command: list[str], tmp_path: Path) -> None:

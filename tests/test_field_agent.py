@@ -21,7 +21,7 @@ import pytest
 
 import drill_env  # noqa: F401  (registers the envs)
 from agents.config import ENV_DEFAULTS, FIELD_ENV_ID, TrainConfig, parse_config
-from agents.model_format import ObsNorm, PolicySpec, stack_frames
+from agents.inference import ObsNorm, PolicySpec, stack_frames
 from agents.policy import DEFAULT_MODEL_DIR, ResidualPolicy, is_model_folder, load_policy
 from drill_env.evaluation import rollout
 

@@ -15,7 +15,7 @@ import pytest
 
 import drill_env  # noqa: F401  (registers the envs)
 from agents import DEFAULT_MODEL_DIR, load_policy
-from agents.model_format import ObsNorm, PolicySpec
+from agents.inference import ObsNorm, PolicySpec
 from agents.policy import ResidualPolicy
 from experiments import compare
 
@@ -96,11 +96,15 @@ def _edited(tmp_path: Path, **env_kwargs: Any) -> Path:
 
 
 def test_env_id_and_observation_are_checked(tmp_path: Path) -> None:
-    with pytest.raises(ValueError, match=r"env_kwargs\.env_id = 'Nope-v0' is not valid: allowed"):
+    with pytest.raises(
+        ValueError, match=r"env_kwargs\.env_id = 'Nope-v0': allowed 'DrillString-v0' or"
+    ):
         load_policy(_edited(tmp_path / "a", env_id="Nope-v0"))
     with pytest.raises(ValueError, match=r"env_kwargs\.observation is a keyword of Drill"):
         load_policy(_edited(tmp_path / "b", observation="state"))
-    with pytest.raises(ValueError, match=r"env_kwargs\.observation = 'all' is not valid"):
+    with pytest.raises(
+        ValueError, match=r"env_kwargs\.observation = 'all': allowed 'state' or 'surface'"
+    ):
         load_policy(_edited(tmp_path / "c", env_id=FIELD, observation="all"))
 
 

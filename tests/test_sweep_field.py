@@ -1,13 +1,15 @@
 """The sweep runner on the field string (``DrillStringField-v0``), serially: a map, a
 comparison and a held-out evaluation on the runner equal the plain serial functions (every
-row, in order, every float bit for bit), a resume after an interrupted results file gives the
-same result, a resume with other field settings is refused, and the commands with
+row, in order, every float bit for bit), a resume after an interrupted sweep gives the same
+result, a study with other field settings reads none of the rows, and the commands with
 ``--task-size``/``--results``/``--resume`` write the files of the plain run."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import shutil
+import sqlite3
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
@@ -19,7 +21,7 @@ from experiments import compare, evaluate, sweep_studies
 from experiments.cli import main as cli_main
 from experiments.field import FIELD_ENV, PAPER_ENV
 from experiments.stick_slip_map import StickSlipMap, compute_map
-from experiments.sweep import read_results, run_sweep
+from experiments.sweep import read_results, run_sweep, spec_hash
 from experiments.sweep_studies import CompareStudy, EvaluateStudy, MapStudy
 
 WOBS = (60e3, 120e3, 180e3)
@@ -51,13 +53,15 @@ def assert_same_map(swept: StickSlipMap, plain: StickSlipMap) -> None:
             assert a == b and type(a) is type(b), f.name
 
 
-def cut_last_line(path: Path) -> int:
-    """Cut the results file's last line in the middle (an interrupted write); returns the
-    number of whole task lines left."""
-    lines = path.read_text().splitlines(keepends=True)
-    assert len(lines) >= 3, "a header and at least two tasks"
-    path.write_text("".join(lines[:-1]) + lines[-1][:20])
-    return len(lines) - 2
+def drop_last_task(path: Path) -> int:
+    """Delete the rows of the results database's last task (as if the sweep had been
+    interrupted before it); returns the number of tasks left."""
+    with contextlib.closing(sqlite3.connect(path)) as db, db:
+        (last,) = db.execute("SELECT task FROM results ORDER BY rowid DESC LIMIT 1").fetchone()
+        db.execute("DELETE FROM results WHERE task = ?", (last,))
+        (left,) = db.execute("SELECT count(DISTINCT task) FROM results").fetchone()
+    assert left >= 1, "at least two tasks"
+    return int(left)
 
 
 # ----------------------------------------------------------------------------------- maps
@@ -100,17 +104,17 @@ def test_field_maps_on_the_runner_equal_compute_map() -> None:
 
 @pytest.fixture(scope="module")
 def map_results(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The results file of :func:`field_map` (one row per task)."""
-    path = tmp_path_factory.mktemp("map") / "map.jsonl"
+    """The results database of :func:`field_map` (one row per task)."""
+    path = tmp_path_factory.mktemp("map") / "map.sqlite"
     run_sweep(field_map(), results_path=path, progress=False)
     return path
 
 
 def test_field_map_resumes_after_an_interruption(map_results: Path, tmp_path: Path) -> None:
     clean = field_map().maps(run_sweep(field_map(), progress=False))
-    path = tmp_path / "map.jsonl"
+    path = tmp_path / "map.sqlite"
     shutil.copy(map_results, path)
-    kept = cut_last_line(path)
+    kept = drop_last_task(path)
     resumed = run_sweep(field_map(task_cells=6), results_path=path, resume=True, progress=False)
     assert resumed.loaded == kept and resumed.ran == ["csmc/state/1500.0m/rows2-2"]
     for a, b in zip(field_map().maps(resumed), clean, strict=True):
@@ -127,14 +131,13 @@ def test_field_map_resumes_after_an_interruption(map_results: Path, tmp_path: Pa
         {"env_id": PAPER_ENV, "depths_m": ()},
     ],
 )
-def test_field_map_resume_with_other_settings_is_refused(
-    other: dict[str, Any], map_results: Path, tmp_path: Path
+def test_field_map_with_other_settings_reads_none_of_the_rows(
+    other: dict[str, Any], map_results: Path
 ) -> None:
-    path = tmp_path / "map.jsonl"
-    shutil.copy(map_results, path)
-    assert read_results(path, "map", field_map().spec())  # the same settings read it
-    with pytest.raises(ValueError, match=r"was written by another sweep \('map' with other"):
-        run_sweep(field_map(**other), results_path=path, resume=True, progress=False)
+    assert read_results(map_results, field_map())  # the same settings read them
+    study = field_map(**other)
+    assert spec_hash("map", study.spec()) != spec_hash("map", field_map().spec())
+    assert read_results(map_results, study) == {}
 
 
 def test_map_study_passes_further_compute_map_keywords_through(
@@ -225,17 +228,17 @@ def test_field_compare_on_the_runner_equals_run_comparison() -> None:
 
 @pytest.fixture(scope="module")
 def compare_results(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The results file of :func:`field_compare` (four runs per task)."""
-    path = tmp_path_factory.mktemp("compare") / "compare.jsonl"
+    """The results database of :func:`field_compare` (four runs per task)."""
+    path = tmp_path_factory.mktemp("compare") / "compare.sqlite"
     run_sweep(field_compare(task_runs=4), results_path=path, progress=False)
     return path
 
 
 def test_field_compare_resumes_after_an_interruption(compare_results: Path, tmp_path: Path) -> None:
     clean, _ = field_compare().results(run_sweep(field_compare(), progress=False))
-    path = tmp_path / "compare.jsonl"
+    path = tmp_path / "compare.sqlite"
     shutil.copy(compare_results, path)
-    kept = cut_last_line(path)
+    kept = drop_last_task(path)
     resumed = run_sweep(field_compare(task_runs=1), results_path=path, resume=True, progress=False)
     assert resumed.loaded == 4 * kept and len(resumed.ran) == 12 - 4 * kept
     rows, _ = field_compare().results(resumed)
@@ -252,14 +255,13 @@ def test_field_compare_resumes_after_an_interruption(compare_results: Path, tmp_
         {"env_id": PAPER_ENV},
     ],
 )
-def test_field_compare_resume_with_other_settings_is_refused(
-    other: dict[str, Any], compare_results: Path, tmp_path: Path
+def test_field_compare_with_other_settings_reads_none_of_the_rows(
+    other: dict[str, Any], compare_results: Path
 ) -> None:
-    path = tmp_path / "compare.jsonl"
-    shutil.copy(compare_results, path)
-    assert read_results(path, "compare", field_compare().spec())  # the same settings read it
-    with pytest.raises(ValueError, match=r"was written by another sweep \('compare' with other"):
-        run_sweep(field_compare(**other), results_path=path, resume=True, progress=False)
+    assert read_results(compare_results, field_compare())  # the same settings read them
+    study = field_compare(**other)
+    assert spec_hash("compare", study.spec()) != spec_hash("compare", field_compare().spec())
+    assert read_results(compare_results, study) == {}
 
 
 def test_bad_field_compare_study() -> None:
@@ -312,12 +314,12 @@ def test_field_evaluation_on_the_runner_equals_evaluate() -> None:
 
 
 def test_field_evaluation_resumes_after_an_interruption(tmp_path: Path) -> None:
-    """Interrupted (the second scenario's line cut), resumed with another task size; then
-    a resume with other settings is refused."""
+    """Interrupted (the second scenario's row lost), resumed with another task size; then
+    studies with other settings read none of the rows."""
     clean, _ = field_evaluate().results(run_sweep(field_evaluate(), progress=False))
-    path = tmp_path / "heldout.jsonl"
+    path = tmp_path / "heldout.sqlite"
     run_sweep(field_evaluate(), results_path=path, progress=False)
-    assert cut_last_line(path) == 1
+    assert drop_last_task(path) == 1
     resumed = run_sweep(
         field_evaluate(task_scenarios=2), results_path=path, resume=True, progress=False
     )
@@ -328,8 +330,7 @@ def test_field_evaluation_resumes_after_an_interruption(tmp_path: Path) -> None:
         field_evaluate(controllers=("stiff_pi",)),
         field_evaluate(scenarios=SCENARIOS[:1]),
     ):
-        with pytest.raises(ValueError, match=r"was written by another sweep \('evaluate' with"):
-            run_sweep(other, results_path=path, resume=True, progress=False)
+        assert read_results(path, other) == {}
 
 
 def test_bad_field_evaluate_study() -> None:
@@ -356,8 +357,8 @@ def test_field_map_command_on_the_runner_writes_the_plain_files(tmp_path: Path) 
     assert cli_main([*base, "--out", str(tmp_path / "plain")]) == 0
     swept = tmp_path / "swept"
     assert cli_main([*base, "--out", str(swept), "--task-size", "1", "--resume"]) == 0
-    path = swept / "stick_slip_map.jsonl"
-    cut_last_line(path)
+    path = swept / "stick_slip_map.sqlite"
+    drop_last_task(path)
     assert cli_main([*base, "--out", str(swept), "--resume"]) == 0
     names = sorted(p.name for p in (tmp_path / "plain").iterdir())
     assert names == [
@@ -365,7 +366,7 @@ def test_field_map_command_on_the_runner_writes_the_plain_files(tmp_path: Path) 
         "stick_slip_map_soft_speed_state_1500m.csv",
         "stick_slip_map_soft_speed_surface_1500m.csv",
     ]
-    assert sorted(p.name for p in swept.iterdir()) == sorted([*names, "stick_slip_map.jsonl"])
+    assert sorted(p.name for p in swept.iterdir()) == sorted([*names, "stick_slip_map.sqlite"])
     _same_files(tmp_path / "plain", swept, names)
 
 
@@ -378,23 +379,19 @@ def test_field_compare_command_on_the_runner_writes_the_plain_files(
     assert cli_main([*base, "--out", str(tmp_path / "plain")]) == 0
     plain = capsys.readouterr().out
     assert cli_main([*base, "--out", str(tmp_path / "swept"), "--task-size", "3", "--results",
-                     str(tmp_path / "c.jsonl")]) == 0  # fmt: skip
+                     str(tmp_path / "c.sqlite")]) == 0  # fmt: skip
     out = capsys.readouterr().out
     assert "sweep compare on serial: 2 tasks run" in out
     table = plain[plain.index("| controller") : plain.index("\n\n4 runs")]
     assert table in out
     _same_files(tmp_path / "plain", tmp_path / "swept", ["compare.csv", "compare.json"])
-    # The options that change the numbers make another sweep: a resume is refused.
-    refused = [
-        *base,
-        "--controller-model",
-        "exact",
-        "--resume",
-        "--results",
-        str(tmp_path / "c.jsonl"),
-    ]
-    assert cli_main([*refused, "--out", str(tmp_path / "other")]) == 2
-    assert "was written by another sweep ('compare'" in capsys.readouterr().err
+    # The options that change the numbers make another study: it reads none of the rows.
+    other = [*base, "--controller-model", "exact", "--resume", "--results"]
+    assert cli_main([*other, str(tmp_path / "c.sqlite"), "--out", str(tmp_path / "other")]) == 0
+    printed = capsys.readouterr().out
+    assert "sweep compare on serial: 4 tasks run" in printed and "items read" not in printed
+    with contextlib.closing(sqlite3.connect(tmp_path / "c.sqlite")) as db:
+        assert db.execute("SELECT count(DISTINCT settings_hash) FROM results").fetchone() == (2,)
 
 
 def test_field_evaluate_command_on_the_runner_writes_the_plain_files(tmp_path: Path) -> None:
@@ -403,6 +400,7 @@ def test_field_evaluate_command_on_the_runner_writes_the_plain_files(tmp_path: P
     assert cli_main([*base, "--out", str(tmp_path / "plain")]) == 0
     swept = tmp_path / "swept"
     assert cli_main([*base, "--out", str(swept), "--resume"]) == 0
-    lines = (swept / "heldout.jsonl").read_text().splitlines()
-    assert len(lines) == 3  # header and one task per scenario
+    with contextlib.closing(sqlite3.connect(swept / "heldout.sqlite")) as db:
+        rows = db.execute("SELECT item, task FROM results ORDER BY rowid").fetchall()
+    assert rows == [("f01", "f01"), ("f14", "f14")]  # one task per scenario
     _same_files(tmp_path / "plain", swept, ["heldout.csv", "heldout.json"])

@@ -1,15 +1,16 @@
 """The sweep runner on a local Ray cluster (the scale extra): the same numbers as the serial
 path, bit for bit, for a map (of either env), a held-out evaluation and a comparison table;
 a worker that dies mid-sweep has its task retried, with nothing lost and nothing counted
-twice.
+twice; the driver shares its results database with a sweep in another process.
 
 One local cluster of two CPUs serves the whole module (the runner joins a running session).
 """
 
 from __future__ import annotations
 
-import json
+import contextlib
 import os
+import sqlite3
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -26,7 +27,14 @@ from experiments.cli import main as cli_main  # noqa: E402
 from experiments.evaluate import HELD_OUT, evaluate  # noqa: E402
 from experiments.field import FIELD_ENV  # noqa: E402
 from experiments.stick_slip_map import compute_map  # noqa: E402
-from experiments.sweep import Backend, Task, TaskResult, ray_session, run_sweep  # noqa: E402
+from experiments.sweep import (  # noqa: E402
+    Backend,
+    Task,
+    TaskResult,
+    ray_session,
+    read_results,
+    run_sweep,
+)
 from experiments.sweep_studies import CompareStudy, EvaluateStudy, MapStudy  # noqa: E402
 
 RAY = Backend(workers=2)
@@ -52,6 +60,27 @@ def test_map_on_ray_equals_the_serial_map_bit_for_bit() -> None:
     swept = study.maps(outcome)[0]
     assert swept.severity.tobytes() == serial.severity.tobytes()
     assert swept.stuck_fraction.tobytes() == serial.stuck_fraction.tobytes()
+
+
+def test_ray_driver_and_another_process_write_one_database_at_once(tmp_path: Path) -> None:
+    """While a map runs on Ray (its driver writing each finished task), a serial sweep in
+    another process writes its own rows to the same file: both complete, each reads back
+    exactly its rows."""
+    from test_sweep import EchoStudy, sweep_process
+
+    path = tmp_path / "shared.sqlite"
+    other = sweep_process("fresh", path, 60, 0.02)
+    wobs, speeds = (50e3, 90e3, 130e3, 170e3), (2.0, 6.0)
+    kw: dict[str, Any] = {"duration_s": 4.0, "window_s": 2.0, "noise_std_rad_s": 0.1, "seed": 3}
+    study = MapStudy(("stiff_pi",), wobs, speeds, task_cells=2, **kw)
+    outcome = run_sweep(study, RAY, path, progress=False)
+    out, err = other.communicate(timeout=120)
+    assert other.returncode == 0, err
+    assert out.split() == ["60", "0"]
+    assert read_results(path, study) == outcome.records
+    assert read_results(path, EchoStudy(60)) == run_sweep(EchoStudy(60), progress=False).records
+    serial = compute_map("stiff_pi", list(wobs), list(speeds), progress=False, **kw)
+    assert study.maps(outcome)[0].severity.tobytes() == serial.severity.tobytes()
 
 
 def test_field_map_on_ray_equals_the_serial_map_bit_for_bit() -> None:
@@ -115,7 +144,7 @@ def test_map_command_with_workers_writes_the_serial_csv(tmp_path: Path) -> None:
     )
     name = "stick_slip_map_z_torque.csv"
     assert (tmp_path / "ray" / name).read_text() == (tmp_path / "serial" / name).read_text()
-    assert (tmp_path / "ray" / "stick_slip_map.jsonl").is_file()  # the results, as they came
+    assert (tmp_path / "ray" / "stick_slip_map.sqlite").is_file()  # the results, as they came
 
 
 def die_once(marker: str, function: Any, **kwargs: Any) -> TaskResult:
@@ -152,19 +181,21 @@ def test_a_worker_that_dies_has_its_task_retried(tmp_path: Path) -> None:
         name = study.name
         spec = study.spec
         items = study.items
+        record_schema = study.record_schema
 
         def tasks(self, missing: Any) -> list[Task]:
             return wrapped
 
-    path = tmp_path / "map.jsonl"
+    path = tmp_path / "map.sqlite"
     outcome = run_sweep(Faulty(), Backend(workers=2, max_retries=2), path, progress=False)
     assert Path(marker).read_text().isdigit()  # the worker did die once
     runs = sorted(Path(marker + ".runs").read_text().split("\n")[:-1])
     assert runs == ["[0]", "[1]", "[2]", "[3]"]  # each task completed exactly once
     assert sorted(outcome.ran) == sorted(t.key for t in tasks)
-    entries = [json.loads(line) for line in path.read_text().splitlines()[1:]]
-    items = [k for e in entries for k in e["items"]]
+    with contextlib.closing(sqlite3.connect(path)) as db:
+        items = [item for (item,) in db.execute("SELECT item FROM results")]
     assert sorted(items) == sorted(study.items())  # nothing lost, nothing twice
+    assert read_results(path, study) == outcome.records
     serial = compute_map("soft_speed", list(wobs), list(speeds), progress=False, **kw)
     np.testing.assert_array_equal(study.maps(outcome)[0].severity, serial.severity)
 
@@ -202,4 +233,5 @@ def test_compare_and_evaluate_commands_with_workers_write_the_serial_files(tmp_p
     assert (tmp_path / "e2" / "heldout.csv").read_text() == (
         tmp_path / "e1" / "heldout.csv"
     ).read_text()
-    assert len((tmp_path / "e2" / "heldout.jsonl").read_text().splitlines()) == 3  # header, 2 tasks
+    with contextlib.closing(sqlite3.connect(tmp_path / "e2" / "heldout.sqlite")) as db:
+        assert db.execute("SELECT count(*) FROM results").fetchone() == (2,)  # 2 scenarios

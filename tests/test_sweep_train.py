@@ -80,7 +80,7 @@ def test_two_trial_sweep_on_the_local_cluster(
         assert len(validations) == 1 + int(row["validations"]) == 4
         best_line = min(validations[1:], key=lambda line: float(line.split(",")[1]))
         assert float(row["best_iae_ratio"]) == pytest.approx(float(best_line.split(",")[1]))
-        assert (run / "model" / "policy.npz").is_file()
+        assert (run / "model" / "policy.safetensors").is_file()
         assert row["stopped_early"] == "False"
     summary = json.loads((out / "summary.json").read_text())
     best = min(rows, key=lambda r: float(r["best_iae_ratio"]))

@@ -4,9 +4,11 @@ selection rule, the tuned-gains file and its loader."""
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import math
+import sqlite3
 from pathlib import Path
 from typing import Any
 
@@ -49,9 +51,10 @@ def test_a_tiny_search_writes_its_files_and_a_gains_file_that_loads(
     argv += ["--episodes", "2", "--top", "2", "--out", str(out), "--no-progress"]
     assert tune.main([*argv, "--write", "--gains-file", str(gains)]) == 0
     printed = capsys.readouterr().out
-    for name in ("tune_round0.jsonl", "tune_round1.jsonl", "tune_validation.jsonl"):
-        header = json.loads((out / name).read_text().splitlines()[0])
-        assert header["sweep"] == f"tune-{name[5:-6]}"
+    with contextlib.closing(sqlite3.connect(out / "tune.sqlite")) as db:
+        sweeps = [sweep for (sweep,) in db.execute("SELECT sweep FROM studies ORDER BY rowid")]
+        (stored,) = db.execute("SELECT count(*) FROM results").fetchone()
+    assert sweeps == ["tune-round0", "tune-round1", "tune-validation"]
     assert len((out / "candidates.csv").read_text().splitlines()) == 1 + 2 * (3 + 2)
     summary = json.loads((out / "tune.json").read_text())
     entries = load_tuned_gains(gains)
@@ -75,6 +78,7 @@ def test_a_tiny_search_writes_its_files_and_a_gains_file_that_loads(
         assert sum(r["validated"] == "True" for r in rows if r["loop"] == loop) == 2
     validated = sum(bool(r.get("validation_score")) for r in rows)
     assert validated in (4, 5, 6)
+    assert stored == (1 + 2 * 3) + 2 * 2 + (1 + validated)  # one row per candidate run
     expected = 2 * 2.0 * (1 + 2 * 5) + len(tune.validation_episodes()) * 2.0 * (1 + validated)
     assert summary["budget"]["simulated_s"] == pytest.approx(expected)
 
@@ -381,7 +385,7 @@ def test_a_malformed_gains_file_fails_before_the_search(
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1
     assert "g.json.format: = 3: expected 1" in err
-    assert not (tmp_path / "tune_round0.jsonl").exists()
+    assert not (tmp_path / "tune.sqlite").exists()
 
 
 def test_every_built_in_controller_is_declared_as_an_entry_point_in_pyproject() -> None:

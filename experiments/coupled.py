@@ -1,0 +1,360 @@
+"""``drill-gym coupled``: the coupled axial-torsional string with the regenerative bit
+(:mod:`drill_env.coupled`, docs/coupled-model.md) at its standard operating points, and its
+stability map.
+
+1. **The standard run** at P1-P4 (:data:`drill_env.coupled.STANDARD_POINTS`): steady-drilling
+   history, top drive at constant speed from ``Omega(0) = 0.9 Omega_0``, 400 s, features over
+   [100, 400] s (:class:`drill_env.coupled.RunFeatures`), printed as one table.
+2. **The critical speeds**: at each applied force of the map, the top-drive speed above which
+   steady drilling is stable, from the roots of the linearised delay equation.
+3. **The stability map** over (applied force, top-drive speed): the rightmost root's real part
+   beside the simulated stick-slip and bounce fractions on the same grid.
+
+Outputs (``--out``, default ``results/coupled``): ``coupled.json`` (the features, critical
+speeds and maps) and ``figures/coupled_stability_map.png``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, Final
+
+import numpy as np
+import numpy.typing as npt
+
+from drill_env.coupled import (
+    FEATURE_SYMBOLS,
+    RGD_PRESETS,
+    STANDARD_DURATION_S,
+    STANDARD_POINTS,
+    STANDARD_WINDOW_S,
+    SURFACE_RULES,
+    critical_speed_rad_s,
+    run_features,
+    simulate,
+    simulated_map,
+    stability_map,
+)
+from experiments.arguments import ArgumentParser, number_type
+from experiments.tables import Column, markdown_table, write_json
+
+__all__ = ["FEATURE_COLUMNS", "main", "stability_figure"]
+
+DEFAULT_FORCES_KN: Final = (40.0, 50.0, 60.0, 75.0, 90.0, 105.0, 120.0)
+"""Applied forces of the map, kN."""
+DEFAULT_SPEEDS_RAD_S: Final = (2.0, 3.0, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 20.0, 25.0, 30.0)
+"""Top-drive speeds of the map, rad/s."""
+SPEED_RANGE_RAD_S: Final = (1.0, 60.0)
+"""Speeds scanned for the critical speed, rad/s."""
+
+FEATURE_COLUMNS: Final = (
+    Column("point", "point", align="left"),
+    Column("applied_force_kn", "W0 (kN)", "{:.0f}"),
+    Column("top_drive_speed_rad_s", "Om0 (rad/s)", "{:.0f}"),
+    Column("om_amp_rel", "Om_amp_rel", "{:.4f}"),
+    Column("om_rms_dev_rad_s", "Om_rms_dev (rad/s)", "{:.4f}"),
+    Column("om_min_rad_s", "Om min (rad/s)", "{:.3f}"),
+    Column("frac_stick", "frac_stick", "{:.4f}"),
+    Column("frac_bounce", "frac_bounce", "{:.4f}"),
+    Column("frac_axhold", "frac_axhold", "{:.4f}"),
+    Column("frac_stick_backtorque", "frac_stick_backtorque", "{:.4f}"),
+    Column("rop_mm_s", "ROP (mm/s)", "{:.4f}"),
+    Column("rop_rel", "ROP_rel", "{:.4f}"),
+    Column("om_mean_rad_s", "Om_mean (rad/s)", "{:.4f}"),
+    Column("period_s", "period (s)", "{:.3f}"),
+    Column("wob_min_kn", "WOB min (kN)", "{:.2f}"),
+    Column("wob_max_kn", "WOB max (kN)", "{:.2f}"),
+    Column("wob_mean_kn", "WOB mean (kN)", "{:.3f}"),
+    Column("tob_min_knm", "TOB min (kN m)", "{:.3f}"),
+    Column("tob_max_knm", "TOB max (kN m)", "{:.3f}"),
+    Column("tob_mean_knm", "TOB mean (kN m)", "{:.4f}"),
+    Column("cpu_s", "CPU (s)", "{:.1f}"),
+)
+"""Columns of the standard-run table (the features of docs/coupled-model.md section 8)."""
+
+CRITICAL_COLUMNS: Final = (
+    Column("applied_force_kn", "W0 (kN)", "{:.0f}"),
+    Column("critical_speed_rad_s", "critical Om0 (rad/s)", "{:.4f}", missing="none"),
+    Column("hopf_closed_form_rad_s", "closed form 2 sqrt(2 k_a/M)/n (rad/s)", "{:.4f}"),
+)
+
+DESCRIPTION = """\
+The coupled axial-torsional drill string with the regenerative (Richard-Germay-Detournay)
+bit at the four operating points of the standard run, the critical top-drive speeds from the
+linearised delay equation, and the stability map beside the simulated stick-slip and bounce.
+Prints two tables and writes coupled.json and figures/coupled_stability_map.png into --out.
+
+examples:
+  drill-gym coupled
+  drill-gym coupled --points P3 P4 --no-map
+  drill-gym coupled --surface delay --out results/coupled-delay
+"""
+
+
+def _feature_row(point: str, trace_features: Any, om_min: float, cpu_s: float) -> dict[str, Any]:
+    force, speed = STANDARD_POINTS[point]
+    f = dataclasses.asdict(trace_features)
+    return {
+        "point": point,
+        "applied_force_kn": force / 1e3,
+        "top_drive_speed_rad_s": speed,
+        **f,
+        "om_min_rad_s": om_min,
+        "rop_mm_s": f["rop_m_s"] * 1e3,
+        "wob_min_kn": f["wob_min_n"] / 1e3,
+        "wob_max_kn": f["wob_max_n"] / 1e3,
+        "wob_mean_kn": f["wob_mean_n"] / 1e3,
+        "tob_min_knm": f["tob_min_nm"] / 1e3,
+        "tob_max_knm": f["tob_max_nm"] / 1e3,
+        "tob_mean_knm": f["tob_mean_nm"] / 1e3,
+        "cpu_s": cpu_s,
+    }
+
+
+def stability_figure(
+    forces_n: Sequence[float],
+    speeds_rad_s: Sequence[float],
+    abscissa: npt.NDArray[np.float64],
+    critical: Sequence[float | None],
+    simulated: dict[str, npt.NDArray[np.float64]] | None,
+    title: str,
+) -> Any:
+    """The stability map: the rightmost root's real part over (speed, force) with its zero
+    line and the critical speeds; beside it the simulated stick and bounce fractions with the
+    linear boundary drawn over them."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.colors import SymLogNorm
+    from matplotlib.figure import Figure
+
+    panels = 1 if simulated is None else 2
+    fig = Figure(figsize=(6.0 * panels, 5.2), layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, panels, squeeze=False)[0]
+    force_kn = np.asarray(forces_n) / 1e3
+    speeds = np.asarray(speeds_rad_s)
+    limit = max(float(np.nanmax(np.abs(abscissa))), 0.1)
+    norm = SymLogNorm(linthresh=0.01, vmin=-limit, vmax=limit)
+    mesh = axes[0].pcolormesh(
+        speeds, force_kn, abscissa, cmap="RdBu_r", norm=norm, shading="nearest"
+    )
+    fig.colorbar(mesh, ax=axes[0], label="max Re s of (6.1), 1/s (red: unstable)")
+    crit_x = [c for c in critical if c is not None]
+    crit_y = [f for f, c in zip(force_kn, critical, strict=True) if c is not None]
+    for ax in axes:
+        ax.plot(crit_x, crit_y, "k-o", ms=3, label="critical speed (roots)")
+        ax.set_xlabel("top-drive speed (rad/s)")
+        ax.set_ylabel("applied force (kN)")
+    for point, (force, speed) in STANDARD_POINTS.items():
+        for ax in axes:
+            ax.annotate(point, (speed, force / 1e3), xytext=(3, 3), textcoords="offset points",
+                        color="k", fontsize=9, weight="bold")  # fmt: skip
+    axes[0].set_title("linear: rightmost root of steady drilling")
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="outside lower left", fontsize=8)
+    if simulated is not None:
+        stick = axes[1].pcolormesh(
+            speeds, force_kn, simulated["frac_stick"], cmap="viridis", vmin=0, vmax=1, shading="nearest"
+        )  # fmt: skip
+        fig.colorbar(stick, ax=axes[1], label="stuck fraction")
+        bounce = simulated["frac_bounce"]
+        ys, xs = np.nonzero(bounce > 0)
+        marks = axes[1].scatter(speeds[xs], force_kn[ys], s=14 + 400 * bounce[ys, xs], marker="x",
+                                color="tab:red", label="bounce (size: fraction off the rock)")  # fmt: skip
+        axes[1].set_title("simulated: stick-slip and bounce")
+        fig.legend([marks], [marks.get_label()], loc="outside lower right", fontsize=8)
+    fig.suptitle(title)
+    return fig
+
+
+def _parser() -> ArgumentParser:
+    p = ArgumentParser(prog="drill-gym coupled", description=DESCRIPTION)
+    p.add_argument(
+        "--parameters", choices=sorted(RGD_PRESETS), default="rgd_a", help="parameter set"
+    )
+    p.add_argument(
+        "--points",
+        nargs="+",
+        choices=list(STANDARD_POINTS),
+        default=list(STANDARD_POINTS),
+        help="operating points of the standard run",
+    )
+    p.add_argument(
+        "--duration",
+        type=number_type(0.0, 2000.0, open_low=True, unit="s"),
+        default=STANDARD_DURATION_S,
+        metavar="S",
+        help="length of each standard run, s",
+    )
+    p.add_argument(
+        "--window",
+        type=number_type(0.0, 2000.0, unit="s"),
+        nargs=2,
+        default=list(STANDARD_WINDOW_S),
+        metavar=("START", "END"),
+        help="window of the features, s",
+    )
+    p.add_argument(
+        "--step",
+        type=number_type(1e-7, 1e-4, unit="s"),
+        default=1e-4,
+        metavar="S",
+        help="integration step, s",
+    )
+    p.add_argument("--surface", choices=SURFACE_RULES, default="max", help="rock-surface rule")
+    p.add_argument(
+        "--forces",
+        nargs="+",
+        type=number_type(0.0, 1e5, open_low=True, unit="kN"),
+        default=list(DEFAULT_FORCES_KN),
+        metavar="KN",
+        help="applied forces of the map and of the critical speeds, kN",
+    )
+    p.add_argument(
+        "--speeds",
+        nargs="+",
+        type=number_type(0.0, 1000.0, open_low=True, unit="rad/s"),
+        default=list(DEFAULT_SPEEDS_RAD_S),
+        metavar="RAD_S",
+        help="top-drive speeds of the map, rad/s",
+    )
+    p.add_argument(
+        "--map-duration",
+        type=number_type(0.0, 2000.0, open_low=True, unit="s"),
+        default=100.0,
+        metavar="S",
+        help="length of each simulated run of the map, s (features over its second half)",
+    )
+    p.add_argument("--no-map", action="store_true", help="skip the stability maps")
+    p.add_argument(
+        "--no-simulated-map", action="store_true", help="map the roots only, simulate no grid"
+    )
+    p.add_argument(
+        "--out", type=Path, default=Path("results/coupled"), metavar="DIR", help="output folder"
+    )
+    p.add_argument("--no-plots", action="store_true", help="write no figure")
+    p.add_argument("--no-progress", action="store_true", help="no progress lines")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``drill-gym coupled``: run, print the tables, write ``coupled.json`` and the figure."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    start_s, end_s = args.window
+    if not start_s < end_s <= args.duration:
+        parser.fail(
+            "--window", f"{start_s:g} {end_s:g} is out of range: allowed START < END <= --duration"
+        )
+    parameters = RGD_PRESETS[args.parameters]
+    floor_kn = parameters.contact_force_n / 1e3
+    for force in args.forces:
+        if force <= floor_kn:
+            parser.fail(
+                "--forces", f"{force:g} is out of range: allowed > W_f_bar = {floor_kn:g} kN"
+            )
+    started = time.perf_counter()
+
+    def note(text: str) -> None:
+        if not args.no_progress:
+            print(f"coupled: {text}", file=sys.stderr)
+
+    rows = []
+    for point in args.points:
+        force, speed = STANDARD_POINTS[point]
+        note(f"standard run at {point} ({force / 1e3:g} kN, {speed:g} rad/s)")
+        cpu = time.process_time()
+        trace = simulate(
+            parameters, speed, force, args.duration, step_s=args.step, surface=args.surface
+        )
+        cpu = time.process_time() - cpu
+        features = run_features(trace, (start_s, end_s))
+        i1 = round(start_s / trace.step_s)
+        om_min = float(trace.bit_speed_rad_s[i1:].min())
+        rows.append(_feature_row(point, features, om_min, cpu))
+        del trace
+    runs_s = time.perf_counter() - started
+    print(f"1. Standard run ({args.parameters}, surface '{args.surface}', step {args.step:g} s, "
+          f"{args.duration:g} s, features over [{start_s:g}, {end_s:g}] s):\n")  # fmt: skip
+    print(markdown_table(rows, FEATURE_COLUMNS))
+    print(f"\n(standard runs: {runs_s:.1f} s wall)")
+
+    forces_n = [f * 1e3 for f in args.forces]
+    hopf = 2 * np.sqrt(2 * parameters.k_a / parameters.axial_mass_kg) / parameters.blades
+    critical: list[float | None] = []
+    crit_rows = []
+    result: dict[str, Any] = {
+        "parameters": dataclasses.asdict(parameters),
+        "surface": args.surface,
+        "step_s": args.step,
+        "duration_s": args.duration,
+        "window_s": [start_s, end_s],
+        "feature_symbols": FEATURE_SYMBOLS,
+        "standard_run": rows,
+    }
+    if not args.no_map:
+        note("critical speeds from the roots of the characteristic equation")
+        for force in forces_n:
+            try:
+                value: float | None = critical_speed_rad_s(
+                    parameters, force, speed_range_rad_s=SPEED_RANGE_RAD_S, grid=30
+                )
+            except ValueError:
+                value = None
+            critical.append(value)
+            crit_rows.append(
+                {
+                    "applied_force_kn": force / 1e3,
+                    "critical_speed_rad_s": value,
+                    "hopf_closed_form_rad_s": hopf,
+                }
+            )
+        print("\n2. Critical top-drive speeds (steady drilling stable above):\n")
+        print(markdown_table(crit_rows, CRITICAL_COLUMNS))
+        note("stability map from the roots")
+        abscissa = stability_map(parameters, forces_n, args.speeds)
+        simulated = None
+        if not args.no_simulated_map:
+            note(
+                f"simulated map: {len(forces_n) * len(args.speeds)} runs of {args.map_duration:g} s"
+            )
+            simulated = simulated_map(
+                parameters,
+                forces_n,
+                args.speeds,
+                duration_s=args.map_duration,
+                window_s=(args.map_duration / 2, args.map_duration),
+                step_s=args.step,
+                surface=args.surface,
+            )
+        result.update(
+            critical_speeds=crit_rows,
+            map_forces_n=forces_n,
+            map_speeds_rad_s=list(args.speeds),
+            rightmost_root_real=abscissa.tolist(),
+            simulated=None if simulated is None else {k: v.tolist() for k, v in simulated.items()},
+        )
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    written = [write_json(result, out / "coupled.json", indent=2)]
+    if not args.no_map and not args.no_plots:
+        from experiments.plots import save_figure
+
+        fig = stability_figure(
+            forces_n,
+            args.speeds,
+            abscissa,
+            critical,
+            simulated,
+            f"{args.parameters}: steady drilling stability and simulated stick-slip/bounce",
+        )
+        written.append(save_figure(fig, out / "figures" / "coupled_stability_map.png"))
+    total_s = time.perf_counter() - started
+    print(f"\nwrote {', '.join(str(w) for w in written)} ({total_s:.1f} s wall in all)")
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())
