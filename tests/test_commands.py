@@ -131,7 +131,9 @@ def test_evaluate_the_shipped_models(command: list[str], tmp_path: Path) -> None
     for name in ("speed_torque_h14", "heldout_bit_speed", "heldout_torque", "heldout_iae_severity"):
         assert (out / "figures" / f"{name}.png").read_bytes()[:8] == PNG_MAGIC, name
     assert "| residual_ppo |" in result.stdout
-    assert "residual_ppo: IAE " in result.stdout and "vs proposed" in result.stdout
+    assert "residual_ppo, residual torque on proposed: " in result.stdout
+    assert "direct_ppo, direct torque, no base controller: " in result.stdout
+    assert "of the best engineered controller (proposed)" in result.stdout
 
 
 def test_compare_one_controller(command: list[str], tmp_path: Path) -> None:
@@ -142,7 +144,9 @@ def test_compare_one_controller(command: list[str], tmp_path: Path) -> None:
     out = tmp_path / "results"
     rows = json.loads((out / "compare.json").read_text())
     assert [r["controller"] for r in rows] == ["csmc", "residual_ppo"]  # the shipped agent row
-    assert "| csmc | nominal | 0 |" in result.stdout
+    assert "| residual_ppo | 1 |" in result.stdout and "| csmc | 1 |" in result.stdout
+    assert len(result.stdout.splitlines()) <= 60
+    assert "| csmc | nominal | 0 |" in (out / "compare.md").read_text()
     assert "2 runs simulated in" in result.stdout
     figures = sorted(p.name for p in (out / "figures").glob("*.png"))
     assert "speed_torque_csmc.png" in figures and "adaptive_gains.png" in figures
