@@ -17,7 +17,9 @@ Python overhead low; the controller still runs inside the compiled plant loop at
 metrics do not depend on the decision period.
 
 Outputs (``--out``, default ``results/``): ``compare.csv`` and ``compare.json`` (one row per
-run), PNG figures under ``figures/``, and a markdown table on standard output.
+run) and ``compare.md`` (the same as a markdown table), PNG figures under ``figures/``; on
+standard output a ranked summary (:func:`summary_table`: one line per controller, the means of
+the paper's metrics over its runs, lowest mean IAE first).
 
 Example::
 
@@ -788,7 +790,9 @@ DESCRIPTION: Final = """\
 Run each controller on the paper's scenario (WOB 97,347 N, reference bit speed 12 rad/s,
 150 s from rest) under each uncertainty condition and measurement-noise level, score every run
 on the paper's metrics (ISE, IAE, RMSE, RMSD, overshoot, settling time, chattering, stick-slip
-severity), print a table and write compare.csv, compare.json and figures/ into --out.
+severity), print a ranked summary (one line per controller: the means over its runs, lowest
+IAE first) and write every run to compare.md, compare.csv and compare.json, and figures/ into
+--out.
 
 Uncertainty conditions: the paper's parametric-uncertainty conditions. nominal is the plant as
 specified; condition1, condition2 and condition3 raise the pipe damping c_pi, the pipe
