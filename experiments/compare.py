@@ -1018,8 +1018,8 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
     per = len(rows) // max(1, len({run_label(r) for r in rows}))
     print(
         f"Ranked by mean IAE (rad), lowest first: the means of the paper's metrics over the "
-        f"{per} runs of each controller ({len(cases)} "
-        f"{'scenarios' if field else 'conditions'} x noise "
+        f"{per} run{'s' * (per != 1)} of each controller ({len(cases)} "
+        f"{'scenario' if field else 'condition'}{'s' * (len(cases) != 1)} x noise "
         f"{', '.join(f'{n:g}' for n in noises)} rad/s); settling: mean over the runs that "
         f"settle. Every run: {out / 'compare.md'} (also .csv, .json).\n"
     )
