@@ -199,7 +199,7 @@ class _BitSpeedLoop:
 
 def test_python_controllers_get_the_named_measurement_in_both_envs() -> None:
     loop = _BitSpeedLoop()
-    env = gym.make("DrillString-v0", randomize=False, base_controller=loop, episode_s=0.05)
+    env = gym.make("DrillString-v0", randomize=False, base_controller=loop, episode_s=0.1)
     rollout(env, ZeroAction(), seed=0)
     assert loop.seen and set(loop.seen) == {control.Measurement}
     field = gym.make("DrillStringField-v0", randomize=False, base_controller=_BitSpeedLoop())
