@@ -36,10 +36,11 @@ if ! installed; then
         "(first run, pyproject.toml changed or install incomplete)" >&2
     pip=(.venv/bin/python -m pip -qq --disable-pip-version-check --no-input)
     "${pip[@]}" install --upgrade pip
-    if [[ ",${extras}," == *",rl,"* ]]; then
-        # torch first, pinned to a CPU build: a bare `torch` request from PyPI on Linux resolves
-        # to a multi-GB CUDA build; this pin is the CPU wheel available to this project's
-        # machines (elsewhere: pip install torch --index-url https://download.pytorch.org/whl/cpu).
+    if [[ ",${extras}," == *",rl,"* || ",${extras}," == *",zoo,"* ]]; then  # both bring torch
+        # torch first, pinned so that pip picks a CPU build: where pip's find-links offer the
+        # wheel 2.13.0+cpu it takes that one instead of a multi-GB CUDA build from PyPI. Without
+        # such a wheel, install the CPU build first yourself:
+        #   .venv/bin/python -m pip install torch --index-url https://download.pytorch.org/whl/cpu
         # The [rl] extra's torch range is then already satisfied.
         "${pip[@]}" install "torch==2.13.0"
     fi
