@@ -72,6 +72,19 @@ def test_readme_is_short() -> None:
     assert size <= README_MAX_CHARS, f"README.md has {size:,} characters"
 
 
+def test_readme_says_how_to_reach_the_command_and_install() -> None:
+    text = (ROOT / "README.md").read_text()
+    for needed in (
+        "./scripts/compare.sh", "./scripts/test.sh", "source .venv/bin/activate",
+        ".venv/bin/drill-gym", "pip install .", "pip install '.[rl]'",
+        "https://download.pytorch.org/whl/cpu", "'.[scale]'", "'.[video]'", "'.[zoo]'",
+    ):  # fmt: skip
+        assert needed in text, needed
+    for model in (ROOT / "agents" / "models").iterdir():  # every shipped model is presented
+        if model.is_dir():
+            assert f"`{model.name}`" in text, model.name
+
+
 @pytest.mark.parametrize("report", REPORTS, ids=_id)
 def test_each_report_opens_with_its_conclusion(report: Path) -> None:
     """The first paragraph after the title is the conclusion."""
