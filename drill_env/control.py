@@ -105,9 +105,11 @@ class Measurement(np.ndarray):
         array = np.asarray(values, dtype=np.float64)
         if array.shape != (N_MEASUREMENT,):
             raise ValueError(f"a measurement has shape ({N_MEASUREMENT},), got {array.shape}")
-        unknown = sorted(set(missing) - set(_PROVIDERS))
+        unknown = sorted(set(missing) - set(MEASUREMENT_NAMES))
         if unknown:
-            raise ValueError(f"missing = {unknown} is not valid: allowed {sorted(_PROVIDERS)}")
+            raise ValueError(
+                f"missing = {unknown} is not valid: allowed {', '.join(MEASUREMENT_NAMES)}"
+            )
         obj = array.view(cls)
         obj._missing = frozenset(missing)
         return obj
@@ -139,9 +141,15 @@ class Measurement(np.ndarray):
                 f"{', '.join(MEASUREMENT_NAMES)}"
             )
         if name in self._missing:
+            if name in _PROVIDERS:
+                raise MissingSignalError(
+                    f"measurement.{name} is not provided by this env's measurement channel: "
+                    f"make the env with {_PROVIDERS[name]} to measure it"
+                )
             raise MissingSignalError(
-                f"measurement.{name} is not provided by this env's measurement channel: "
-                f"make the env with {_PROVIDERS[name]} to measure it"
+                f"measurement.{name} is not available here: this measurement was rebuilt from "
+                "an observation that does not carry it (run the controller as the env's "
+                "base_controller to receive every signal)"
             )
         return float(self[MEASUREMENT_NAMES.index(name)])
 

@@ -211,3 +211,26 @@ def test_python_controllers_get_the_named_measurement_in_both_envs() -> None:
         observation="state", episode_s=0.05, control_dt_s=0.05,
     )  # fmt: skip
     rollout(state, ZeroAction(), seed=0)
+
+
+def test_controller_policy_hands_a_named_measurement_of_what_the_observation_carries() -> None:
+    from baselines import ControllerPolicy
+
+    class Reads:
+        def __init__(self, name: str) -> None:
+            self.name = name
+
+        def reset(self) -> None:
+            pass
+
+        def torque(self, measurement: Any, reference_speed_rad_s: float, dt_s: float) -> float:
+            return 13_000.0 + 0.0 * getattr(measurement, self.name)
+
+    env = gym.make("DrillString-v0", randomize=False, episode_s=0.1)
+    obs, _ = env.reset(seed=0)
+    for name in ("bit_speed_rad_s", "surface_top_drive_speed_rad_s"):
+        action, _ = ControllerPolicy.for_env(Reads(name), env).predict(obs)
+        assert action.shape == (1,)
+    policy = ControllerPolicy.for_env(Reads("surface_torque_nm"), env)
+    with pytest.raises(control.MissingSignalError, match="surface_torque_nm is not available"):
+        policy.predict(obs)
