@@ -110,3 +110,13 @@ def test_every_docs_path_named_in_the_repository_exists() -> None:
         if not (ROOT / hit).exists()
     )
     assert not missing, "\n".join(missing)
+
+
+def test_the_readme_example_runs(capsys: pytest.CaptureFixture[str]) -> None:
+    """The README's Python example, as written, prints the metrics of the paper's SMC."""
+    text = (ROOT / "README.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.DOTALL)
+    assert len(blocks) == 1 and len(blocks[0].splitlines()) <= 12
+    exec(compile(blocks[0], "README.md", "exec"), {"__name__": "readme_example"})
+    printed = capsys.readouterr().out
+    assert "'iae':" in printed and "'diverged': False" in printed
