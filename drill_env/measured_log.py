@@ -182,6 +182,11 @@ def check_log_arrays(
     """Check a log's arrays: known names, the required ones there, one length, finite values,
     a strictly increasing clock; ``ValueError`` naming the column and the row otherwise."""
     names = ["time_s", *columns]
+    _check_names(names)
+    _check_rows(time_s, columns)
+
+
+def _check_names(names: list[str]) -> None:
     unknown = [n for n in names if n not in COLUMN_UNITS]
     if unknown:
         raise ValueError(
@@ -194,6 +199,10 @@ def check_log_arrays(
             f"missing required column(s) {', '.join(repr(n) for n in missing)} "
             f"(required: {', '.join(REQUIRED_COLUMNS)})"
         )
+
+
+def _check_rows(time_s: npt.NDArray[np.float64], columns: Mapping[str, npt.NDArray[np.float64]]) -> None:
+    names = ["time_s", *columns]
     n = len(time_s)
     if n < MIN_LOG_ROWS:
         raise ValueError(f"the log has {n} data rows: allowed at least {MIN_LOG_ROWS}")
@@ -204,7 +213,7 @@ def check_log_arrays(
         bad = np.flatnonzero(~np.isfinite(values))
         if bad.size:
             raise ValueError(
-                f"column {name!r}, row {bad[0] + 1}: {values[bad[0]]!r} is not finite "
+                f"column {name!r}, row {bad[0] + 1}: {float(values[bad[0]])!r} is not finite "
                 f"({bad.size} such row(s))"
             )
     steps = np.diff(time_s)
@@ -212,8 +221,8 @@ def check_log_arrays(
     if bad.size:
         i = int(bad[0]) + 1
         raise ValueError(
-            f"column 'time_s', row {i + 1}: {time_s[i]!r} s is not after row {i}'s "
-            f"{time_s[i - 1]!r} s: time must be strictly increasing"
+            f"column 'time_s', row {i + 1}: {float(time_s[i])!r} s is not after row {i}'s "
+            f"{float(time_s[i - 1])!r} s: time must be strictly increasing"
         )
 
 
@@ -247,9 +256,7 @@ def _read_csv(path: Path) -> tuple[npt.NDArray[np.float64], dict[str, npt.NDArra
     duplicated = sorted({n for n in names if names.count(n) > 1})
     if duplicated:
         raise ValueError(f"column(s) {', '.join(repr(n) for n in duplicated)} appear twice")
-    check_log_arrays(
-        np.zeros(MIN_LOG_ROWS), {n: np.zeros(MIN_LOG_ROWS) for n in names if n != "time_s"}
-    )  # names first: unknown and missing columns before any number is read
+    _check_names(names)  # unknown and missing columns before any number is read
     rows: list[list[float]] = []
     with open(path, encoding="utf-8", newline="") as f:
         for _ in range(skipped):
@@ -295,9 +302,7 @@ def _read_parquet(
         raise ValueError(f"log {str(path)!r} has {meta.num_rows} rows: allowed {MAX_LOG_ROWS}")
     table = pq.read_table(path)
     names = list(table.column_names)
-    check_log_arrays(
-        np.zeros(MIN_LOG_ROWS), {n: np.zeros(MIN_LOG_ROWS) for n in names if n != "time_s"}
-    )
+    _check_names(names)
     data: dict[str, npt.NDArray[np.float64]] = {}
     for name in names:
         column = table.column(name)

@@ -51,6 +51,9 @@ MAX_RELATIVE_STD: Final = 0.25
 """A parameter whose fitted relative standard deviation exceeds this is not identified."""
 MEMORY_TIMES_S: Final = (0.003, 0.01, 0.03, 0.1, 0.3)
 """Starting memory times of the ``memory`` family's fit, s."""
+STARTS_REFINED: Final = 3
+"""The fit runs Levenberg-Marquardt from this many of its starting points (those of lowest
+initial cost) and keeps the best end."""
 FEATURE_KEYS: Final = (
     "period_fft_s",
     "period_cycles_s",
@@ -130,6 +133,35 @@ def initial_estimates(log: MeasuredLog, uses_wob: bool) -> tuple[npt.NDArray[np.
     return p, twist0
 
 
+SEGMENT_CYCLES: Final = 2
+"""Stick-slip cycles per segment of the multiple-shooting stage: with two, each segment
+predicts a whole stick phase (its length sets the period) from the state of the one before."""
+SEGMENT_MIN_STUCK_S: Final = 0.02
+"""Shortest measured stuck run that starts a segment of the multiple-shooting stage, s."""
+
+
+def stuck_segments(log: MeasuredLog) -> list[tuple[int, int, float]] | None:
+    """Segments ``(first, end, torque)`` of the multiple-shooting stage of the fit: each starts
+    in the middle of every :data:`SEGMENT_CYCLES`-th measured stuck run (``|bit speed|`` below :func:`stuck_threshold`
+    for :data:`SEGMENT_MIN_STUCK_S`) with the median measured torque of its first 5 samples,
+    and ends where the next starts; None with fewer than 2 stuck runs (no stick-slip)."""
+    bit = log.column("bit_speed_rad_s")
+    torque = log.column("bit_torque_nm")
+    stuck = np.abs(bit) < stuck_threshold(bit)
+    padded = np.concatenate(([0], stuck.astype(np.int8), [0]))
+    edges = np.flatnonzero(np.diff(padded))
+    starts = []
+    min_samples = max(5, int(SEGMENT_MIN_STUCK_S / log.sample_period_s))
+    for a, b in zip(edges[::2], edges[1::2]):
+        if b - a >= min_samples:
+            starts.append(int(a + b) // 2)
+    if len(starts) < 2:
+        return None
+    starts = starts[::SEGMENT_CYCLES]
+    ends = [*starts[1:], bit.size]
+    return [(a, b, float(np.median(torque[a : a + 5]))) for a, b in zip(starts, ends) if b - a >= 3]
+
+
 @dataclass
 class _Problem:
     """The residuals of one window for one family."""
@@ -143,6 +175,8 @@ class _Problem:
     scales: tuple[float, float]
     speed0: float
     substeps: int
+    twist0_fixed: float = 0.0
+    segments: list[tuple[int, int, float]] | None = None
 
     def unpack(self, theta: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], float]:
         p = self.fixed_p.copy()
@@ -160,8 +194,6 @@ class _Problem:
         else:
             twist0 = self.twist0_fixed
         return p, twist0
-
-    twist0_fixed: float = 0.0
 
     def twist_scale(self, p: npt.NDArray[np.float64]) -> float:
         scale = float(np.mean(self.log.column("wob_n"))) if self.uses_wob else 1.0
@@ -183,10 +215,23 @@ class _Problem:
         self, theta: npt.NDArray[np.float64]
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
         p, twist0 = self.unpack(theta)
-        speed, torque, _ = simulate_bit(
-            self.log.time_s, self.log.column("top_speed_rad_s"), p, self.family, twist0,
-            self.speed0, self.log.column("wob_n") if self.uses_wob else None, self.substeps,
-        )  # fmt: skip
+        top = self.log.column("top_speed_rad_s")
+        wob = self.log.column("wob_n") if self.uses_wob else None
+        if self.segments is None:
+            speed, torque, _ = simulate_bit(
+                self.log.time_s, top, p, self.family, twist0, self.speed0, wob, self.substeps
+            )
+            return speed, torque
+        # Multiple shooting: every segment starts stuck, its twist from the measured torque.
+        speed = self.log.column("bit_speed_rad_s").copy()
+        torque = self.log.column("bit_torque_nm").copy()
+        for a, b, torque0 in self.segments:
+            s, q, _ = simulate_bit(
+                self.log.time_s[a:b], top[a:b], p, self.family, (torque0 - p[P_C] * top[a]) / p[P_K],
+                0.0, None if wob is None else wob[a:b], self.substeps,
+            )  # fmt: skip
+            speed[a:b] = s
+            torque[a:b] = q
         return speed, torque
 
     def residuals(self, theta: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
@@ -199,6 +244,22 @@ class _Problem:
         )
         r = np.where(np.isfinite(r), r, 1e3)
         return np.asarray(r * self.weights)
+
+
+def _initial_twist_grid(problem: _Problem, p: npt.NDArray[np.float64]) -> float:
+    """The initial twist (rad) of lowest cost on a grid of 61 values spanning one static
+    torque around the torque balance, the other parameters held at ``p``."""
+    log = problem.log
+    torque0 = float(np.median(log.column("bit_torque_nm")[:5]))
+    balance = (torque0 - p[P_C] * (log.column("top_speed_rad_s")[0] - problem.speed0)) / p[P_K]
+    span = problem.twist_scale(p)
+    best = (math.inf, balance)
+    for x0 in balance + span * np.linspace(-1.0, 1.0, 61):
+        r = problem.residuals(problem.pack(p, float(x0)))
+        cost = float(r @ r)
+        if cost < best[0]:
+            best = (cost, float(x0))
+    return best[1]
 
 
 def _jacobian(problem: _Problem, theta: npt.NDArray[np.float64], step: float = 1e-3) -> npt.NDArray[np.float64]:
@@ -280,13 +341,24 @@ class FamilyFit:
     singular_values: list[float] = field(default_factory=list)
 
 
+def _moderate(p: npt.NDArray[np.float64], log: MeasuredLog, uses_wob: bool) -> npt.NDArray[np.float64]:
+    """``p`` with damping terms near 0 raised to moderate starting values (a 2 % damping
+    ratio; a viscous friction of 5 % of the sliding torque at the mean slip speed), so that
+    the fit can move them: a term started at 0 has no gradient in log space."""
+    q = p.copy()
+    q[P_C] = max(q[P_C], 0.04 * math.sqrt(q[P_K] * q[P_J]))
+    scale = float(np.mean(log.column("wob_n"))) if uses_wob else 1.0
+    speed = float(np.mean(np.abs(log.column("bit_speed_rad_s")))) or 1.0
+    q[P_CV] = max(q[P_CV], 0.05 * q[P_A0] * scale / speed)
+    return q
+
+
 def _fit_family(
     log: MeasuredLog,
     family: str,
     uses_wob: bool,
     weights: npt.NDArray[np.float64],
-    start_p: npt.NDArray[np.float64],
-    start_twist0: float,
+    starts_p: list[tuple[npt.NDArray[np.float64], float]],
     direct: npt.NDArray[np.float64],
     user_fixed: dict[str, float],
 ) -> FamilyFit:
@@ -295,35 +367,60 @@ def _fit_family(
     scales = (float(np.std(bit)) or 1.0, float(np.std(torque)) or 1.0)
     names = list(FAMILY_PARAMETERS[family]) + ["initial_twist"]
     fixed: dict[str, str] = {}
-    p = start_p.copy()
+    held: dict[int, float] = {}
     for name, value in user_fixed.items():
-        p[MODEL_PARAMETERS[name][0]] = value
+        held[MODEL_PARAMETERS[name][0]] = value
         fixed[name] = f"fixed at {value:.6g} by the user"
+    candidates = []
+    for p_start, twist_start in starts_p:
+        q = _moderate(p_start, log, uses_wob)
+        for index, value in held.items():
+            q[index] = value
+        candidates.append((q, twist_start))
+    p, start_twist0 = candidates[0]
     problem = _Problem(
         log, family, uses_wob, [n for n in names if n not in fixed], p.copy(),
         weights, scales, _speed0(bit, stuck_threshold(bit)), 1, start_twist0,
     )  # fmt: skip
     iterations = 0
+    free_full = list(problem.free)
     while True:
-        problem.fixed_p = p.copy()
-        problem.substeps = substeps_for(p, log.sample_period_s)
-        theta0 = problem.pack(p, start_twist0)
-        starts = [theta0]
-        if family == "memory" and "memory_time" in problem.free:
-            i = problem.free.index("memory_time")
-            for tau in MEMORY_TIMES_S:
-                th = theta0.copy()
-                th[i] = math.log(tau)
-                starts.append(th)
-        best = None
-        for th in starts:
-            r = problem.residuals(th)
-            c = float(r @ r)
-            if best is None or c < best[1]:
-                best = (th, c)
-        assert best is not None
-        theta, cost, it = _levenberg_marquardt(problem, best[0])
-        iterations += it
+        tried = []
+        free_shooting = [n for n in free_full if n != "initial_twist"]
+        shooting = stuck_segments(log)
+        problem.segments = shooting
+        if shooting is not None:
+            problem.free = free_shooting
+        for q, twist_q in candidates:
+            problem.fixed_p = q.copy()
+            theta0 = problem.pack(q, twist_q)
+            variants = [theta0]
+            if family == "memory" and "memory_time" in problem.free:
+                i = problem.free.index("memory_time")
+                for tau in MEMORY_TIMES_S:
+                    th = theta0.copy()
+                    th[i] = math.log(tau)
+                    variants.append(th)
+            for th in variants:
+                problem.substeps = substeps_for(problem.unpack(th)[0], log.sample_period_s)
+                r = problem.residuals(th)
+                tried.append((float(r @ r), q.copy(), th))
+        tried.sort(key=lambda item: item[0])
+        best_run = None
+        for _, q, th in tried[:STARTS_REFINED]:
+            problem.fixed_p = q
+            problem.segments = shooting
+            problem.free = free_shooting if shooting is not None else free_full
+            problem.substeps = substeps_for(problem.unpack(th)[0], log.sample_period_s)
+            theta_run, cost_run, it = _levenberg_marquardt(problem, th)
+            iterations += it
+            if best_run is None or cost_run < best_run[0]:
+                best_run = (cost_run, q, theta_run)
+        # The Laplace covariance and the BIC are those of the stage that fitted (multiple
+        # shooting when the window stick-slips); the initial twist of the whole window is
+        # then the best one on a grid, for the figures and the plant file.
+        assert best_run is not None
+        _, problem.fixed_p, theta = best_run
         p, start_twist0 = problem.unpack(theta)
         problem.substeps = substeps_for(p, log.sample_period_s)
         theta = problem.pack(p, start_twist0)
@@ -376,7 +473,15 @@ def _fit_family(
         p[index] = value
         if worst == "static_friction" and p[P_A0] > value:
             p[P_A0] = value
-        problem.free = [n for n in problem.free if n != worst]
+        held[index] = value
+        free_full = [n for n in free_full if n != worst]
+        candidates = [(p.copy(), start_twist0)]
+    if problem.segments is not None:
+        problem.segments = None
+        problem.free = free_full
+        problem.fixed_p = p.copy()
+        problem.substeps = substeps_for(p, log.sample_period_s)
+        start_twist0 = _initial_twist_grid(problem, p)
     k = len(problem.free)
     bic = n_eff * math.log(cost / n) + k * math.log(n_eff)
     return FamilyFit(
@@ -446,20 +551,17 @@ def calibrate(
     weights, defects = fit_weights(window)
     direct, twist0 = initial_estimates(window, uses_wob)
     fits: dict[str, FamilyFit] = {}
-    start_p, start_twist0 = direct.copy(), twist0
+    previous: tuple[npt.NDArray[np.float64], float] | None = None
     for family in FAMILIES:
         if family not in families:
             continue
         fam_fixed = {k: v for k, v in user_fixed.items() if k in FAMILY_PARAMETERS[family]}
-        fit = _fit_family(
-            window, family, uses_wob, weights, start_p, start_twist0, direct, fam_fixed
-        )
+        starts = [(direct.copy(), twist0)]
+        if previous is not None:
+            starts.append(previous)
+        fit = _fit_family(window, family, uses_wob, weights, starts, direct, fam_fixed)
         fits[family] = fit
-        start_p, start_twist0 = fit.p.copy(), fit.twist0
-        if start_p[P_CV] <= 0:
-            start_p[P_CV] = direct[P_CV]
-        if start_p[P_C] <= 0:
-            start_p[P_C] = direct[P_C]
+        previous = (fit.p.copy(), fit.twist0)
     # One effective sample size for every family (the simplest family's), so that the BIC
     # compares costs on one footing.
     n_eff = next(iter(fits.values())).n_eff
@@ -550,18 +652,49 @@ def simulate_plant(
     if log.has("bit_speed_rad_s"):
         bit = log.column("bit_speed_rad_s")
         speed0 = _speed0(bit, stuck_threshold(bit))
+    wob = log.column("wob_n") if uses_wob else None
     if twist0 is None:
-        if log.has("bit_torque_nm"):
-            torque0 = float(np.median(log.column("bit_torque_nm")[:5]))
-            top0 = float(log.column("top_speed_rad_s")[0])
-            twist0 = (torque0 - p[P_C] * (top0 - speed0)) / p[P_K]
-        else:
-            twist0 = plant.initial_twist_rad
+        twist0 = initial_twist(plant, log, speed0)
     speed, torque, _ = simulate_bit(
-        log.time_s, log.column("top_speed_rad_s"), p, plant.family, twist0, speed0,
-        log.column("wob_n") if uses_wob else None,
-    )  # fmt: skip
+        log.time_s, log.column("top_speed_rad_s"), p, plant.family, twist0, speed0, wob
+    )
     return speed, torque
+
+
+INITIAL_STATE_FRACTION: Final = 0.25
+"""Share of a replayed window, from its start, on which its initial twist is estimated."""
+
+
+def initial_twist(plant: CalibratedPlant, log: MeasuredLog, speed0: float) -> float:
+    """The string's twist at the start of a replayed log, rad: the value that best matches
+    the measured bit speed and torque on bit over the first :data:`INITIAL_STATE_FRACTION` of
+    the log (a grid of 61 values within one static torque of the torque balance), or the
+    torque balance alone when the log lacks either column. Only this initial state is
+    estimated from a replayed window; the plant's parameters are not touched.
+    """
+    p = plant.model_vector()
+    top0 = float(log.column("top_speed_rad_s")[0])
+    if not log.has("bit_torque_nm"):
+        return plant.initial_twist_rad
+    torque0 = float(np.median(log.column("bit_torque_nm")[:5]))
+    balance = (torque0 - p[P_C] * (top0 - speed0)) / p[P_K]
+    if not log.has("bit_speed_rad_s"):
+        return balance
+    n = max(3, int(INITIAL_STATE_FRACTION * log.time_s.size))
+    head = log.time_s[:n]
+    top = log.column("top_speed_rad_s")[:n]
+    bit = log.column("bit_speed_rad_s")[:n]
+    torque = log.column("bit_torque_nm")[:n]
+    wob = log.column("wob_n")[:n] if plant.uses_wob else None
+    span = p[P_AA] * (float(np.mean(wob)) if wob is not None else 1.0) / p[P_K]
+    scales = (float(np.std(bit)) or 1.0, float(np.std(torque)) or 1.0)
+    best = (math.inf, balance)
+    for x0 in balance + span * np.linspace(-1.0, 1.0, 61):
+        s, q, _ = simulate_bit(head, top, p, plant.family, float(x0), speed0, wob)
+        cost = float(np.mean(((s - bit) / scales[0]) ** 2 + ((q - torque) / scales[1]) ** 2))
+        if cost < best[0]:
+            best = (cost, float(x0))
+    return best[1]
 
 
 def _cycle_starts(speed: npt.NDArray[np.float64], low: float, high: float) -> npt.NDArray[np.intp]:

@@ -156,10 +156,13 @@ def _add_defects(
 ) -> tuple[npt.NDArray[np.float64], dict[str, npt.NDArray[np.float64]]]:
     for s in spikes_s:
         i = int(np.searchsorted(time_s, s))
+        if i >= time_s.size - 1:
+            continue  # the log ends before it
         values = columns[spike_column]
         values[i] += 8.0 * float(np.std(values)) * (1 if i % 2 else -1)
     a, b = np.searchsorted(time_s, flat_line_s)
-    columns[flat_column][a:b] = columns[flat_column][a]
+    if a < time_s.size:
+        columns[flat_column][a:b] = columns[flat_column][a]
     keep = (time_s <= gap_s[0]) | (time_s >= gap_s[1])
     return time_s[keep], {k: v[keep] for k, v in columns.items()}
 
