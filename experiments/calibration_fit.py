@@ -102,6 +102,12 @@ def initial_estimates(log: MeasuredLog, uses_wob: bool) -> tuple[npt.NDArray[np.
     coef, *_ = np.linalg.lstsq(a, -cumulative(torque), rcond=None)
     j_est, k_est, kx0, c_est, _ = (float(v) for v in coef)
     p = np.zeros(N_MODEL_PARAMS)
+    stick_k, stick_j = _stick_slip_estimates(t, top, bit, torque)
+    if not (j_est > 0 and k_est > 0) or (
+        stick_k > 0 and not 0.5 < k_est / stick_k < 2.0
+    ):  # the equation error failed (coarse sampling, a string with more inertias)
+        j_est, k_est, c_est = stick_j, stick_k, 0.0
+        kx0 = float(np.median(torque[:5]))
     p[P_J] = j_est if j_est > 0 else 1.0
     p[P_K] = k_est if k_est > 0 else 1.0
     p[P_C] = max(c_est, 1e-3 * math.sqrt(p[P_K] * p[P_J]))
@@ -117,14 +123,20 @@ def initial_estimates(log: MeasuredLog, uses_wob: bool) -> tuple[npt.NDArray[np.
         speed = np.abs(bit[slip])
         y = per[slip] * np.sign(bit[slip])
         for xi in np.geomspace(1e-2 / max(speed.mean(), 1e-9), 10 / max(speed.mean(), 1e-9), 40):
-            basis = np.column_stack([np.ones_like(speed), np.exp(-xi * speed), speed / scale[slip]])
-            sol, *_ = np.linalg.lstsq(basis, y, rcond=None)
-            cost = float(np.sum((basis @ sol - y) ** 2))
-            if cost < best[0] and sol[0] > 0:
-                best = (cost, float(sol[0]), max(float(sol[1]), 0.0), max(float(sol[2]), 0.0), xi)
+            viscous = speed / scale[slip]
+            for columns in (3, 2):
+                basis = np.column_stack([np.ones_like(speed), np.exp(-xi * speed), viscous])
+                basis = basis[:, :columns]
+                norms = np.linalg.norm(basis, axis=0)
+                sol, *_ = np.linalg.lstsq(basis / norms, y, rcond=None)
+                sol = sol / norms
+                cost = float(np.sum((basis @ sol - y) ** 2))
+                if cost < best[0] and np.all(sol >= 0) and sol[0] > 0:
+                    c_v = float(sol[2]) if columns == 3 else 0.0
+                    best = (cost, float(sol[0]), float(sol[1]), c_v, xi)
     _, a_0, drop, c_v, xi = best
     if a_0 <= 0:
-        a_0 = float(np.median(np.abs(per)))
+        a_0 = float(np.median(np.abs(per[slip]))) if slip.any() else float(np.median(np.abs(per)))
     p[P_A0] = a_0
     p[P_AA] = max(a_0 + drop, static_max, 1.01 * a_0)
     p[P_XI] = xi
@@ -160,6 +172,36 @@ def stuck_segments(log: MeasuredLog) -> list[tuple[int, int, float]] | None:
     starts = starts[::SEGMENT_CYCLES]
     ends = [*starts[1:], bit.size]
     return [(a, b, float(np.median(torque[a : a + 5]))) for a, b in zip(starts, ends) if b - a >= 3]
+
+
+def _stick_slip_estimates(
+    t: npt.NDArray[np.float64],
+    top: npt.NDArray[np.float64],
+    bit: npt.NDArray[np.float64],
+    torque: npt.NDArray[np.float64],
+) -> tuple[float, float]:
+    """``(k, J)`` from the stick-slip cycles: while the bit is stuck the torque on bit rises
+    with the twist the top drive winds (slope ``k``, least squares on every stuck run of 4 or
+    more samples); a slip lasts about half a natural period, ``J = k (t_slip / pi)^2``.
+    ``(0, 0)`` without stuck runs."""
+    stuck = np.abs(bit) < stuck_threshold(bit)
+    padded = np.concatenate(([0], stuck.astype(np.int8), [0]))
+    edges = np.flatnonzero(np.diff(padded))
+    xs, ys = [], []
+    for a, b in zip(edges[::2], edges[1::2]):
+        if b - a >= 4:
+            dt = np.diff(t[a:b])
+            twist = np.concatenate(([0.0], np.cumsum(0.5 * (top[a + 1 : b] + top[a : b - 1]) * dt)))
+            xs.append(twist - twist.mean())
+            ys.append(torque[a:b] - torque[a:b].mean())
+    if not xs:
+        return 0.0, 0.0
+    x, y = np.concatenate(xs), np.concatenate(ys)
+    k = float(x @ y / (x @ x)) if x @ x > 0 else 0.0
+    slips = [t[b] - t[a] for a, b in zip(edges[1::2][:-1], edges[2::2]) if b > a]
+    if k <= 0 or not slips:
+        return 0.0, 0.0
+    return k, k * (float(np.median(slips)) / math.pi) ** 2
 
 
 @dataclass
@@ -454,6 +496,12 @@ def _fit_family(
         worst = max(rel, key=lambda k: rel[k] if math.isfinite(rel[k]) else math.inf, default=None)
         if worst is None or (math.isfinite(rel[worst]) and rel[worst] <= MAX_RELATIVE_STD):
             break
+        if len(rel) == 1:
+            raise ValueError(
+                f"the window identifies no parameter of the {family} family (the last one, "
+                f"{worst}, has relative std {rel[worst]:.2g}): choose a window with stick-slip "
+                "cycles, or hold parameters with --fix"
+            )
         # Not identified: fix it at its direct estimate (or 0 for a damping term) and refit.
         index = MODEL_PARAMETERS[worst][0]
         partner, rho = corr[worst]
