@@ -37,6 +37,7 @@ from numba import njit
 __all__ = [
     "FAMILIES",
     "FAMILY_CODES",
+    "MAX_SUBSTEPS",
     "N_MODEL_PARAMS",
     "P_A0",
     "P_AA",
@@ -63,18 +64,21 @@ N_MODEL_PARAMS: Final = 8
 """Length of the model parameter vector."""
 STEPS_PER_PERIOD: Final = 40_000
 """The simulator's step is at most this fraction of the string's natural period."""
+MAX_SUBSTEPS: Final = 2000
+"""Most steps per sample interval (a bound on the cost of a simulation)."""
 
 
 def substeps_for(p: npt.NDArray[np.float64], sample_period_s: float) -> int:
     """Steps per sample interval: at least :data:`STEPS_PER_PERIOD` per natural period
-    ``2 pi sqrt(J/k)``, and a step below ``J / (10 c)`` and ``tau / 4``."""
+    ``2 pi sqrt(J/k)``, and a step below ``J / (10 c)`` and ``tau / 4``; at most
+    :data:`MAX_SUBSTEPS`."""
     period = 2.0 * math.pi * math.sqrt(p[P_J] / p[P_K])
     h = period / STEPS_PER_PERIOD
     if p[P_C] + p[P_CV] > 0:
         h = min(h, 0.1 * p[P_J] / (p[P_C] + p[P_CV]))
     if p[P_TAU] > 0:
         h = min(h, 0.25 * p[P_TAU])
-    return max(1, min(100_000, int(math.ceil(sample_period_s / h))))
+    return max(1, min(MAX_SUBSTEPS, int(math.ceil(sample_period_s / h))))
 
 
 @njit(cache=True)

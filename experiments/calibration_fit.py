@@ -51,6 +51,8 @@ MAX_RELATIVE_STD: Final = 0.25
 """A parameter whose fitted relative standard deviation exceeds this is not identified."""
 MEMORY_TIMES_S: Final = (0.003, 0.01, 0.03, 0.1, 0.3)
 """Starting memory times of the ``memory`` family's fit, s."""
+MAX_LOG_STEP: Final = 4.0
+"""A fit moves each parameter by at most a factor ``e^4`` (about 55) from its start."""
 STARTS_REFINED: Final = 3
 """The fit runs Levenberg-Marquardt from this many of its starting points (those of lowest
 initial cost) and keeps the best end."""
@@ -321,6 +323,7 @@ def _levenberg_marquardt(
     """Minimise the sum of squared residuals from ``theta``; returns (theta, cost, iterations)."""
     r = problem.residuals(theta)
     cost = float(r @ r)
+    low, high = theta - MAX_LOG_STEP, theta + MAX_LOG_STEP
     damping = 1e-2
     iteration = 0
     for iteration in range(1, max_iterations + 1):
@@ -331,7 +334,7 @@ def _levenberg_marquardt(
         for _ in range(12):
             step = np.linalg.solve(h + damping * np.diag(np.diag(h) + 1e-12), -g)
             step = np.clip(step, -1.0, 1.0)
-            trial = theta + step
+            trial = np.clip(theta + step, low, high)
             r_trial = problem.residuals(trial)
             cost_trial = float(r_trial @ r_trial)
             if cost_trial < cost:
@@ -644,7 +647,14 @@ def _plant_of(
                 "fitted (output error on bit speed and torque on bit)",
             )  # fmt: skip
     bit = window.column("bit_speed_rad_s")
-    noise = float(np.std(np.diff(bit)) / math.sqrt(2))
+    stuck = np.abs(bit) < stuck_threshold(bit)
+    # The noise of the bit-speed sensor: its spread while the bit is stuck (at rest), else
+    # that of the sample-to-sample differences.
+    noise = (
+        float(np.std(bit[stuck]))
+        if stuck.sum() >= 20
+        else float(np.std(np.diff(bit)) / math.sqrt(2))
+    )
     operating = {
         "mean_top_speed_rad_s": float(np.mean(window.column("top_speed_rad_s"))),
         "mean_bit_speed_rad_s": float(np.mean(bit)),
