@@ -117,7 +117,9 @@ class CalibratedPlant:
 
     def __post_init__(self) -> None:
         if self.family not in FAMILIES:
-            raise ValueError(f"family = {self.family!r} is not known: allowed {', '.join(FAMILIES)}")
+            raise ValueError(
+                f"family = {self.family!r} is not known: allowed {', '.join(FAMILIES)}"
+            )
         expected = FAMILY_PARAMETERS[self.family]
         missing = [n for n in expected if n not in self.parameters]
         extra = [n for n in self.parameters if n not in expected]
@@ -307,7 +309,9 @@ MAP_TOP_INERTIA_FACTOR: Final = 5.0
 inertias."""
 
 
-def drill_string_parameters(plant: CalibratedPlant, wob_n: float | None = None) -> DrillStringParameters:
+def drill_string_parameters(
+    plant: CalibratedPlant, wob_n: float | None = None
+) -> DrillStringParameters:
     """The calibrated plant as 4-DOF ``DrillString-v0`` parameters.
 
     The string's stiffness ``k`` becomes three equal springs in series (``3 k`` each) joined by

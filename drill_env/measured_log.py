@@ -201,7 +201,9 @@ def _check_names(names: list[str]) -> None:
         )
 
 
-def _check_rows(time_s: npt.NDArray[np.float64], columns: Mapping[str, npt.NDArray[np.float64]]) -> None:
+def _check_rows(
+    time_s: npt.NDArray[np.float64], columns: Mapping[str, npt.NDArray[np.float64]]
+) -> None:
     names = ["time_s", *columns]
     n = len(time_s)
     if n < MIN_LOG_ROWS:
@@ -273,7 +275,7 @@ def _read_csv(path: Path) -> tuple[npt.NDArray[np.float64], dict[str, npt.NDArra
                     f"({', '.join(names)})"
                 )
             values = []
-            for name, text in zip(names, row):
+            for name, text in zip(names, row, strict=False):
                 try:
                     values.append(float(text))
                 except ValueError:
@@ -348,7 +350,7 @@ def _runs(mask: npt.NDArray[np.bool_]) -> list[tuple[int, int]]:
         return []
     padded = np.concatenate(([False], mask, [False])).astype(np.int8)
     edges = np.flatnonzero(np.diff(padded))
-    return [(int(a), int(b) - 1) for a, b in zip(edges[::2], edges[1::2])]
+    return [(int(a), int(b) - 1) for a, b in zip(edges[::2], edges[1::2], strict=False)]
 
 
 def _running_median(x: npt.NDArray[np.float64], half: int) -> npt.NDArray[np.float64]:
@@ -375,7 +377,9 @@ def spike_mask(values: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
     return np.asarray(mask)
 
 
-def flat_mask(values: npt.NDArray[np.float64], time_s: npt.NDArray[np.float64]) -> list[tuple[int, int]]:
+def flat_mask(
+    values: npt.NDArray[np.float64], time_s: npt.NDArray[np.float64]
+) -> list[tuple[int, int]]:
     """Runs of exactly equal samples at least :data:`FLAT_MIN_SAMPLES` long and
     :data:`FLAT_MIN_S` seconds, as ``(first, last)`` indices."""
     same = np.concatenate(([False], values[1:] == values[:-1]))

@@ -26,7 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from drill_env.bit_model import FAMILIES
-from drill_env.calibrated_plant import MODEL_PARAMETERS, CalibratedPlant, load_plant
+from drill_env.calibrated_plant import MODEL_PARAMETERS, load_plant
 from drill_env.measured_log import MeasuredLog, find_defects, read_log
 from experiments.arguments import ArgumentParser
 from experiments.calibration_fit import (
@@ -39,7 +39,7 @@ from experiments.calibration_fit import (
     stuck_threshold,
 )
 
-__all__ = ["main", "replay_main", "window_type"]
+__all__ = ["main", "replay_main", "replay_parser", "window_type"]
 
 CALIBRATE_FILES = ("plant.json", "report.md", "fit.png", "loop.png", "uncertainty.png")
 """The files ``calibrate`` writes into ``--out``."""
@@ -95,7 +95,9 @@ def _format(value: float | None, digits: int = 4) -> str:
     return f"{value:.{digits}g}"
 
 
-def _fit_figure(window: MeasuredLog, speed: npt.NDArray[np.float64], torque: npt.NDArray[np.float64], title: str) -> Any:
+def _fit_figure(
+    window: MeasuredLog, speed: npt.NDArray[np.float64], torque: npt.NDArray[np.float64], title: str
+) -> Any:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -122,7 +124,9 @@ def _fit_figure(window: MeasuredLog, speed: npt.NDArray[np.float64], torque: npt
     return fig
 
 
-def _loop_figure(window: MeasuredLog, speed: npt.NDArray[np.float64], torque: npt.NDArray[np.float64], title: str) -> Any:
+def _loop_figure(
+    window: MeasuredLog, speed: npt.NDArray[np.float64], torque: npt.NDArray[np.float64], title: str
+) -> Any:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -149,7 +153,7 @@ def _uncertainty_figure(result: FitResult) -> Any:
     names = list(plant.parameters)
     values = [plant.parameters[n].relative_std for n in names]
     fig, ax = plt.subplots(figsize=(7, 3.8), layout="constrained")
-    for i, (name, rel) in enumerate(zip(names, values)):
+    for i, (name, rel) in enumerate(zip(names, values, strict=False)):
         p = plant.parameters[name]
         if p.identified and rel is not None and math.isfinite(rel):
             ax.barh(i, max(rel * 100, 1e-4), color="C0")
@@ -183,7 +187,9 @@ def _defect_lines(defects: Sequence[Any], start: float, end: float) -> list[str]
     return lines
 
 
-def _report(result: FitResult, log: MeasuredLog, window_s: tuple[float, float], command: str) -> str:
+def _report(
+    result: FitResult, log: MeasuredLog, window_s: tuple[float, float], command: str
+) -> str:
     plant = result.plant
     lines = [
         "# Calibration report",
@@ -257,8 +263,8 @@ def _report(result: FitResult, log: MeasuredLog, window_s: tuple[float, float], 
     return "\n".join(lines)
 
 
-def calibrate_main(argv: Sequence[str]) -> int:
-    """``drill-gym calibrate``."""
+def _parser() -> ArgumentParser:
+    """The parser of ``drill-gym calibrate``."""
     parser = ArgumentParser(
         prog="drill-gym calibrate",
         description=(
@@ -268,23 +274,39 @@ def calibrate_main(argv: Sequence[str]) -> int:
             "and the one of lowest BIC kept. Writes plant.json, report.md and figures."
         ),
     )
-    parser.add_argument("log", help="the measured log (.csv, or .parquet with pyarrow)")
-    parser.add_argument("--window", type=window_type, required=True, metavar="A:B",
-                        help="fitted window, start:end in s")  # fmt: skip
-    parser.add_argument("--out", type=Path, required=True, metavar="DIR",
-                        help="output directory (made if missing)")  # fmt: skip
+    parser.add_argument("log", nargs="?", help="the measured log (.csv, or .parquet with pyarrow)")
+    parser.add_argument("--window", type=window_type, metavar="A:B",
+                        help="fitted window, start:end in s (required)")  # fmt: skip
+    parser.add_argument("--out", type=Path, metavar="DIR",
+                        help="output directory, made if missing (required)")  # fmt: skip
     parser.add_argument("--family", choices=("auto", *FAMILIES), default="auto",
                         help="friction family; auto fits all and keeps the lowest BIC")  # fmt: skip
     parser.add_argument("--no-wob", action="store_true",
                         help="friction in N m, not proportional to the log's wob_n")  # fmt: skip
-    parser.add_argument("--fix", type=fix_type, action="append", default=[], metavar="NAME=VALUE",
+    parser.add_argument("--fix", type=fix_type, action="append", metavar="NAME=VALUE",
                         help="hold a parameter at a value (SI unit; repeatable)")  # fmt: skip
+    return parser
+
+
+def _required(parser: ArgumentParser, args: argparse.Namespace, names: Sequence[str]) -> None:
+    """Report the required arguments ``names`` (dests) that are missing, as argparse would
+    (checked after the parse, so that an unknown option is reported first)."""
+    missing = [n for n in names if getattr(args, n) is None]
+    if missing:
+        shown = [n.upper() if n in ("log", "plant") else f"--{n}" for n in missing]
+        parser.error(f"the following arguments are required: {', '.join(shown)}")
+
+
+def calibrate_main(argv: Sequence[str]) -> int:
+    """``drill-gym calibrate``."""
+    parser = _parser()
     args = parser.parse_args(list(argv))
+    _required(parser, args, ("log", "window", "out"))
     out: Path = args.out
     prepare_out(out, CALIBRATE_FILES)
     log = read_log(args.log)
     families = FAMILIES if args.family == "auto" else (args.family,)
-    result = calibrate(log, args.window, families, not args.no_wob, dict(args.fix))
+    result = calibrate(log, args.window, families, not args.no_wob, dict(args.fix or []))
     window = log.window(*args.window)
     speed, torque = simulate_plant(result.plant, window, result.plant.initial_twist_rad)
     result.plant.save(out / "plant.json")
@@ -303,7 +325,7 @@ def calibrate_main(argv: Sequence[str]) -> int:
 
 def replay_rows(
     window: MeasuredLog, speed: npt.NDArray[np.float64], torque: npt.NDArray[np.float64]
-) -> tuple[list[dict[str, float]], dict[str, float], dict[str, float], dict[str, float]]:
+) -> tuple[list[dict[str, Any]], dict[str, float], dict[str, float], dict[str, float]]:
     """The feature rows of a replay: measured, simulated, their errors, and the normalised RMS
     speed error."""
     bit = window.column("bit_speed_rad_s")
@@ -315,7 +337,12 @@ def replay_rows(
     nrms = float(np.sqrt(np.mean((speed - bit) ** 2)) / (np.std(bit) or 1.0))
     errors["normalised_rms_speed_error"] = nrms
     rows = [
-        {"feature": key, "measured": measured[key], "simulated": simulated[key], "error": errors[key]}
+        {
+            "feature": key,
+            "measured": measured[key],
+            "simulated": simulated[key],
+            "error": errors[key],
+        }
         for key in FEATURE_KEYS
     ]
     rows.append({"feature": "normalised_rms_speed_error", "measured": 0.0, "simulated": nrms,
@@ -323,8 +350,8 @@ def replay_rows(
     return rows, measured, simulated, errors
 
 
-def replay_main(argv: Sequence[str]) -> int:
-    """``drill-gym replay``."""
+def replay_parser() -> ArgumentParser:
+    """The parser of ``drill-gym replay``."""
     parser = ArgumentParser(
         prog="drill-gym replay",
         description=(
@@ -333,13 +360,20 @@ def replay_main(argv: Sequence[str]) -> int:
             "the measured ones (replay.csv) and the stick-slip features (features.csv)."
         ),
     )
-    parser.add_argument("plant", help="plant.json written by drill-gym calibrate")
-    parser.add_argument("log", help="the measured log (.csv, or .parquet with pyarrow)")
-    parser.add_argument("--window", type=window_type, required=True, metavar="C:D",
-                        help="replayed window, start:end in s")  # fmt: skip
-    parser.add_argument("--out", type=Path, required=True, metavar="DIR",
-                        help="output directory (made if missing)")  # fmt: skip
+    parser.add_argument("plant", nargs="?", help="plant.json written by drill-gym calibrate")
+    parser.add_argument("log", nargs="?", help="the measured log (.csv, or .parquet with pyarrow)")
+    parser.add_argument("--window", type=window_type, metavar="C:D",
+                        help="replayed window, start:end in s (required)")  # fmt: skip
+    parser.add_argument("--out", type=Path, metavar="DIR",
+                        help="output directory, made if missing (required)")  # fmt: skip
+    return parser
+
+
+def replay_main(argv: Sequence[str]) -> int:
+    """``drill-gym replay``."""
+    parser = replay_parser()
     args = parser.parse_args(list(argv))
+    _required(parser, args, ("plant", "log", "window", "out"))
     out: Path = args.out
     prepare_out(out, REPLAY_FILES)
     plant = load_plant(args.plant)
@@ -365,20 +399,29 @@ def replay_main(argv: Sequence[str]) -> int:
     defects = [d for d in find_defects(log) if d.overlaps(*args.window)]
     if defects:
         lines += ["Defects inside the window:", ""]
-        lines += [f"- {d.kind} in {d.column}, {d.start_s:.6g}-{d.end_s:.6g} s: {d.detail}" for d in defects]
+        lines += [
+            f"- {d.kind} in {d.column}, {d.start_s:.6g}-{d.end_s:.6g} s: {d.detail}"
+            for d in defects
+        ]
         lines.append("")
     if window.has("bit_speed_rad_s") and window.has("bit_torque_nm"):
         rows, *_ = replay_rows(window, speed, torque)
         with (out / "features.csv").open("w") as f:
             f.write("feature,measured,simulated,error\n")
             for r in rows:
-                f.write(f"{r['feature']},{r['measured']:.6g},{r['simulated']:.6g},{r['error']:.6g}\n")
+                f.write(
+                    f"{r['feature']},{r['measured']:.6g},{r['simulated']:.6g},{r['error']:.6g}\n"
+                )
         lines += [
             "| feature | measured | simulated | error |",
             "|---|---|---|---|",
         ]
         for r in rows:
-            kind = "absolute" if r["feature"] in ("stuck_fraction", "normalised_rms_speed_error") else "relative"
+            kind = (
+                "absolute"
+                if r["feature"] in ("stuck_fraction", "normalised_rms_speed_error")
+                else "relative"
+            )
             lines.append(
                 f"| {r['feature']} | {_format(r['measured'])} | {_format(r['simulated'])} | "
                 f"{_format(r['error'], 3)} ({kind}) |"

@@ -166,14 +166,18 @@ def stuck_segments(log: MeasuredLog) -> list[tuple[int, int, float]] | None:
     edges = np.flatnonzero(np.diff(padded))
     starts = []
     min_samples = max(5, int(SEGMENT_MIN_STUCK_S / log.sample_period_s))
-    for a, b in zip(edges[::2], edges[1::2]):
+    for a, b in zip(edges[::2], edges[1::2], strict=False):
         if b - a >= min_samples:
             starts.append(int(a + b) // 2)
     if len(starts) < 2:
         return None
     starts = starts[::SEGMENT_CYCLES]
     ends = [*starts[1:], bit.size]
-    return [(a, b, float(np.median(torque[a : a + 5]))) for a, b in zip(starts, ends) if b - a >= 3]
+    return [
+        (a, b, float(np.median(torque[a : a + 5])))
+        for a, b in zip(starts, ends, strict=False)
+        if b - a >= 3
+    ]
 
 
 def _stick_slip_estimates(
@@ -190,7 +194,7 @@ def _stick_slip_estimates(
     padded = np.concatenate(([0], stuck.astype(np.int8), [0]))
     edges = np.flatnonzero(np.diff(padded))
     xs, ys = [], []
-    for a, b in zip(edges[::2], edges[1::2]):
+    for a, b in zip(edges[::2], edges[1::2], strict=False):
         if b - a >= 4:
             dt = np.diff(t[a:b])
             twist = np.concatenate(([0.0], np.cumsum(0.5 * (top[a + 1 : b] + top[a : b - 1]) * dt)))
@@ -200,7 +204,7 @@ def _stick_slip_estimates(
         return 0.0, 0.0
     x, y = np.concatenate(xs), np.concatenate(ys)
     k = float(x @ y / (x @ x)) if x @ x > 0 else 0.0
-    slips = [t[b] - t[a] for a, b in zip(edges[1::2][:-1], edges[2::2]) if b > a]
+    slips = [t[b] - t[a] for a, b in zip(edges[1::2][:-1], edges[2::2], strict=False) if b > a]
     if k <= 0 or not slips:
         return 0.0, 0.0
     return k, k * (float(np.median(slips)) / math.pi) ** 2
@@ -306,7 +310,9 @@ def _initial_twist_grid(problem: _Problem, p: npt.NDArray[np.float64]) -> float:
     return best[1]
 
 
-def _jacobian(problem: _Problem, theta: npt.NDArray[np.float64], step: float = 1e-3) -> npt.NDArray[np.float64]:
+def _jacobian(
+    problem: _Problem, theta: npt.NDArray[np.float64], step: float = 1e-3
+) -> npt.NDArray[np.float64]:
     columns = []
     for i in range(theta.size):
         hi = theta.copy()
@@ -326,7 +332,8 @@ def _levenberg_marquardt(
     low, high = theta - MAX_LOG_STEP, theta + MAX_LOG_STEP
     damping = 1e-2
     iteration = 0
-    for iteration in range(1, max_iterations + 1):
+    while iteration < max_iterations:
+        iteration += 1
         jac = _jacobian(problem, theta)
         g = jac.T @ r
         h = jac.T @ jac
@@ -386,7 +393,9 @@ class FamilyFit:
     singular_values: list[float] = field(default_factory=list)
 
 
-def _moderate(p: npt.NDArray[np.float64], log: MeasuredLog, uses_wob: bool) -> npt.NDArray[np.float64]:
+def _moderate(
+    p: npt.NDArray[np.float64], log: MeasuredLog, uses_wob: bool
+) -> npt.NDArray[np.float64]:
     """``p`` with damping terms near 0 raised to moderate starting values (a 2 % damping
     ratio; a viscous friction of 5 % of the sliding torque at the mean slip speed), so that
     the fit can move them: a term started at 0 has no gradient in log space."""
@@ -784,7 +793,7 @@ def features(
     * ``bit_torque_mean_nm``: mean torque on bit.
     * ``stuck_fraction``: fraction of samples with ``|bit speed| < threshold``.
     """
-    out = dict.fromkeys(FEATURE_KEYS, math.nan)
+    out: dict[str, float] = dict.fromkeys(FEATURE_KEYS, math.nan)
     out["bit_torque_mean_nm"] = float(np.mean(bit_torque))
     out["stuck_fraction"] = float(np.mean(np.abs(bit_speed) < threshold))
     dt = float(np.median(np.diff(time_s)))
@@ -802,8 +811,8 @@ def features(
     starts = _cycle_starts(bit_speed, threshold, 2 * threshold)
     if starts.size >= 2:
         out["period_cycles_s"] = float(np.mean(np.diff(time_s[starts])))
-        speeds = [np.ptp(bit_speed[a:b]) for a, b in zip(starts[:-1], starts[1:])]
-        torques = [np.ptp(bit_torque[a:b]) for a, b in zip(starts[:-1], starts[1:])]
+        speeds = [np.ptp(bit_speed[a:b]) for a, b in zip(starts[:-1], starts[1:], strict=False)]
+        torques = [np.ptp(bit_torque[a:b]) for a, b in zip(starts[:-1], starts[1:], strict=False)]
         out["bit_speed_p2p_rad_s"] = float(np.mean(speeds))
         out["bit_torque_p2p_nm"] = float(np.mean(torques))
     return out
@@ -811,7 +820,7 @@ def features(
 
 def feature_errors(measured: dict[str, float], simulated: dict[str, float]) -> dict[str, float]:
     """Relative errors of the simulated features (absolute for the stuck fraction)."""
-    out = {}
+    out: dict[str, float] = {}
     for key in FEATURE_KEYS:
         m, s = measured[key], simulated[key]
         if key == "stuck_fraction":

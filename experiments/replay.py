@@ -5,9 +5,15 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from experiments.calibrate import replay_main
+from experiments.arguments import ArgumentParser
+from experiments.calibrate import replay_main, replay_parser
 
 __all__ = ["main"]
+
+
+def _parser() -> ArgumentParser:
+    """The parser of ``drill-gym replay``."""
+    return replay_parser()
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -69,9 +69,14 @@ class LabRig:
 
 LAB_TRUTH: Final = LabRig()
 """The rig of the synthetic laboratory log."""
-LAB_NOISE: Final = {"top_speed_rad_s": 0.03, "bit_speed_rad_s": 0.05, "bit_torque_nm": 0.03, "wob_n": 2.0}
+LAB_NOISE: Final = {
+    "top_speed_rad_s": 0.03,
+    "bit_speed_rad_s": 0.05,
+    "bit_torque_nm": 0.03,
+    "wob_n": 2.0,
+}
 """Standard deviation of the white measurement noise of each column of the lab log."""
-LAB_DEFECTS: Final = {
+LAB_DEFECTS: Final[dict[str, tuple[float, ...]]] = {
     "gap_s": (21.0, 21.05),
     "spikes_s": (17.3, 24.1, 35.55),
     "flat_line_s": (33.0, 33.12),
@@ -148,9 +153,9 @@ def _lab_run(rig, duration_s, out_dt, h, wob_wave, stall_start, stall_end):  # f
 def _add_defects(
     time_s: npt.NDArray[np.float64],
     columns: dict[str, npt.NDArray[np.float64]],
-    gap_s: tuple[float, float],
+    gap_s: tuple[float, ...],
     spikes_s: tuple[float, ...],
-    flat_line_s: tuple[float, float],
+    flat_line_s: tuple[float, ...],
     spike_column: str,
     flat_column: str,
 ) -> tuple[npt.NDArray[np.float64], dict[str, npt.NDArray[np.float64]]]:
@@ -193,9 +198,14 @@ def lab_log(
     return MeasuredLog(time_s, columns, "synthetic laboratory log")
 
 
-FIELD_NOISE: Final = {"top_speed_rad_s": 0.05, "bit_speed_rad_s": 0.1, "bit_torque_nm": 200.0, "wob_n": 500.0}
+FIELD_NOISE: Final = {
+    "top_speed_rad_s": 0.05,
+    "bit_speed_rad_s": 0.1,
+    "bit_torque_nm": 200.0,
+    "wob_n": 500.0,
+}
 """Standard deviation of the white measurement noise of each column of the field log."""
-FIELD_DEFECTS: Final = {
+FIELD_DEFECTS: Final[dict[str, tuple[float, ...]]] = {
     "gap_s": (250.0, 256.0),
     "spikes_s": (130.3, 211.7),
     "flat_line_s": (300.0, 320.0),
@@ -264,4 +274,3 @@ def field_log(
             FIELD_DEFECTS["flat_line_s"], "bit_speed_rad_s", "bit_torque_nm",
         )  # fmt: skip
     return MeasuredLog(time_s, columns, "synthetic field log (zribi2024)")
-

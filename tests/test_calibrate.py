@@ -42,7 +42,7 @@ def _truth_nm() -> np.ndarray:
     return p
 
 
-def _memory_rhs(t: float, y: np.ndarray, p: np.ndarray, top) -> list[float]:  # type: ignore[no-untyped-def]
+def _memory_rhs(t: float, y: np.ndarray, p: np.ndarray, top) -> list[float]:
     twist, w, v = y
     t_e = p[P_K] * twist + p[2] * (top(t) - w)
     friction = p[P_A0] + (p[P_AA] - p[P_A0]) * math.exp(-p[P_XI] * v) + p[P_CV] * w
@@ -67,9 +67,7 @@ def test_slipping_bit_matches_a_tight_scipy_integration() -> None:
     )
     assert not stuck.any()
     assert np.max(np.abs(speed - ref.y[1])) < 2e-3 * np.ptp(ref.y[1]) + 1e-3
-    friction = (
-        p[P_A0] + (p[P_AA] - p[P_A0]) * np.exp(-p[P_XI] * ref.y[2]) + p[P_CV] * ref.y[1]
-    )
+    friction = p[P_A0] + (p[P_AA] - p[P_A0]) * np.exp(-p[P_XI] * ref.y[2]) + p[P_CV] * ref.y[1]
     assert np.max(np.abs(torque - friction)) < 2e-3
 
 
@@ -173,7 +171,7 @@ def test_what_the_data_cannot_tell_apart_is_reported_not_fitted() -> None:
     )  # fmt: skip
     out = _lab_run(values, 6.0, 1e-3, 1e-5, 0.0, -1.0, -1.0)
     rng = np.random.default_rng(0)
-    t = np.arange(out.shape[0]) * 1e-3
+    t = np.arange(out.shape[0], dtype=np.float64) * 1e-3
     columns = {
         name: out[:, j] + rng.normal(0, sd, t.size)
         for j, (name, sd) in enumerate(
@@ -274,17 +272,31 @@ def test_calibrate_and_replay_as_a_user_types_them(tmp_path: Path) -> None:
         (("calibrate", "missing.csv", "--window", "0:1", "--out", "o"), "No such file"),
         (("calibrate", "rig.csv", "--window", "0:1", "--out", "afile"), "is not a directory"),
         (("calibrate", "rig.csv", "--window", "0:99", "--out", "o"), "out of range"),
-        (("calibrate", "rig.csv", "--window", "0:1", "--out", "o", "--fix", "mass=1"),
-         "unknown parameter 'mass'"),
-        (("calibrate", "bad.csv", "--window", "0:1", "--out", "o"),
-         "column 'bit_speed_rad_s', row 2"),
+        (
+            ("calibrate", "rig.csv", "--window", "0:1", "--out", "o", "--fix", "mass=1"),
+            "unknown parameter 'mass'",
+        ),
+        (
+            ("calibrate", "bad.csv", "--window", "0:1", "--out", "o"),
+            "column 'bit_speed_rad_s', row 2",
+        ),
         (("replay", "afile", "rig.csv", "--window", "0:1", "--out", "o"), "not JSON"),
     ],  # fmt: skip
-    ids=["inverted-window", "bad-window", "missing-log", "out-is-a-file", "window-outside",
-         "unknown-fix", "bad-value", "bad-plant"],  # fmt: skip
+    ids=[
+        "inverted-window",
+        "bad-window",
+        "missing-log",
+        "out-is-a-file",
+        "window-outside",
+        "unknown-fix",
+        "bad-value",
+        "bad-plant",
+    ],  # fmt: skip
 )
-def test_user_errors_are_one_line_and_exit_2(tmp_path: Path, args: tuple[str, ...], match: str) -> None:
-    t = np.arange(100) * 1e-3
+def test_user_errors_are_one_line_and_exit_2(
+    tmp_path: Path, args: tuple[str, ...], match: str
+) -> None:
+    t = np.arange(100, dtype=np.float64) * 1e-3
     write_log_csv(
         MeasuredLog(t, {"top_speed_rad_s": np.ones(100), "bit_speed_rad_s": np.ones(100),
                         "bit_torque_nm": np.ones(100)}),

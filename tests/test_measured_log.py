@@ -14,7 +14,7 @@ from drill_env.measured_log import MeasuredLog, find_defects, read_log, write_lo
 def _clean_log(n: int = 4000, dt: float = 1e-3, seed: int = 0) -> MeasuredLog:
     """A noisy oscillating log without defects."""
     rng = np.random.default_rng(seed)
-    t = np.arange(n) * dt
+    t = np.arange(n, dtype=np.float64) * dt
     top = 5.0 + 0.2 * np.sin(2 * np.pi * 1.3 * t) + rng.normal(0, 0.02, n)
     bit = 5.0 + 3.0 * np.sin(2 * np.pi * 1.3 * t) + rng.normal(0, 0.05, n)
     torque = 2.0 + 0.5 * np.cos(2 * np.pi * 1.3 * t) + rng.normal(0, 0.02, n)
@@ -47,29 +47,52 @@ def test_comments_and_blank_lines_before_the_header(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("text", "match"),
     [
-        ("time_s,top_speed_rad_s\n0,1\n0.001,abc\n0.002,1\n",
-         r"column 'top_speed_rad_s', row 2: 'abc' is not a number"),
-        ("time_s,top_speed_rad_s\n0,1\n0.001,nan\n0.002,1\n",
-         r"column 'top_speed_rad_s', row 2: nan is not finite"),
-        ("time_s,top_speed_rad_s\n0,1\n0.001,inf\n0.002,1\n",
-         r"column 'top_speed_rad_s', row 2: inf is not finite"),
-        ("time_s,top_speed_rad_s\n0,1\n0.002,1\n0.001,1\n",
-         r"column 'time_s', row 3: 0.001 s is not after row 2's 0.002 s"),
+        (
+            "time_s,top_speed_rad_s\n0,1\n0.001,abc\n0.002,1\n",
+            r"column 'top_speed_rad_s', row 2: 'abc' is not a number",
+        ),
+        (
+            "time_s,top_speed_rad_s\n0,1\n0.001,nan\n0.002,1\n",
+            r"column 'top_speed_rad_s', row 2: nan is not finite",
+        ),
+        (
+            "time_s,top_speed_rad_s\n0,1\n0.001,inf\n0.002,1\n",
+            r"column 'top_speed_rad_s', row 2: inf is not finite",
+        ),
+        (
+            "time_s,top_speed_rad_s\n0,1\n0.002,1\n0.001,1\n",
+            r"column 'time_s', row 3: 0.001 s is not after row 2's 0.002 s",
+        ),
         ("time_s,top_speed_rad_s\n0,1\n0,1\n0.001,1\n", r"column 'time_s', row 2"),
-        ("time_s,bit_speed_rad_s\n0,1\n0.001,1\n0.002,1\n",
-         r"missing required column\(s\) 'top_speed_rad_s'"),
-        ("time_s,top_speed_rad_s,rpm,torque\n0,1,2,3\n",
-         r"unknown column\(s\) 'rpm', 'torque': allowed time_s, top_speed_rad_s"),
+        (
+            "time_s,bit_speed_rad_s\n0,1\n0.001,1\n0.002,1\n",
+            r"missing required column\(s\) 'top_speed_rad_s'",
+        ),
+        (
+            "time_s,top_speed_rad_s,rpm,torque\n0,1,2,3\n",
+            r"unknown column\(s\) 'rpm', 'torque': allowed time_s, top_speed_rad_s",
+        ),
         ("time_s,top_speed_rad_s,top_speed_rad_s\n0,1,1\n", r"'top_speed_rad_s' appear twice"),
         ("time_s,top_speed_rad_s\n0,1\n0.001\n0.002,1\n", r"row 2: 1 values for 2 columns"),
-        ("time_s,top_speed_rad_s\n0,1\n0.001,\n0.002,1\n",
-         r"column 'top_speed_rad_s', row 2: '' is not a number"),
+        (
+            "time_s,top_speed_rad_s\n0,1\n0.001,\n0.002,1\n",
+            r"column 'top_speed_rad_s', row 2: '' is not a number",
+        ),
         ("time_s,top_speed_rad_s\n0,1\n", r"the log has 1 data rows: allowed at least 3"),
         ("# only a comment\n", r"has no header line"),
     ],  # fmt: skip
     ids=[
-        "non-numeric", "nan", "inf", "time-decreasing", "time-repeated", "missing-column",
-        "unknown-columns", "duplicate-column", "short-row", "empty-value", "too-short",
+        "non-numeric",
+        "nan",
+        "inf",
+        "time-decreasing",
+        "time-repeated",
+        "missing-column",
+        "unknown-columns",
+        "duplicate-column",
+        "short-row",
+        "empty-value",
+        "too-short",
         "no-header",
     ],  # fmt: skip
 )
@@ -152,7 +175,7 @@ def test_every_kind_of_defect_is_found_with_its_time_range_and_the_data_unchange
 
 
 def test_a_steep_stick_slip_front_is_not_a_spike() -> None:
-    t = np.arange(4000) * 1e-3
+    t = np.arange(4000, dtype=np.float64) * 1e-3
     bit = np.where((t % 0.8) < 0.3, 0.0, 8.0 * np.sin(np.pi * ((t % 0.8) - 0.3) / 0.5))
     bit = bit + np.random.default_rng(1).normal(0, 0.05, t.size)
     log = MeasuredLog(t, {"top_speed_rad_s": np.full(t.size, 3.0), "bit_speed_rad_s": bit})
