@@ -361,18 +361,29 @@ def _running_median(x: npt.NDArray[np.float64], half: int) -> npt.NDArray[np.flo
 
 def spike_mask(values: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
     """Samples that are isolated spikes (a Hampel test on 7 samples, with the noise scale the
-    median absolute deviation of the whole signal from its running median)."""
+    larger of the median absolute deviations of the signal from its running median and of its
+    sample-to-sample steps, over the whole signal), outside the signal's 0.5-99.5 % range
+    widened by 10 % or three times beyond the threshold."""
     if values.size < 7:
         return np.zeros(values.shape, dtype=bool)
     deviation = values - _running_median(values, 3)
     scale = 1.4826 * float(np.median(np.abs(deviation - np.median(deviation))))
+    # A signal sampled coarsely against its own changes (field telemetry) deviates from a
+    # running median by its trend too: the spread of the sample-to-sample steps bounds it.
+    steps = np.diff(values)
+    scale = max(scale, 1.4826 * float(np.median(np.abs(steps - np.median(steps)))) / math.sqrt(2))
     spread = float(np.percentile(values, 99) - np.percentile(values, 1))
     scale = max(scale, 1e-3 * spread, 1e-12)
     far = np.abs(deviation) > SPIKE_SIGMAS * scale
     # A spike also jumps from both of its neighbours (a steep front does not).
     prev = np.abs(values - np.roll(values, 1)) > 0.5 * SPIKE_SIGMAS * scale
     after = np.abs(values - np.roll(values, -1)) > 0.5 * SPIKE_SIGMAS * scale
-    mask = far & prev & after
+    # A coarse log samples a real peak (a break-away torque) once: such a sample stays within
+    # the signal's range; a spike is outside it or far beyond the threshold.
+    low, high = np.percentile(values, [0.5, 99.5])
+    margin = 0.1 * (high - low)
+    outside = (values < low - margin) | (values > high + margin)
+    mask = far & prev & after & (outside | (np.abs(deviation) > 3 * SPIKE_SIGMAS * scale))
     mask[0] = mask[-1] = False
     return np.asarray(mask)
 

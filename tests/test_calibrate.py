@@ -19,6 +19,7 @@ import drill_env  # noqa: F401  (registers the envs)
 from drill_env.bit_model import P_A0, P_AA, P_CV, P_K, P_TAU, P_XI, simulate_bit
 from drill_env.calibrated_plant import (
     PLANT_FORMAT,
+    CalibratedPlant,
     env_keywords,
     load_plant,
     plant_from_json,
@@ -192,8 +193,13 @@ def test_what_the_data_cannot_tell_apart_is_reported_not_fitted() -> None:
         assert "not identifiable" in p.note
 
 
-def test_plant_file_round_trip_and_schema(tmp_path: Path, lab: MeasuredLog) -> None:
-    plant = calibrate(lab, (2.0, 5.0), families=("karnopp",)).plant
+@pytest.fixture(scope="module")
+def karnopp_plant(lab: MeasuredLog) -> CalibratedPlant:
+    return calibrate(lab, (2.0, 5.0), families=("karnopp",)).plant
+
+
+def test_plant_file_round_trip_and_schema(tmp_path: Path, karnopp_plant: CalibratedPlant) -> None:
+    plant = karnopp_plant
     path = plant.save(tmp_path / "plant.json")
     back = load_plant(path)
     assert back.family == plant.family
@@ -218,8 +224,8 @@ def test_plant_file_round_trip_and_schema(tmp_path: Path, lab: MeasuredLog) -> N
         plant_from_json(bad)
 
 
-def test_the_calibrated_plant_runs_in_the_env(lab: MeasuredLog) -> None:
-    plant = calibrate(lab, (2.0, 5.0), families=("stribeck_viscous",)).plant
+def test_the_calibrated_plant_runs_in_the_env(karnopp_plant: CalibratedPlant) -> None:
+    plant = karnopp_plant
     keywords = env_keywords(plant)
     assert keywords["max_torque_nm"] < 20  # a lab rig: a few N m
     assert keywords["reference_speed_rad_s"] == pytest.approx(3.0, rel=0.05)
