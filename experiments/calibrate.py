@@ -26,7 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from drill_env.bit_model import FAMILIES
-from drill_env.calibrated_plant import MODEL_PARAMETERS, load_plant
+from drill_env.calibrated_plant import MODEL_PARAMETERS, PLANT_FORMAT, load_plant
 from drill_env.measured_log import MeasuredLog, find_defects, read_log
 from experiments.arguments import ArgumentParser
 from experiments.calibration_fit import (
@@ -77,15 +77,31 @@ def fix_type(text: str) -> tuple[str, float]:
     return name, number
 
 
-def prepare_out(out: Path, names: Sequence[str]) -> None:
-    """Make ``out`` (refusing an existing non-directory) and refuse to overwrite any of
-    ``names`` there that is not a regular file (a link or a directory is not ours)."""
+def _head(path: Path) -> str:
+    try:
+        with path.open(encoding="utf-8") as f:
+            return f.read(300)
+    except (OSError, UnicodeDecodeError):
+        return ""
+
+
+def prepare_out(out: Path, names: Sequence[str], signature: tuple[str, str]) -> None:
+    """Make ``out``, refusing an existing non-directory; files of ``names`` already there are
+    replaced only when they are a previous run's: regular files, and the run's main file
+    ``signature[0]`` holds ``signature[1]`` in its first 300 characters (otherwise they are
+    someone else's)."""
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {str(out)!r} exists and is not a directory")
-    for name in names:
-        target = out / name
-        if target.is_symlink() or (target.exists() and not target.is_file()):
+    present = [out / n for n in names if (out / n).exists() or (out / n).is_symlink()]
+    for target in present:
+        if target.is_symlink() or not target.is_file():
             raise ValueError(f"--out: {str(target)!r} exists and is not a regular file")
+    main_file, start = signature
+    if present and start not in _head(out / main_file):
+        raise ValueError(
+            f"--out: {str(present[0])!r} exists and is not from a previous run of this command "
+            "(not overwritten): choose another directory"
+        )
     out.mkdir(parents=True, exist_ok=True)
 
 
@@ -303,7 +319,7 @@ def calibrate_main(argv: Sequence[str]) -> int:
     args = parser.parse_args(list(argv))
     _required(parser, args, ("log", "window", "out"))
     out: Path = args.out
-    prepare_out(out, CALIBRATE_FILES)
+    prepare_out(out, CALIBRATE_FILES, ("plant.json", PLANT_FORMAT))
     log = read_log(args.log)
     families = FAMILIES if args.family == "auto" else (args.family,)
     result = calibrate(log, args.window, families, not args.no_wob, dict(args.fix or []))
@@ -375,7 +391,7 @@ def replay_main(argv: Sequence[str]) -> int:
     args = parser.parse_args(list(argv))
     _required(parser, args, ("plant", "log", "window", "out"))
     out: Path = args.out
-    prepare_out(out, REPLAY_FILES)
+    prepare_out(out, REPLAY_FILES, ("replay.csv", "time_s,bit_speed_rad_s,bit_torque_nm"))
     plant = load_plant(args.plant)
     log = read_log(args.log)
     window = log.window(*args.window)

@@ -287,6 +287,10 @@ def test_calibrate_and_replay_as_a_user_types_them(tmp_path: Path) -> None:
             "column 'bit_speed_rad_s', row 2",
         ),
         (("replay", "afile", "rig.csv", "--window", "0:1", "--out", "o"), "not JSON"),
+        (
+            ("calibrate", "rig.csv", "--window", "0:0.05", "--out", "mine"),
+            "is not from a previous run of this command",
+        ),
     ],  # fmt: skip
     ids=[
         "inverted-window",
@@ -297,6 +301,7 @@ def test_calibrate_and_replay_as_a_user_types_them(tmp_path: Path) -> None:
         "unknown-fix",
         "bad-value",
         "bad-plant",
+        "not-ours",
     ],  # fmt: skip
 )
 def test_user_errors_are_one_line_and_exit_2(
@@ -312,9 +317,12 @@ def test_user_errors_are_one_line_and_exit_2(
         "time_s,top_speed_rad_s,bit_speed_rad_s,bit_torque_nm\n0,1,1,1\n0.001,1,?,1\n"
     )
     (tmp_path / "afile").write_text("mine")
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "report.md").write_text("my notes")
     done = _cli(*args, cwd=tmp_path)
     assert done.returncode == 2
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1, done.stderr
     assert match in lines[0]
     assert (tmp_path / "afile").read_text() == "mine"
+    assert (tmp_path / "mine" / "report.md").read_text() == "my notes"
