@@ -661,14 +661,10 @@ def _plant_of(
                 "fitted (output error on bit speed and torque on bit)",
             )  # fmt: skip
     bit = window.column("bit_speed_rad_s")
-    stuck = np.abs(bit) < stuck_threshold(bit)
-    # The noise of the bit-speed sensor: its spread while the bit is stuck (at rest), else
-    # that of the sample-to-sample differences.
-    noise = (
-        float(np.std(bit[stuck]))
-        if stuck.sum() >= 20
-        else float(np.std(np.diff(bit)) / math.sqrt(2))
-    )
+    # The noise of the bit-speed sensor: the robust spread of the second differences (white
+    # noise of std s gives std s sqrt(6); a smooth signal's trend cancels).
+    second = np.diff(bit, 2)
+    noise = 1.4826 * float(np.median(np.abs(second - np.median(second)))) / math.sqrt(6)
     operating = {
         "mean_top_speed_rad_s": float(np.mean(window.column("top_speed_rad_s"))),
         "mean_bit_speed_rad_s": float(np.mean(bit)),
