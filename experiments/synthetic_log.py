@@ -12,12 +12,17 @@ section 4): a laboratory rig and a field well, written in the log format of
 
 Both add white measurement noise from a seeded generator and, with ``defects``, a gap, spikes,
 a flat line of a sensor and a stall of the top drive at stated times.
+
+``python -m experiments.synthetic_log OUT [--seed N]`` writes both as ``OUT/lab_log.csv`` and
+``OUT/field_log.csv`` (existing files of these names are refused).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Final
 
 import numpy as np
@@ -26,10 +31,10 @@ from numba import njit
 
 from drill_env.friction import STUCK
 from drill_env.integration import plant_step
-from drill_env.measured_log import MeasuredLog
+from drill_env.measured_log import MeasuredLog, write_log_csv
 from drill_env.parameters import PRESETS, plant_parameter_vector
 
-__all__ = ["LAB_TRUTH", "LabRig", "field_log", "lab_log"]
+__all__ = ["LAB_TRUTH", "LabRig", "field_log", "lab_log", "main"]
 
 
 @dataclass(frozen=True)
@@ -274,3 +279,39 @@ def field_log(
             FIELD_DEFECTS["flat_line_s"], "bit_speed_rad_s", "bit_torque_nm",
         )  # fmt: skip
     return MeasuredLog(time_s, columns, "synthetic field log (zribi2024)")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Write ``OUT/lab_log.csv`` and ``OUT/field_log.csv``; refuses to replace existing ones."""
+    from experiments.arguments import ArgumentParser, run_command, seed_option
+
+    parser = ArgumentParser(
+        prog="python -m experiments.synthetic_log",
+        description="Write the synthetic laboratory and field logs of docs/calibration.md.",
+    )
+    parser.add_argument("out", type=Path, help="output directory (made if missing)")
+    seed_option(parser, "seed of the measurement noise")
+    args = parser.parse_args(argv)
+
+    def run() -> int:
+        out: Path = args.out
+        if out.exists() and not out.is_dir():
+            raise ValueError(f"{str(out)!r} exists and is not a directory")
+        targets: dict[str, Callable[[int], MeasuredLog]] = {
+            "lab_log.csv": lab_log,
+            "field_log.csv": field_log,
+        }
+        for name in targets:
+            if (out / name).exists() or (out / name).is_symlink():
+                raise ValueError(f"{str(out / name)!r} exists: not overwritten")
+        out.mkdir(parents=True, exist_ok=True)
+        for name, make in targets.items():
+            write_log_csv(make(args.seed), out / name)
+            print(f"wrote {out / name}")
+        return 0
+
+    return run_command(parser.prog, run, debug=False)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

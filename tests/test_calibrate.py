@@ -326,3 +326,12 @@ def test_user_errors_are_one_line_and_exit_2(
     assert match in lines[0]
     assert (tmp_path / "afile").read_text() == "mine"
     assert (tmp_path / "mine" / "report.md").read_text() == "my notes"
+
+
+def test_synthetic_logs_are_seeded() -> None:
+    a = lab_log(seed=5, duration_s=3.0, defects=False)
+    b = lab_log(seed=5, duration_s=3.0, defects=False)
+    c = lab_log(seed=6, duration_s=3.0, defects=False)
+    for name in a.columns:
+        assert np.array_equal(a.column(name), b.column(name))
+    assert not np.array_equal(a.column("bit_speed_rad_s"), c.column("bit_speed_rad_s"))
