@@ -14,6 +14,7 @@ many numbers another component used.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -28,9 +29,9 @@ from drill_env.distributed import (
     resolve_distributed_parameters,
     with_measured_depth,
 )
-from drill_env.limits import MAX_REFERENCE_RAD_S, MAX_WOB_N
+from drill_env.limits import MAX_MEASURED_DEPTH_M, MAX_REFERENCE_RAD_S, MAX_WOB_N
 from drill_env.parameters import DrillStringParameters, resolve_parameters, scale_uncertain
-from drill_env.validation import check_choice, check_interval, check_range
+from drill_env.validation import check_choice, check_interval, check_range, shown
 
 __all__ = [
     "COMPONENTS",
@@ -133,7 +134,7 @@ class SpeedProfile:
             check_range(f"reference time[{k}]", t, 0.0, math.inf)
             check_range(f"reference_speed_rad_s[{k}]", v, 0.0, MAX_REFERENCE_RAD_S)
         if any(b < a for a, b in zip(self.times_s, self.times_s[1:], strict=False)):
-            raise ValueError(f"reference knot times must not decrease, got {self.times_s!r}")
+            raise ValueError(f"reference knot times must not decrease, got {shown(self.times_s)}")
 
     @classmethod
     def constant(cls, speed_rad_s: float) -> SpeedProfile:
@@ -154,7 +155,9 @@ class SpeedProfile:
     def ramp(cls, start_rad_s: float, end_rad_s: float, t0_s: float, t1_s: float) -> SpeedProfile:
         """Hold ``start_rad_s`` until ``t0_s``, ramp linearly to ``end_rad_s`` at ``t1_s``."""
         if not t1_s > t0_s:
-            raise ValueError(f"ramp end time {t1_s!r} must be after its start time {t0_s!r}")
+            raise ValueError(
+                f"ramp end time {shown(t1_s)} must be after its start time {shown(t0_s)}"
+            )
         return cls((float(t0_s), float(t1_s)), (float(start_rad_s), float(end_rad_s)))
 
     def value(self, t_s: float) -> float:
@@ -170,17 +173,18 @@ def resolve_uncertainty(value: str | Sequence[float]) -> tuple[float, float, flo
             return UNCERTAINTY_CONDITIONS[value]
         except KeyError:
             raise ValueError(
-                f"uncertainty = {value!r} is not a known condition: allowed "
+                f"uncertainty = {shown(value)} is not a known condition: allowed "
                 f"{sorted(UNCERTAINTY_CONDITIONS)} or a (Delta1, Delta2, Delta3) tuple"
             ) from None
     try:
-        deltas = tuple(value)
+        deltas = tuple(itertools.islice(value, 4))  # a longer iterable is refused unread
     except TypeError:
         raise TypeError(
-            f"uncertainty must be a condition name or 3 numbers, got {value!r}"
+            f"uncertainty must be a condition name or 3 numbers, got {shown(value)}"
         ) from None
     if len(deltas) != 3:
-        raise ValueError(f"uncertainty must have 3 entries (Delta1..3), got {len(deltas)}")
+        got = "more" if len(deltas) > 3 else len(deltas)
+        raise ValueError(f"uncertainty must have 3 entries (Delta1..3), got {got}")
     d1, d2, d3 = (check_range(f"uncertainty[{k}]", d, -0.9, 10.0) for k, d in enumerate(deltas))
     return (d1, d2, d3)
 
@@ -301,7 +305,9 @@ class FieldRandomization:
         check_interval(
             "reference_range_rad_s", self.reference_range_rad_s, 0.0, MAX_REFERENCE_RAD_S
         )
-        check_interval("measured_depth_range_m", self.measured_depth_range_m, 1.0, 20_000.0)
+        check_interval(
+            "measured_depth_range_m", self.measured_depth_range_m, 1.0, MAX_MEASURED_DEPTH_M
+        )
         check_interval("mu_a_range", self.mu_a_range, 1e-3, 10.0)
         check_interval("mu_0_ratio_range", self.mu_0_ratio_range, 1e-3, 1.0)
         check_interval("xi_range", self.xi_range, 0.0, 100.0)
@@ -406,16 +412,16 @@ class Scenario:
 
     def __post_init__(self) -> None:
         if not isinstance(self.wob, WobProfile):
-            raise TypeError(f"wob must be a WobProfile, got {self.wob!r}")
+            raise TypeError(f"wob must be a WobProfile, got {shown(self.wob)}")
         if not isinstance(self.reference, SpeedProfile):
-            raise TypeError(f"reference must be a SpeedProfile, got {self.reference!r}")
+            raise TypeError(f"reference must be a SpeedProfile, got {shown(self.reference)}")
         object.__setattr__(self, "uncertainty", resolve_uncertainty(self.uncertainty))
         check_choice("uncertainty_reading", self.reading, READINGS, "reading")
         check_range("noise_std_rad_s", self.noise_std_rad_s, 0.0, 10.0)
         if isinstance(self.parameters, DistributedStringParameters):
             if any(self.uncertainty):
                 raise ValueError(
-                    f"uncertainty = {self.uncertainty!r} is out of range for a distributed "
+                    f"uncertainty = {shown(self.uncertainty)} is out of range for a distributed "
                     "string: allowed (0, 0, 0) (the conditions scale the 4-DOF plant)"
                 )
             if self.model is not None and not isinstance(self.model, DistributedStringParameters):

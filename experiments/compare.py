@@ -46,7 +46,13 @@ from drill_env.evaluation import Trace, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
 from drill_env.parameters import PLANT_DT_S, resolve_parameters
 from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, WobProfile
-from experiments.arguments import ArgumentParser, names_type, number_type, seed_option
+from experiments.arguments import (
+    ArgumentParser,
+    names_type,
+    number_type,
+    one_line,
+    seed_option,
+)
 from experiments.field import (
     COMPARE_CONDITIONS,
     COMPARE_DEPTHS_M,
@@ -65,6 +71,7 @@ from experiments.field import (
     run_label,
     run_on,
 )
+from experiments.paths import output_file
 from experiments.sweep import COMPARE_TASK_RUNS, add_sweep_options, sweep_requested
 from experiments.tables import Column, write_csv, write_json
 from experiments.tables import markdown_table as _markdown
@@ -674,7 +681,7 @@ def write_figures(
 
     folder.mkdir(parents=True, exist_ok=True)
     return [
-        save_figure(fig, folder / name)
+        save_figure(fig, output_file(folder, name))
         for name, fig in comparison_figures(rows, runs, cases, focus)
     ]
 
@@ -694,10 +701,13 @@ def load_agent(loader: Callable[[], Any] | None = None) -> Any:
     try:
         policy = loader()
     except ImportError as exc:
-        print(f"compare: no agent row ({exc})", file=sys.stderr)
+        print(f"compare: no agent row ({one_line(str(exc))})", file=sys.stderr)
         return None
     except Exception as exc:  # a broken model must not stop the baseline comparison
-        print(f"compare: the shipped agent failed to load, skipped: {exc!r}", file=sys.stderr)
+        print(
+            f"compare: the shipped agent failed to load, skipped: {one_line(repr(exc))}",
+            file=sys.stderr,
+        )
         return None
     return policy
 

@@ -51,6 +51,7 @@ from agents.policy import (
 from drill_env.control import controller_names
 from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
+from drill_env.validation import printable
 from experiments.arguments import ArgumentParser, names_type
 from experiments.field import (
     ENV_IDS,
@@ -71,6 +72,7 @@ from experiments.heldout import (
     HeldOutScenario,
     held_out_set,
 )
+from experiments.paths import output_file
 from experiments.sweep import EVALUATE_TASK_SCENARIOS, add_sweep_options, sweep_requested
 from experiments.tables import write_csv, write_json
 
@@ -485,7 +487,10 @@ def write_figures(
     """Write :func:`heldout_figures` as PNG files into ``out``; returns their paths."""
     from experiments.plots import save_figure
 
-    return [save_figure(fig, out / name) for name, fig in heldout_figures(rows, traces, labels)]
+    return [
+        save_figure(fig, output_file(out, name))
+        for name, fig in heldout_figures(rows, traces, labels)
+    ]
 
 
 def shipped_models() -> list[Path]:
@@ -622,7 +627,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         if agent.env_id != args.env:
             if args.models:
                 parser.error(f"MODEL {path} is for {agent.env_id}, not for {args.env}")
-            print(f"evaluate: {path} is for {agent.env_id}: left out", file=sys.stderr)
+            print(
+                f"evaluate: {printable(path)} is for {printable(agent.env_id)}: left out",
+                file=sys.stderr,
+            )
     paths = [p for a, p in zip(agents, paths, strict=True) if a.env_id == args.env]
     agents = [a for a in agents if a.env_id == args.env]
     labels = [a.name for a in agents]

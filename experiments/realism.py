@@ -66,6 +66,7 @@ from drill_env.options import REALISM_KEYWORDS, EnvConfig, FieldEnvConfig, reali
 from experiments.arguments import ArgumentParser, names_type, number_type, seed_option
 from experiments.evaluate import FIELD_HELD_OUT, HELD_OUT, HeldOutScenario
 from experiments.field import ENV_IDS, FIELD_ENV, PAPER_ENV, run_on
+from experiments.paths import output_file
 from experiments.sweep import (
     Task,
     TaskResult,
@@ -1065,7 +1066,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         from experiments.plots import save_figure
 
         written += [
-            save_figure(fig, out / "figures" / name) for name, fig in realism_figures(means, breaks)
+            save_figure(fig, output_file(out / "figures", name))
+            for name, fig in realism_figures(means, breaks)
         ]
     for env_id in envs:
         prone = ", ".join(s for s in scenarios[env_id] if s in PRONE[env_id]) or "none"
