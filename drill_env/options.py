@@ -54,6 +54,7 @@ from drill_env.validation import (
     check_range,
     check_real,
     check_unknown,
+    printable,
     require,
     shown,
 )
@@ -389,7 +390,7 @@ def episode_config(base: EnvConfig, options: dict[str, Any] | None) -> EnvConfig
             f"option(s) {', '.join(fixed)} cannot change per episode: set them at make; "
             f"per-episode options: {', '.join(per_episode)}"
         )
-    unknown = sorted(set(options) - set(keywords))
+    unknown = sorted(printable(name) for name in set(options) - set(keywords))
     if unknown:
         raise ValueError(
             f"unknown option(s): {', '.join(unknown)}; valid options: {', '.join(per_episode)}"

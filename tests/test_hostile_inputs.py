@@ -808,3 +808,28 @@ def test_tuned_gains_document_round_trips() -> None:
     """The shipped file still loads (the loader's refusals do not refuse good files)."""
     entries = load_tuned_gains()
     assert entries and json.dumps(str(entries))
+
+
+@pytest.mark.parametrize(
+    "seed",
+    [-1, 1.5, "x", True, [1, "a"], [1, -5], [1], 10**400 * -1, {"a": 1}],
+    ids=lambda v: shown(v, 24),
+)
+def test_vector_env_seeds_are_checked(seed: Any) -> None:
+    """A seed is None, an integer >= 0, or a list of one per string: anything else is named."""
+    venv = gym.make_vec(ENV_ID, num_envs=2, episode_s=1.0)
+    _refused(lambda: venv.reset(seed=seed), "seed")
+    venv.reset(seed=np.int64(3))
+    venv.reset(seed=[None, 10**400])
+
+
+@pytest.mark.parametrize(
+    "options",
+    [{1: 2}, {None: 1}, {"\x1b[2J": 1}, {("a",): 1, "b": 2}, {"x" * 10_000: 1}],
+    ids=["int-key", "none-key", "escape-key", "tuple-key", "long-key"],
+)
+def test_reset_options_with_hostile_names_are_refused(options: dict[Any, Any]) -> None:
+    env = gym.make(ENV_ID, episode_s=1.0).unwrapped
+    _refused(lambda: env.reset(seed=0, options=options), "unknown option")
+    keywords = {str(k): v for k, v in options.items()}
+    _refused(lambda: EnvConfig.from_kwargs(keywords), "unrecognized")
