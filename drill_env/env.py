@@ -124,15 +124,18 @@ def validate_actions(
         if -1.0 <= v <= 1.0:
             return np.array([v]), np.zeros(1, dtype=bool)
     expected = "(1,)" if not batched else f"({num}, 1)"
-    if isinstance(action, np.ma.MaskedArray):
+    if type(action) is np.ndarray:  # a plain array (a masked array is a subclass)
+        a = action
+    elif isinstance(action, np.ma.MaskedArray):
         raise ValueError(
             f"action must be a plain array of real numbers with shape {expected}, got a masked "
             "array (fill it first: action.filled())"
         )
-    try:
-        a = np.asarray(action)
-    except (TypeError, ValueError, OverflowError):
-        a = np.asarray(None)
+    else:
+        try:
+            a = np.asarray(action)
+        except (TypeError, ValueError, OverflowError):
+            a = np.asarray(None)
     if a.dtype.kind not in "fiu":
         raise ValueError(
             f"action must be numeric (real numbers) with shape {expected}, got {shown(action)} "
@@ -143,8 +146,10 @@ def validate_actions(
             raise ValueError(f"action must have shape (1,), got shape {a.shape}")
     elif a.shape not in ((num, 1), (num,)):
         raise ValueError(f"action must have shape ({num}, 1), got shape {a.shape}")
-    with np.errstate(over="ignore", invalid="ignore"):
-        a = a.astype(np.float64).reshape(num)
+    if a.dtype.itemsize > 8:  # long double: beyond float64 it becomes inf, refused below
+        with np.errstate(over="ignore"):
+            a = a.astype(np.float64)
+    a = np.asarray(a, dtype=np.float64).reshape(num)
     if not np.all(np.isfinite(a)):
         raise ValueError(f"action must be finite, got {shown(action)}")
     clipped = (a < -1.0) | (a > 1.0)

@@ -130,35 +130,40 @@ class SpeedProfile:
                 f"reference profile needs 1 to {MAX_KNOTS} knots with one value per time, got "
                 f"{len(self.times_s)} times and {len(self.values_rad_s)} values"
             )
+        times, values = [], []
         for k, (t, v) in enumerate(zip(self.times_s, self.values_rad_s, strict=True)):
-            check_range(f"reference time[{k}]", t, 0.0, math.inf)
-            check_range(f"reference_speed_rad_s[{k}]", v, 0.0, MAX_REFERENCE_RAD_S)
+            times.append(check_range(f"reference time[{k}]", t, 0.0, math.inf))
+            values.append(check_range(f"reference_speed_rad_s[{k}]", v, 0.0, MAX_REFERENCE_RAD_S))
+        object.__setattr__(self, "times_s", tuple(times))  # as floats
+        object.__setattr__(self, "values_rad_s", tuple(values))
         if any(b < a for a, b in zip(self.times_s, self.times_s[1:], strict=False)):
             raise ValueError(f"reference knot times must not decrease, got {shown(self.times_s)}")
 
     @classmethod
     def constant(cls, speed_rad_s: float) -> SpeedProfile:
         """A constant reference, rad/s."""
-        return cls((0.0,), (float(speed_rad_s),))
+        return cls((0.0,), (speed_rad_s,))  # checked by __post_init__
 
     @classmethod
     def steps(cls, initial_rad_s: float, changes: Sequence[tuple[float, float]]) -> SpeedProfile:
         """Start at ``initial_rad_s`` and jump to ``v`` at each ``(t, v)`` of ``changes``."""
         times: list[float] = [0.0]
-        values: list[float] = [float(initial_rad_s)]
-        for t, v in changes:
-            times += [float(t), float(t)]
-            values += [values[-1], float(v)]
-        return cls(tuple(times), tuple(values))
+        values: list[float] = [initial_rad_s]
+        for t, v in itertools.islice(changes, MAX_KNOTS):  # more are refused by the knot count
+            times += [t, t]
+            values += [values[-1], v]
+        return cls(tuple(times), tuple(values))  # checked by __post_init__
 
     @classmethod
     def ramp(cls, start_rad_s: float, end_rad_s: float, t0_s: float, t1_s: float) -> SpeedProfile:
         """Hold ``start_rad_s`` until ``t0_s``, ramp linearly to ``end_rad_s`` at ``t1_s``."""
-        if not t1_s > t0_s:
+        t0 = check_range("ramp start time", t0_s, 0.0, math.inf)
+        t1 = check_range("ramp end time", t1_s, 0.0, math.inf)
+        if not t1 > t0:
             raise ValueError(
                 f"ramp end time {shown(t1_s)} must be after its start time {shown(t0_s)}"
             )
-        return cls((float(t0_s), float(t1_s)), (float(start_rad_s), float(end_rad_s)))
+        return cls((t0, t1), (start_rad_s, end_rad_s))  # checked by __post_init__
 
     def value(self, t_s: float) -> float:
         """Reference speed at time ``t_s``, rad/s."""

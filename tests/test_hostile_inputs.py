@@ -111,6 +111,21 @@ HOSTILE_NAMES = [
 _ids = [shown(v, 24) for v in HOSTILE_NUMBERS]
 
 
+@pytest.fixture(scope="module", autouse=True)
+def _compiled() -> None:
+    """Load (or compile) the engine once, outside the allocation tracing of :func:`_refused`
+    (tracing slows compilation down a hundredfold)."""
+    for env_id in (ENV_ID, FIELD_ID):
+        env = gym.make(env_id, episode_s=1.0)
+        env.reset(seed=0)
+        env.step(np.zeros(1, np.float32))
+        env.close()
+        venv = gym.make_vec(env_id, num_envs=2, episode_s=1.0)
+        venv.reset(seed=0)
+        venv.step(np.zeros((2, 1), np.float32))
+        venv.close()
+
+
 def _one_line(message: str) -> bool:
     return "\n" not in message and "\x1b" not in message and len(message) < 600
 
@@ -833,3 +848,18 @@ def test_reset_options_with_hostile_names_are_refused(options: dict[Any, Any]) -
     _refused(lambda: env.reset(seed=0, options=options), "unknown option")
     keywords = {str(k): v for k, v in options.items()}
     _refused(lambda: EnvConfig.from_kwargs(keywords), "unrecognized")
+
+
+def test_speed_profiles_refuse_hostile_knots() -> None:
+    """Profile helpers check their numbers and read no more knots than a profile holds."""
+    import itertools
+
+    from drill_env.scenarios import SpeedProfile
+
+    endless = ((float(t), 1.0) for t in itertools.count())
+    _refused(lambda: SpeedProfile.steps(5.0, endless), "knots")
+    _refused(lambda: SpeedProfile.steps(5.0, [(10**400, 1.0)]), "reference time")
+    _refused(lambda: SpeedProfile.ramp(1.0, 2.0, 0.0, 10**400), "ramp end time")
+    _refused(lambda: SpeedProfile.constant(1j), "reference_speed_rad_s")  # type: ignore[arg-type]
+    _refused(lambda: EnvConfig(reference_speed_rad_s=SpeedProfile.constant(10**400)), "reference")
+    assert SpeedProfile.steps(5, [(1, 6)]).times_s == (0.0, 1.0, 1.0)
