@@ -23,6 +23,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
+from drill_env.validation import shown
+
 __all__ = [
     "ENV_DEFAULTS",
     "ENV_IDS",
@@ -339,21 +341,21 @@ def _check_int(name: str, value: Any, low: int, high: int | None = None) -> None
     if ok and (high is None or value <= high):
         return
     allowed = f"an integer >= {low}" if high is None else f"an integer in [{low}, {high}]"
-    raise ValueError(f"{_option(name)} = {value!r} is out of range: allowed {allowed}")
+    raise ValueError(f"{_option(name)} = {shown(value)} is out of range: allowed {allowed}")
 
 
 def _check_number(name: str, value: Any, low: float, high: float, open_low: bool = False) -> None:
     ok = (
         not isinstance(value, bool)
         and isinstance(value, (int, float))
-        and math.isfinite(value)
+        and math.isfinite(value if isinstance(value, float) else 0.0)
         and (value > low if open_low else value >= low)
         and value <= high
     )
     if not ok:
         bracket = "(" if open_low else "["
         raise ValueError(
-            f"{_option(name)} = {value!r} is out of range: allowed {bracket}{low:g}, {high:g}]"
+            f"{_option(name)} = {shown(value)} is out of range: allowed {bracket}{low:g}, {high:g}]"
         )
 
 

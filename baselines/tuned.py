@@ -52,7 +52,7 @@ from baselines.stiff_pi import StiffPI, StiffPIGains
 from baselines.z_torque import ZTorque, ZTorqueGains
 from drill_env.distributed import DistributedStringParameters
 from drill_env.parameters import DrillStringParameters
-from drill_env.validation import check_unknown
+from drill_env.validation import check_unknown, printable, shown
 
 __all__ = [
     "KIND_ENVS",
@@ -122,7 +122,18 @@ def plant_kind(model: Model) -> str:
 
 
 def _fail(where: str, message: str) -> ValueError:
-    return ValueError(f"{where}: {message}")
+    return ValueError(f"{printable(where, 200)}: {message}")
+
+
+def _finite(value: Any) -> float | None:
+    """``value`` as a finite float when it is a JSON number (not a bool) in the float range."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    try:
+        number = float(value)
+    except OverflowError:
+        return None
+    return number if math.isfinite(number) else None
 
 
 def _object(value: Any, where: str, allowed: tuple[str, ...], required: tuple[str, ...]) -> None:
@@ -130,7 +141,9 @@ def _object(value: Any, where: str, allowed: tuple[str, ...], required: tuple[st
         raise _fail(where, f"expected a JSON object, got {type(value).__name__}")
     unknown = sorted(set(value) - set(allowed))
     if unknown:
-        raise _fail(f"{where}.{unknown[0]}", f"unknown field: allowed {', '.join(allowed)}")
+        raise _fail(
+            f"{where}.{printable(unknown[0])}", f"unknown field: allowed {', '.join(allowed)}"
+        )
     missing = [k for k in required if k not in value]
     if missing:
         raise _fail(f"{where}.{missing[0]}", "missing")
@@ -139,9 +152,10 @@ def _object(value: Any, where: str, allowed: tuple[str, ...], required: tuple[st
 def _number_or_none(value: Any, where: str) -> float | None:
     if value is None:
         return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise _fail(where, f"= {value!r}: expected a finite number or null")
-    return float(value)
+    number = _finite(value)
+    if number is None:
+        raise _fail(where, f"= {shown(value)}: expected a finite number or null")
+    return number
 
 
 def _gains(name: str, value: Any, where: str) -> Gains:
@@ -153,10 +167,13 @@ def _gains(name: str, value: Any, where: str) -> Gains:
         default = getattr(gains_type(), key)
         if isinstance(default, bool):
             if not isinstance(item, bool):
-                raise _fail(f"{where}.{key}", f"= {item!r}: expected true or false")
-        elif isinstance(item, bool) or not isinstance(item, (int, float)):
-            raise _fail(f"{where}.{key}", f"= {item!r}: expected a number")
-        kwargs[key] = item if isinstance(item, bool) else float(item)
+                raise _fail(f"{where}.{key}", f"= {shown(item)}: expected true or false")
+            kwargs[key] = item
+            continue
+        number = _finite(item)
+        if number is None:
+            raise _fail(f"{where}.{key}", f"= {shown(item)}: expected a finite number")
+        kwargs[key] = number
     try:
         return gains_type(**kwargs)
     except (TypeError, ValueError) as exc:
@@ -180,7 +197,7 @@ def parse_tuned_gains(data: Any, source: str = "tuned gains") -> dict[str, dict[
     _object(data, source, _TOP_KEYS, ("format", "controllers"))
     version = data["format"]
     if isinstance(version, bool) or version != TUNED_FORMAT:
-        raise _fail(f"{source}.format", f"= {version!r}: expected {TUNED_FORMAT}")
+        raise _fail(f"{source}.format", f"= {shown(version)}: expected {TUNED_FORMAT}")
     if not isinstance(data.get("about", ""), str):
         raise _fail(f"{source}.about", "expected a string")
     controllers = data["controllers"]
@@ -194,10 +211,10 @@ def parse_tuned_gains(data: Any, source: str = "tuned gains") -> dict[str, dict[
             at = f"{where}.{kind}"
             _object(entry, at, _ENTRY_KEYS, ("env", "gains"))
             if entry["env"] != KIND_ENVS[kind]:
-                raise _fail(f"{at}.env", f"= {entry['env']!r}: expected {KIND_ENVS[kind]!r}")
+                raise _fail(f"{at}.env", f"= {shown(entry['env'])}: expected {KIND_ENVS[kind]!r}")
             command = entry.get("command", "")
             if not isinstance(command, str):
-                raise _fail(f"{at}.command", f"= {command!r}: expected a string")
+                raise _fail(f"{at}.command", f"= {shown(command)}: expected a string")
             out[name][kind] = TunedEntry(
                 gains=_gains(name, entry["gains"], f"{at}.gains"),
                 env_id=KIND_ENVS[kind],
@@ -216,7 +233,7 @@ def _no_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for key, value in pairs:
         if key in out:
-            raise ValueError(f"field {key!r} appears twice")
+            raise ValueError(f"field {shown(key)} appears twice")
         out[key] = value
     return out
 
@@ -235,21 +252,22 @@ def load_tuned_gains(path: Path | str | None = None) -> dict[str, dict[str, Tune
             field that breaks the layout; the message names the file and the field.
     """
     file = Path(TUNED_GAINS_FILE if path is None else path)
+    name = printable(str(file), 200)
     if not file.is_file():
-        raise FileNotFoundError(f"no tuned gains file at {str(file)!r}")
-    if file.stat().st_size > _MAX_BYTES:
-        raise ValueError(
-            f"{str(file)!r} is larger than {_MAX_BYTES:,} bytes: not a tuned gains file"
-        )
+        raise FileNotFoundError(f"no tuned gains file at {name!r}")
+    with file.open("rb") as stream:
+        raw = stream.read(_MAX_BYTES + 1)
+    if len(raw) > _MAX_BYTES:
+        raise ValueError(f"{name!r} is larger than {_MAX_BYTES:,} bytes: not a tuned gains file")
     try:
         data = json.loads(
-            file.read_text(encoding="utf-8"),
-            object_pairs_hook=_no_duplicates,
-            parse_constant=_no_constant,
+            raw.decode("utf-8"), object_pairs_hook=_no_duplicates, parse_constant=_no_constant
         )
+    except RecursionError:
+        raise ValueError(f"{name!r} is not a tuned gains file: JSON nested too deeply") from None
     except (ValueError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{str(file)!r} is not valid JSON: {exc}") from None
-    return parse_tuned_gains(data, file.name)
+        raise ValueError(f"{name!r} is not valid JSON: {printable(exc, 200)}") from None
+    return parse_tuned_gains(data, printable(file.name, 200))
 
 
 def tuned_gains_document(

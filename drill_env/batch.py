@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import math
+import numbers
 from dataclasses import dataclass
 from typing import Final
 
@@ -79,6 +80,7 @@ from drill_env.layout import (
     observation_scales,
     observation_sources,
 )
+from drill_env.limits import MAX_BATCH_BYTES
 from drill_env.modes import probe_nodes
 from drill_env.options import EnvConfig, episode_config, steps_of
 from drill_env.parameters import PLANT_DT_S, plant_parameter_vector
@@ -91,6 +93,7 @@ from drill_env.scenarios import (
     spawn_generators,
 )
 from drill_env.sensors import reset_channel, telemetry_buffer_size
+from drill_env.validation import printable, shown
 
 __all__ = ["StringBatch", "node_count"]
 
@@ -105,6 +108,54 @@ assert tuple(range(1, 5)) == (REP_VARIATION, REP_STUCK_STEPS, REP_STEPS, REP_TOR
 def node_count(parameters: DistributedStringParameters) -> int:
     """Nodes of the chain of a distributed string."""
     return 1 + sum(section_element_counts(parameters))
+
+
+def _noise_rows(num: int, substeps: int) -> int:
+    """Rows of a string's noise block: several decision periods (fewer for big batches)."""
+    periods = max(1, min(2000, 200_000 // num) // substeps)
+    return periods * substeps + 1
+
+
+def _check_batch_size(config: EnvConfig, num: int, max_nodes: int, chain: bool) -> None:
+    """Refuse, before anything is allocated, a batch whose per-string arrays would exceed
+    :data:`drill_env.limits.MAX_BATCH_BYTES` (``num_envs`` is named: the keywords are valid)."""
+    s = config.substeps
+    state = 2 * max_nodes - 1 if chain else N_STATE
+    node_cols = max_nodes if chain else 1
+    period = steps_of(config.telemetry_period_s) if config.telemetry_period_s else 0
+    delay = steps_of(config.telemetry_delay_s)
+    floats = (
+        s * N_RECORD  # records
+        + _noise_rows(num, s) * 6  # speed and sensor noise blocks
+        + 2 * telemetry_buffer_size(period, delay)
+        + steps_of(config.actuator_dead_time_s) + 1
+        + (CHAIN_WORK_ROWS + 1) * node_cols
+        + (chain_parameter_length(max_nodes) if chain else N_PLANT_PARAMS)
+        + 2 * state + N_FIXED_SOURCES + N_PROFILES * MAX_KNOTS
+        + N_INTS + N_SCALARS + N_MEASUREMENT + N_CHANNEL + N_REPORT + 8
+    )  # fmt: skip
+    per_string = 8 * floats
+    if num * per_string > MAX_BATCH_BYTES:
+        most = max(1, MAX_BATCH_BYTES // per_string)
+        raise ValueError(
+            f"num_envs = {num} is out of range: allowed at most {most} strings with these "
+            f"keywords ({per_string / 2**20:.3g} MiB of arrays each, at most "
+            f"{MAX_BATCH_BYTES / 2**30:g} GiB in all)"
+        )
+
+
+def _real_torque(value: object) -> float | None:
+    """``value`` as a float when it is one real number (not a bool), else None."""
+    if isinstance(value, np.ndarray):
+        if value.size != 1 or value.dtype.kind not in "fiu" or isinstance(value, np.ma.MaskedArray):
+            return None
+        value = value.reshape(()).item()
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        return None
+    try:
+        return float(value)
+    except (OverflowError, ValueError, TypeError):
+        return math.inf
 
 
 def _max_nodes(config: EnvConfig) -> int:
@@ -141,6 +192,7 @@ class StringBatch:
         self.residual = config.residual
         self.chain = config.distributed
         self.max_nodes = _max_nodes(config) if self.chain else 4
+        _check_batch_size(config, num, self.max_nodes, self.chain)
         state_size = 2 * self.max_nodes - 1 if self.chain else N_STATE
         state_fields = chain_state_fields(self.max_nodes) if self.chain else None
         self.fields = observation_fields(
@@ -178,8 +230,7 @@ class StringBatch:
         n, s = num, self.substeps
         # Noise is drawn in blocks: row noise_pos is the current measurement's, the rows after
         # it the next steps'. A block holds several decision periods (fewer for big batches).
-        periods = max(1, min(2000, 200_000 // n) // s)
-        rows = periods * s + 1
+        rows = _noise_rows(n, s)
         period = steps_of(config.telemetry_period_s) if config.telemetry_period_s else 0
         delay = steps_of(config.telemetry_delay_s)
         node_cols = self.max_nodes if self.chain else 1
@@ -228,6 +279,8 @@ class StringBatch:
             chain=self.chain,
         )
         self.episodes: list[_StringEpisode | None] = [None] * n
+        self.end_reasons: list[str] = [""] * n
+        """Why each string's episode ended early, if not by diverging ("" otherwise)."""
         self._noise_rows = rows
         self._node_noise = self.chain and config.observation == "state"
         # Action to command torque: residual_scale * a, or min + (a + 1) / 2 * (max - min).
@@ -328,6 +381,7 @@ class StringBatch:
             config, scenario, root, generators["noise"], noise_out, generators["sensors"],
             sensor_out, node_rng, config.duration_s,
         )  # fmt: skip
+        self.end_reasons[i] = ""
         a.noise[i] = 0.0
         if noise_out is not None:
             generators["noise"].standard_normal(out=a.noise[i, 0])
@@ -489,14 +543,38 @@ class StringBatch:
                 prof = a.profiles[i]
                 ref = profile_value(prof[PROF_REF_T], prof[PROF_REF_V], a.ints[i, I_REF_KNOTS], t)
                 measured = Measurement(self.measurement(i), self._missing_signals)
-                torque = float(self.controllers[i].torque(measured, ref, PLANT_DT_S))
-                a.scalars[i, F_BASE_TORQUE] = torque if math.isfinite(torque) else math.nan
+                value = self.controllers[i].torque(measured, ref, PLANT_DT_S)
+                torque = self._base_torque(i, value)
+                a.scalars[i, F_BASE_TORQUE] = torque
             self._advance(step_arrays, one_step)
             a.records[:, j] = step_arrays.records[:, 0]
             sums += a.report[:, _SUMS]
         a.report[:, _SUMS] = sums
         a.report[:, REP_LAW_ERROR] = 0.0  # a Python controller's state is its own
         a.report[:, REP_LAW_GAIN] = 0.0
+
+    def _base_torque(self, i: int, value: object) -> float:
+        """The base torque a Python controller returned, N m: a real number (a numpy scalar or
+        a one-element real array too). A NaN or infinite torque ends string ``i``'s episode
+        (:meth:`end_reason` names the controller); anything else raises ``TypeError``."""
+        torque = value if type(value) is float else _real_torque(value)
+        if torque is None:
+            name = printable(type(self.controllers[i]).__name__)
+            raise TypeError(
+                f"base_controller {name}.torque() returned {shown(value)} "
+                f"({printable(type(value).__name__)}): expected a finite real number, N m"
+            )
+        if not math.isfinite(torque):
+            if not self.end_reasons[i]:
+                name = printable(type(self.controllers[i]).__name__)
+                self.end_reasons[i] = f"base_controller {name} returned {torque!r} N m"
+            return math.nan
+        return torque
+
+    def end_reason(self, i: int) -> str:
+        """Why string ``i``'s episode ended: the base controller's failure, else
+        ``"diverged"``."""
+        return self.end_reasons[i] or "diverged"
 
     # ---------------------------------------------------------------- outputs
     def observations(self) -> npt.NDArray[np.float32]:

@@ -45,6 +45,7 @@ from drill_env.layout import (
 from drill_env.limits import TorqueLimits
 from drill_env.parameters import DrillStringParameters
 from drill_env.sensors import MeasurementChannel
+from drill_env.validation import shown
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -383,12 +384,14 @@ def register_controller(name: str, factory: Callable[..., Controller]) -> None:
     error.
     """
     if not isinstance(name, str) or not name:
-        raise ValueError(f"controller name must be a non-empty string, got {name!r}")
+        raise ValueError(f"controller name must be a non-empty string, got {shown(name)}")
     if not callable(factory):
-        raise TypeError(f"controller factory for {name!r} must be callable, got {factory!r}")
+        raise TypeError(
+            f"controller factory for {shown(name)} must be callable, got {shown(factory)}"
+        )
     known = _FACTORIES.get(name)
     if known is not None and known is not factory:
-        raise ValueError(f"controller name {name!r} is already registered")
+        raise ValueError(f"controller name {shown(name)} is already registered")
     _FACTORIES[name] = factory
 
 
@@ -412,7 +415,7 @@ def make_controller(name: str, **gains: Any) -> Controller:
         register_controller(name, factory)
     if factory is None:
         raise ValueError(
-            f"unknown controller {name!r}: valid names are {', '.join(controller_names())}"
+            f"unknown controller {shown(name)}: valid names are {', '.join(controller_names())}"
         )
     return factory(**gains)
 

@@ -31,14 +31,20 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import numbers
 from dataclasses import dataclass, field
 from typing import Any, Final
 
 import numpy as np
 import numpy.typing as npt
 
+from drill_env.limits import (
+    MAX_ELEMENTS,
+    MAX_MEASURED_DEPTH_M,
+    MAX_SECTIONS,
+    MIN_ELEMENT_LENGTH_M,
+)
 from drill_env.parameters import PRESETS, DrillStringParameters
+from drill_env.validation import check_real, require, shown
 
 __all__ = [
     "DISTRIBUTED_PRESETS",
@@ -59,17 +65,13 @@ FloatArray = npt.NDArray[np.float64]
 
 
 def _real(name: str, value: Any) -> float:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{name} must be a real number, got {value!r} ({type(value).__name__})")
-    number = float(value)
+    number = check_real(name, value, "a finite number")
     if not math.isfinite(number):
-        raise ValueError(f"{name} = {value!r} is out of range: allowed a finite number")
+        raise ValueError(f"{name} = {shown(value)} is out of range: allowed a finite number")
     return number
 
 
-def _require(name: str, value: float, allowed: str, ok: bool) -> None:
-    if not ok:
-        raise ValueError(f"{name} = {value!r} is out of range: allowed {allowed}")
+_require = require
 
 
 def polar_moment_m4(outer_diameter_m: float, inner_diameter_m: float) -> float:
@@ -100,6 +102,10 @@ class StringSection:
             object.__setattr__(self, f.name, _real(f.name, getattr(self, f.name)))
         for name in ("length_m", "outer_diameter_m", "shear_modulus_pa", "density_kg_m3"):
             _require(name, getattr(self, name), "> 0", getattr(self, name) > 0)
+        _require(
+            "length_m", self.length_m, f"(0, {MAX_MEASURED_DEPTH_M:g}] m",
+            self.length_m <= MAX_MEASURED_DEPTH_M,
+        )  # fmt: skip
         od, idia = self.outer_diameter_m, self.inner_diameter_m
         _require(
             "inner_diameter_m", idia, f"0 <= inner_diameter_m < outer_diameter_m = {od}",
@@ -219,6 +225,10 @@ class DistributedStringParameters:
         sections = tuple(sections)
         if not sections:
             raise ValueError("sections = () is out of range: allowed at least one StringSection")
+        if len(sections) > MAX_SECTIONS:
+            raise ValueError(
+                f"sections has {len(sections)} entries: allowed at most {MAX_SECTIONS}"
+            )
         for i, section in enumerate(sections):
             if not isinstance(section, StringSection):
                 raise TypeError(
@@ -232,8 +242,23 @@ class DistributedStringParameters:
             "mu_a", "mu_0", "xi", "Dw", "element_length_m",
         ):  # fmt: skip
             object.__setattr__(self, name, _real(name, getattr(self, name)))
-        for name in ("top_drive_inertia_kg_m2", "bit_radius_m", "Dw", "element_length_m"):
+        for name in ("top_drive_inertia_kg_m2", "bit_radius_m", "Dw"):
             _require(name, getattr(self, name), "> 0", getattr(self, name) > 0)
+        depth = self.measured_depth_m
+        _require(
+            "measured_depth_m (the sum of the section lengths)", depth,
+            f"at most {MAX_MEASURED_DEPTH_M:g} m", depth <= MAX_MEASURED_DEPTH_M,
+        )  # fmt: skip
+        h = self.element_length_m
+        _require("element_length_m", h, f">= {MIN_ELEMENT_LENGTH_M:g} m",
+                 h >= MIN_ELEMENT_LENGTH_M)  # fmt: skip
+        elements = sum(section_element_counts(self))
+        _require(
+            "element_length_m", h,
+            f"a length that cuts this {depth:g} m string into at most {MAX_ELEMENTS} elements "
+            f"(it gives {elements}; use >= {depth / (MAX_ELEMENTS - len(sections)):.3g} m)",
+            elements <= MAX_ELEMENTS,
+        )  # fmt: skip
         for name in ("bit_inertia_kg_m2", "xi"):
             _require(name, getattr(self, name), ">= 0", getattr(self, name) >= 0)
         _require("mu_0", self.mu_0, f"0 < mu_0 <= mu_a = {self.mu_a}", 0 < self.mu_0 <= self.mu_a)
@@ -263,9 +288,10 @@ class DistributedStringParameters:
 
 
 def resolve_distributed_parameters(
-    value: str | DistributedStringParameters,
+    value: str | DistributedStringParameters, name: str = "parameters"
 ) -> DistributedStringParameters:
-    """Return the preset named ``value`` (see ``DISTRIBUTED_PRESETS``) or ``value`` itself."""
+    """Return the preset named ``value`` (see ``DISTRIBUTED_PRESETS``) or ``value`` itself;
+    errors name the keyword ``name``."""
     if isinstance(value, DistributedStringParameters):
         return value
     if isinstance(value, str):
@@ -273,11 +299,11 @@ def resolve_distributed_parameters(
             return DISTRIBUTED_PRESETS[value]
         except KeyError:
             raise ValueError(
-                f"parameters = {value!r} is not a known distributed preset: "
+                f"{name} = {shown(value)} is not a known distributed preset: "
                 f"allowed {sorted(DISTRIBUTED_PRESETS)}"
             ) from None
     raise TypeError(
-        "parameters must be a distributed preset name or a DistributedStringParameters, "
+        f"{name} must be a distributed preset name or a DistributedStringParameters, "
         f"got {type(value).__name__}"
     )
 
@@ -296,9 +322,10 @@ def with_measured_depth(
         ValueError: naming ``measured_depth_m`` when it is not longer than the BHA.
     """
     p = resolve_distributed_parameters(parameters)
-    depth = _real("measured_depth_m", measured_depth_m)
     bha = p.bha_length_m
-    _require("measured_depth_m", depth, f"> BHA length {bha} m", depth > bha)
+    allowed = f"> BHA length {bha} m and <= {MAX_MEASURED_DEPTH_M:g} m"
+    depth = check_real("measured_depth_m", measured_depth_m, allowed)
+    _require("measured_depth_m", depth, allowed, bha < depth <= MAX_MEASURED_DEPTH_M)
     pipe = dataclasses.replace(p.sections[0], length_m=depth - bha)
     return dataclasses.replace(p, sections=(pipe, *p.sections[1:]))
 
@@ -452,7 +479,7 @@ def resolve_plant(
         if value in PRESETS:
             return PRESETS[value]
         raise ValueError(
-            f"parameters = {value!r} is not a known preset: allowed "
+            f"parameters = {shown(value)} is not a known preset: allowed "
             f"{sorted(DISTRIBUTED_PRESETS) + sorted(PRESETS)}"
         )
     raise TypeError(

@@ -36,6 +36,7 @@ from drill_env.layout import (
 )
 from drill_env.options import EnvConfig, FieldEnvConfig
 from drill_env.rewards import TERMS, reward_terms, total_reward
+from drill_env.validation import shown
 
 __all__ = [
     "DrillStringEnv",
@@ -107,27 +108,50 @@ def validate_actions(
     """Check ``action`` (``num`` values in [-1, 1]) and clip it; returns (clipped, was_clipped).
 
     A single env takes shape ``(1,)`` (or a scalar); a vector env (``batched``) takes
-    ``(num, 1)`` (or ``(num,)``).
+    ``(num, 1)`` (or ``(num,)``). Real numbers only: integers and floats (Python or numpy);
+    bools, complex numbers, strings, objects and masked arrays are refused.
 
     Raises:
-        ValueError: naming ``action`` when it is not finite or not of the right shape.
+        ValueError: naming ``action`` when it is not real, not finite or not of the right shape.
     """
-    if not batched and type(action) is np.ndarray and action.shape == (1,):  # the common case
+    if (
+        not batched
+        and type(action) is np.ndarray
+        and action.shape == (1,)
+        and action.dtype.kind == "f"
+    ):  # the common case
         v = float(action[0])
         if -1.0 <= v <= 1.0:
             return np.array([v]), np.zeros(1, dtype=bool)
-    try:
-        a = np.asarray(action, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"action must be numeric with shape ({num}, 1), got {action!r}") from None
+    expected = "(1,)" if not batched else f"({num}, 1)"
+    if type(action) is np.ndarray:  # a plain array (a masked array is a subclass)
+        a = action
+    elif isinstance(action, np.ma.MaskedArray):
+        raise ValueError(
+            f"action must be a plain array of real numbers with shape {expected}, got a masked "
+            "array (fill it first: action.filled())"
+        )
+    else:
+        try:
+            a = np.asarray(action)
+        except (TypeError, ValueError, OverflowError):
+            a = np.asarray(None)
+    if a.dtype.kind not in "fiu":
+        raise ValueError(
+            f"action must be numeric (real numbers) with shape {expected}, got {shown(action)} "
+            f"(dtype {a.dtype})"
+        )
     if not batched:
         if a.shape not in ((1,), ()):
             raise ValueError(f"action must have shape (1,), got shape {a.shape}")
     elif a.shape not in ((num, 1), (num,)):
         raise ValueError(f"action must have shape ({num}, 1), got shape {a.shape}")
-    a = a.reshape(num)
+    if a.dtype.itemsize > 8:  # long double: beyond float64 it becomes inf, refused below
+        with np.errstate(over="ignore"):
+            a = a.astype(np.float64)
+    a = np.asarray(a, dtype=np.float64).reshape(num)
     if not np.all(np.isfinite(a)):
-        raise ValueError(f"action must be finite, got {action!r}")
+        raise ValueError(f"action must be finite, got {shown(action)}")
     clipped = (a < -1.0) | (a > 1.0)
     return np.clip(a, -1.0, 1.0), clipped
 
@@ -219,7 +243,10 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
     ``gym.make(..., max_episode_steps=n)`` adds Gymnasium's ``TimeLimit``, which may end an
     episode earlier. Termination when the state is not finite or leaves the physical bounds
     (1000 rad/s, 1000 rad, ``drill_env.limits``): ``info["termination_reason"] = "diverged"``,
-    the observation stays finite.
+    the observation stays finite. A Python ``base_controller`` that returns a NaN or infinite
+    torque ends the episode the same way, with ``termination_reason`` naming it
+    (``"base_controller Name returned nan N m"``); one that returns anything but a real number
+    raises ``TypeError`` naming it.
 
     ## Arguments
     | keyword | meaning | default |
@@ -374,7 +401,7 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         info = self._info(terms, report)
         info["action_clipped"] = was_clipped
         if terminated:
-            info["termination_reason"] = "diverged"
+            info["termination_reason"] = b.end_reason(0)
         if self._rendering is not None:
             self._record(report)
         return b.obs[0].copy(), reward, terminated, truncated, info

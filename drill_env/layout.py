@@ -13,6 +13,8 @@ from typing import Final, NamedTuple
 import numpy as np
 import numpy.typing as npt
 
+from drill_env.validation import shown
+
 __all__ = [
     "N_FIXED_SOURCES",
     "MEASUREMENT_NAMES",
@@ -260,7 +262,7 @@ def observation_fields(
     """
     if mode not in OBSERVATION_MODES:
         raise ValueError(
-            f"observation = {mode!r} is not a known mode: allowed {list(OBSERVATION_MODES)}"
+            f"observation = {shown(mode)} is not a known mode: allowed {list(OBSERVATION_MODES)}"
         )
     if mode == "state":
         head = state

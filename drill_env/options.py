@@ -25,6 +25,7 @@ from drill_env.distributed import (
 from drill_env.layout import OBSERVATION_MODES
 from drill_env.limits import (
     DEFAULT_TORQUE_LIMITS,
+    MAX_EPISODE_S,
     MAX_REFERENCE_RAD_S,
     MAX_TORQUE_ABS_NM,
     TorqueLimits,
@@ -53,7 +54,9 @@ from drill_env.validation import (
     check_range,
     check_real,
     check_unknown,
+    printable,
     require,
+    shown,
 )
 
 __all__ = [
@@ -157,7 +160,7 @@ class EnvConfig:
     def __post_init__(self) -> None:
         if self.distributed and not self.is_field:
             raise ValueError(
-                f"parameters = {self.parameters!r} is a distributed string: use "
+                f"parameters = {shown(self.parameters)} is a distributed string: use "
                 "DrillStringField-v0; DrillString-v0 takes a 4-DOF preset "
                 f"{sorted(PRESETS)} or a DrillStringParameters"
             )
@@ -180,7 +183,7 @@ class EnvConfig:
                 f"control_dt_s = {self.control_dt_s!r} is out of range: allowed a multiple of "
                 f"plant_dt = {PLANT_DT_S} s"
             )
-        check_range("episode_s", self.episode_s, self.control_dt_s, 1e5)
+        check_range("episode_s", self.episode_s, self.control_dt_s, MAX_EPISODE_S)
         if abs(self.episode_s / self.control_dt_s - self.max_steps) > 1e-6:
             raise ValueError(
                 f"episode_s = {self.episode_s!r} is out of range: allowed a multiple of "
@@ -202,10 +205,12 @@ class EnvConfig:
             )
         if not isinstance(self.randomization, randomization_type):
             raise TypeError(
-                f"randomization must be a {randomization_type.__name__}, got {self.randomization!r}"
+                f"randomization must be a {randomization_type.__name__}, got {shown(self.randomization)}"
             )
         if not isinstance(self.reward_weights, RewardWeights):
-            raise TypeError(f"reward_weights must be a RewardWeights, got {self.reward_weights!r}")
+            raise TypeError(
+                f"reward_weights must be a RewardWeights, got {shown(self.reward_weights)}"
+            )
         check_choice("observation", self.observation, OBSERVATION_MODES, "mode")
         check_range("torque_noise_std_nm", self.torque_noise_std_nm, 0.0, 1e5)
         check_range("telemetry_noise_std_rad_s", self.telemetry_noise_std_rad_s, 0.0, 10.0)
@@ -311,7 +316,9 @@ class EnvConfig:
         if self.distributed:
             model = None
             if self.controller_parameters is not None:
-                model = resolve_distributed_parameters(self.controller_parameters)
+                model = resolve_distributed_parameters(
+                    self.controller_parameters, "controller_parameters"
+                )
             return Scenario(
                 wob=WobProfile(self.wob_n, self.wob_step_time_s, self.wob_final_n),
                 reference=ref,
@@ -383,7 +390,7 @@ def episode_config(base: EnvConfig, options: dict[str, Any] | None) -> EnvConfig
             f"option(s) {', '.join(fixed)} cannot change per episode: set them at make; "
             f"per-episode options: {', '.join(per_episode)}"
         )
-    unknown = sorted(set(options) - set(keywords))
+    unknown = sorted(printable(name) for name in set(options) - set(keywords))
     if unknown:
         raise ValueError(
             f"unknown option(s): {', '.join(unknown)}; valid options: {', '.join(per_episode)}"
@@ -441,7 +448,7 @@ class FieldEnvConfig(EnvConfig):
     def __post_init__(self) -> None:
         if not self.distributed:
             raise ValueError(
-                f"parameters = {self.parameters!r} is not a distributed string: allowed "
+                f"parameters = {shown(self.parameters)} is not a distributed string: allowed "
                 f"{sorted(DISTRIBUTED_PRESETS)} or a DistributedStringParameters"
             )
         super().__post_init__()
@@ -464,7 +471,7 @@ def realism_keywords(level: str) -> dict[str, Any]:
     """
     if level not in REALISM_LEVELS:
         raise ValueError(
-            f"realism = {level!r} is not a known level: allowed {list(REALISM_LEVELS)}"
+            f"realism = {shown(level)} is not a known level: allowed {list(REALISM_LEVELS)}"
         )
     source = EnvConfig if level == "ideal" else FieldEnvConfig
     defaults = {f.name: f.default for f in fields(source) if f.name in REALISM_KEYWORDS}

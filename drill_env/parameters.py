@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from drill_env.layout import N_PLANT_PARAMS
-from drill_env.validation import check_finite_fields, require
+from drill_env.validation import check_finite_fields, require, shown
 
 __all__ = [
     "PLANT_DT_S",
@@ -124,7 +124,7 @@ def resolve_parameters(value: str | DrillStringParameters) -> DrillStringParamet
             return PRESETS[value]
         except KeyError:
             raise ValueError(
-                f"parameters = {value!r} is not a known preset: allowed {sorted(PRESETS)}"
+                f"parameters = {shown(value)} is not a known preset: allowed {sorted(PRESETS)}"
             ) from None
     raise TypeError(
         f"parameters must be a preset name or a DrillStringParameters, got {type(value).__name__}"

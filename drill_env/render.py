@@ -47,6 +47,8 @@ from typing import Any, Final
 import numpy as np
 import numpy.typing as npt
 
+from drill_env.validation import shown
+
 __all__ = [
     "MAX_DIALS",
     "RENDER_MODES",
@@ -84,7 +86,7 @@ def check_render_mode(render_mode: object) -> None:
     :data:`RENDER_MODES`."""
     if render_mode is not None and render_mode not in RENDER_MODES:
         raise ValueError(
-            f"render_mode = {render_mode!r} is not valid: allowed None, "
+            f"render_mode = {shown(render_mode)} is not valid: allowed None, "
             + ", ".join(repr(m) for m in RENDER_MODES)
         )
 

@@ -40,7 +40,7 @@ from drill_env.layout import (
     REP_TRACKING_SUM,
     REP_VARIATION,
 )
-from drill_env.validation import check_range, require
+from drill_env.validation import check_range, check_real, require
 
 __all__ = ["TERMS", "RewardWeights", "reward_terms", "total_reward", "tracking_error"]
 
@@ -92,8 +92,8 @@ class RewardWeights:
                 "reward weights tracking, chattering and stuck are all zero: at least one must "
                 "be > 0"
             )
-        s = self.chattering_scale_nm
-        require("chattering_scale_nm", s, "> 0", isinstance(s, (int, float)) and 0 < s < np.inf)
+        s = check_real("chattering_scale_nm", self.chattering_scale_nm, "> 0 and finite")
+        require("chattering_scale_nm", self.chattering_scale_nm, "> 0 and finite", 0 < s < np.inf)
 
 
 def reward_terms(

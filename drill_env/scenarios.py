@@ -14,6 +14,7 @@ many numbers another component used.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -28,9 +29,9 @@ from drill_env.distributed import (
     resolve_distributed_parameters,
     with_measured_depth,
 )
-from drill_env.limits import MAX_REFERENCE_RAD_S, MAX_WOB_N
+from drill_env.limits import MAX_MEASURED_DEPTH_M, MAX_REFERENCE_RAD_S, MAX_WOB_N
 from drill_env.parameters import DrillStringParameters, resolve_parameters, scale_uncertain
-from drill_env.validation import check_choice, check_interval, check_range
+from drill_env.validation import check_choice, check_interval, check_range, shown
 
 __all__ = [
     "COMPONENTS",
@@ -129,33 +130,40 @@ class SpeedProfile:
                 f"reference profile needs 1 to {MAX_KNOTS} knots with one value per time, got "
                 f"{len(self.times_s)} times and {len(self.values_rad_s)} values"
             )
+        times, values = [], []
         for k, (t, v) in enumerate(zip(self.times_s, self.values_rad_s, strict=True)):
-            check_range(f"reference time[{k}]", t, 0.0, math.inf)
-            check_range(f"reference_speed_rad_s[{k}]", v, 0.0, MAX_REFERENCE_RAD_S)
+            times.append(check_range(f"reference time[{k}]", t, 0.0, math.inf))
+            values.append(check_range(f"reference_speed_rad_s[{k}]", v, 0.0, MAX_REFERENCE_RAD_S))
+        object.__setattr__(self, "times_s", tuple(times))  # as floats
+        object.__setattr__(self, "values_rad_s", tuple(values))
         if any(b < a for a, b in zip(self.times_s, self.times_s[1:], strict=False)):
-            raise ValueError(f"reference knot times must not decrease, got {self.times_s!r}")
+            raise ValueError(f"reference knot times must not decrease, got {shown(self.times_s)}")
 
     @classmethod
     def constant(cls, speed_rad_s: float) -> SpeedProfile:
         """A constant reference, rad/s."""
-        return cls((0.0,), (float(speed_rad_s),))
+        return cls((0.0,), (speed_rad_s,))  # checked by __post_init__
 
     @classmethod
     def steps(cls, initial_rad_s: float, changes: Sequence[tuple[float, float]]) -> SpeedProfile:
         """Start at ``initial_rad_s`` and jump to ``v`` at each ``(t, v)`` of ``changes``."""
         times: list[float] = [0.0]
-        values: list[float] = [float(initial_rad_s)]
-        for t, v in changes:
-            times += [float(t), float(t)]
-            values += [values[-1], float(v)]
-        return cls(tuple(times), tuple(values))
+        values: list[float] = [initial_rad_s]
+        for t, v in itertools.islice(changes, MAX_KNOTS):  # more are refused by the knot count
+            times += [t, t]
+            values += [values[-1], v]
+        return cls(tuple(times), tuple(values))  # checked by __post_init__
 
     @classmethod
     def ramp(cls, start_rad_s: float, end_rad_s: float, t0_s: float, t1_s: float) -> SpeedProfile:
         """Hold ``start_rad_s`` until ``t0_s``, ramp linearly to ``end_rad_s`` at ``t1_s``."""
-        if not t1_s > t0_s:
-            raise ValueError(f"ramp end time {t1_s!r} must be after its start time {t0_s!r}")
-        return cls((float(t0_s), float(t1_s)), (float(start_rad_s), float(end_rad_s)))
+        t0 = check_range("ramp start time", t0_s, 0.0, math.inf)
+        t1 = check_range("ramp end time", t1_s, 0.0, math.inf)
+        if not t1 > t0:
+            raise ValueError(
+                f"ramp end time {shown(t1_s)} must be after its start time {shown(t0_s)}"
+            )
+        return cls((t0, t1), (start_rad_s, end_rad_s))  # checked by __post_init__
 
     def value(self, t_s: float) -> float:
         """Reference speed at time ``t_s``, rad/s."""
@@ -170,17 +178,18 @@ def resolve_uncertainty(value: str | Sequence[float]) -> tuple[float, float, flo
             return UNCERTAINTY_CONDITIONS[value]
         except KeyError:
             raise ValueError(
-                f"uncertainty = {value!r} is not a known condition: allowed "
+                f"uncertainty = {shown(value)} is not a known condition: allowed "
                 f"{sorted(UNCERTAINTY_CONDITIONS)} or a (Delta1, Delta2, Delta3) tuple"
             ) from None
     try:
-        deltas = tuple(value)
+        deltas = tuple(itertools.islice(value, 4))  # a longer iterable is refused unread
     except TypeError:
         raise TypeError(
-            f"uncertainty must be a condition name or 3 numbers, got {value!r}"
+            f"uncertainty must be a condition name or 3 numbers, got {shown(value)}"
         ) from None
     if len(deltas) != 3:
-        raise ValueError(f"uncertainty must have 3 entries (Delta1..3), got {len(deltas)}")
+        got = "more" if len(deltas) > 3 else len(deltas)
+        raise ValueError(f"uncertainty must have 3 entries (Delta1..3), got {got}")
     d1, d2, d3 = (check_range(f"uncertainty[{k}]", d, -0.9, 10.0) for k, d in enumerate(deltas))
     return (d1, d2, d3)
 
@@ -301,7 +310,9 @@ class FieldRandomization:
         check_interval(
             "reference_range_rad_s", self.reference_range_rad_s, 0.0, MAX_REFERENCE_RAD_S
         )
-        check_interval("measured_depth_range_m", self.measured_depth_range_m, 1.0, 20_000.0)
+        check_interval(
+            "measured_depth_range_m", self.measured_depth_range_m, 1.0, MAX_MEASURED_DEPTH_M
+        )
         check_interval("mu_a_range", self.mu_a_range, 1e-3, 10.0)
         check_interval("mu_0_ratio_range", self.mu_0_ratio_range, 1e-3, 1.0)
         check_interval("xi_range", self.xi_range, 0.0, 100.0)
@@ -406,16 +417,16 @@ class Scenario:
 
     def __post_init__(self) -> None:
         if not isinstance(self.wob, WobProfile):
-            raise TypeError(f"wob must be a WobProfile, got {self.wob!r}")
+            raise TypeError(f"wob must be a WobProfile, got {shown(self.wob)}")
         if not isinstance(self.reference, SpeedProfile):
-            raise TypeError(f"reference must be a SpeedProfile, got {self.reference!r}")
+            raise TypeError(f"reference must be a SpeedProfile, got {shown(self.reference)}")
         object.__setattr__(self, "uncertainty", resolve_uncertainty(self.uncertainty))
         check_choice("uncertainty_reading", self.reading, READINGS, "reading")
         check_range("noise_std_rad_s", self.noise_std_rad_s, 0.0, 10.0)
         if isinstance(self.parameters, DistributedStringParameters):
             if any(self.uncertainty):
                 raise ValueError(
-                    f"uncertainty = {self.uncertainty!r} is out of range for a distributed "
+                    f"uncertainty = {shown(self.uncertainty)} is out of range for a distributed "
                     "string: allowed (0, 0, 0) (the conditions scale the 4-DOF plant)"
                 )
             if self.model is not None and not isinstance(self.model, DistributedStringParameters):

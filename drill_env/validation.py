@@ -3,7 +3,10 @@ the allowed range, so that a message alone tells the user what to change.
 
 Conventions: a value of the wrong type is a ``TypeError``; a value of the right type outside
 its range is a ``ValueError``; unknown names are a ``TypeError`` (keywords) or a ``ValueError``
-(choices) that lists the valid ones.
+(choices) that lists the valid ones. A real number too large for a float (``10**400``) is out of
+range, never an ``OverflowError``; a value is shown in a message by :func:`shown` (bounded, one
+line, no control characters), and any text from outside that reaches a terminal goes through
+:func:`printable`.
 """
 
 from __future__ import annotations
@@ -11,12 +14,14 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
+import unicodedata
 from collections.abc import Collection, Iterable, Sequence
-from typing import Any
+from typing import Any, Final
 
 import numpy as np
 
 __all__ = [
+    "MAX_SHOWN_CHARS",
     "check_bool",
     "check_choice",
     "check_finite_fields",
@@ -25,26 +30,74 @@ __all__ = [
     "check_range",
     "check_real",
     "check_unknown",
+    "printable",
     "require",
+    "shown",
 ]
+
+MAX_SHOWN_CHARS: Final = 80
+"""Longest text :func:`shown` and :func:`printable` put in a message (longer is cut with ...)."""
+
+
+def printable(text: object, limit: int = MAX_SHOWN_CHARS, cell: bool = False) -> str:
+    """``text`` made safe for one line of a terminal, a log or (``cell``) a Markdown table
+    cell: control and format characters (newlines, escape sequences, bidirectional overrides)
+    become ``\\xNN`` or ``\\uNNNN``, in a cell ``|`` (its border) becomes ``\\|``, and more
+    than ``limit`` characters are cut with ``...``."""
+    out: list[str] = []
+    for char in str(text):
+        if cell and char == "|":
+            out.append("\\|")
+        elif char == "\\" or char.isprintable() or char == " ":
+            out.append(char)
+        elif unicodedata.category(char) == "Zs":  # exotic spaces: show as a space
+            out.append(" ")
+        else:
+            code = ord(char)
+            out.append(f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}")
+    line = "".join(out)
+    return line if len(line) <= limit else line[: max(0, limit - 3)] + "..."
+
+
+def shown(value: object, limit: int = MAX_SHOWN_CHARS) -> str:
+    """A bounded one-line ``repr`` of ``value`` for an error message: an integer too long to
+    print is shown by its sign and digit count, any object whose ``repr`` fails or is long is
+    cut, and nothing in it can move the terminal's cursor."""
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10**30:
+        sign = "-" if value < 0 else ""
+        return f"{sign}<an integer of {len(format(abs(value), 'x')) * 4} bits>"
+    try:
+        text = repr(value)
+    except Exception:  # noqa: BLE001 - a hostile __repr__ must not hide the real error
+        text = f"<{type(value).__name__} object>"
+    return printable(text, limit)
 
 
 def _is_real(value: object) -> bool:
     return not isinstance(value, (bool, np.bool_)) and isinstance(value, numbers.Real)
 
 
-def check_real(name: str, value: object) -> float:
-    """``value`` as a float; ``TypeError`` naming ``name`` unless it is a real number."""
+def check_real(name: str, value: object, allowed: str = "a finite real number") -> float:
+    """``value`` as a float; ``TypeError`` naming ``name`` unless it is a real number (bools,
+    complex numbers, strings and arrays are not), ``ValueError`` naming ``allowed`` when it is
+    beyond the float range (an ``int`` such as ``10**400``). NaN and infinities pass: the range
+    checks refuse them."""
     if not _is_real(value):
-        raise TypeError(f"{name} must be a real number, got {value!r} ({type(value).__name__})")
-    return float(value)  # type: ignore[arg-type]
+        raise TypeError(
+            f"{name} must be a real number, got {shown(value)} ({printable(type(value).__name__)})"
+        )
+    try:
+        return float(value)  # type: ignore[arg-type]
+    except (OverflowError, ValueError, TypeError, ArithmeticError):
+        raise ValueError(f"{name} = {shown(value)} is out of range: allowed {allowed}") from None
 
 
 def check_range(name: str, value: object, low: float, high: float) -> float:
     """``value`` as a float if it is a finite real number in ``[low, high]``."""
-    v = check_real(name, value)
+    allowed = f"[{low:g}, {high:g}]"
+    v = check_real(name, value, allowed)
     if not (math.isfinite(v) and low <= v <= high):
-        raise ValueError(f"{name} = {value!r} is out of range: allowed [{low:g}, {high:g}]")
+        raise ValueError(f"{name} = {shown(value)} is out of range: allowed {allowed}")
     return v
 
 
@@ -52,35 +105,37 @@ def check_interval(
     name: str, bounds: Sequence[float], low: float, high: float
 ) -> tuple[float, float]:
     """A ``(lo, hi)`` pair with both ends in ``[low, high]`` and ``lo <= hi``."""
-    if len(bounds) != 2:
-        raise ValueError(f"{name} must be a (low, high) pair, got {bounds!r}")
+    if isinstance(bounds, (str, bytes)) or not isinstance(bounds, Sequence) or len(bounds) != 2:
+        raise ValueError(f"{name} must be a (low, high) pair, got {shown(bounds)}")
     lo = check_range(f"{name}[0]", bounds[0], low, high)
     hi = check_range(f"{name}[1]", bounds[1], low, high)
     if lo > hi:
-        raise ValueError(f"{name} = {tuple(bounds)!r} is inverted: low must be <= high")
+        raise ValueError(f"{name} = {shown(tuple(bounds))} is inverted: low must be <= high")
     return lo, hi
 
 
-def check_int(name: str, value: object, low: int = 1) -> int:
-    """``value`` if it is an integer (not a bool) of at least ``low``."""
+def check_int(name: str, value: object, low: int = 1, high: int | None = None) -> int:
+    """``value`` if it is an integer (not a bool) in ``[low, high]`` (no upper bound when
+    ``high`` is None)."""
+    allowed = f"an integer >= {low}" if high is None else f"an integer in [{low}, {high}]"
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        raise ValueError(f"{name} = {value!r} is out of range: allowed an integer >= {low}")
-    if value < low:
-        raise ValueError(f"{name} = {value!r} is out of range: allowed an integer >= {low}")
+        raise ValueError(f"{name} = {shown(value)} is out of range: allowed {allowed}")
+    if value < low or (high is not None and value > high):
+        raise ValueError(f"{name} = {shown(value)} is out of range: allowed {allowed}")
     return int(value)
 
 
 def check_bool(name: str, value: object) -> bool:
     """``value`` if it is ``True`` or ``False``."""
     if not isinstance(value, bool):
-        raise TypeError(f"{name} must be True or False, got {value!r}")
+        raise TypeError(f"{name} must be True or False, got {shown(value)}")
     return value
 
 
 def require(name: str, value: object, allowed: str, ok: bool) -> None:
     """``ValueError`` ``"{name} = {value!r} is out of range: allowed {allowed}"`` unless ``ok``."""
     if not ok:
-        raise ValueError(f"{name} = {value!r} is out of range: allowed {allowed}")
+        raise ValueError(f"{name} = {shown(value)} is out of range: allowed {allowed}")
 
 
 def check_choice(name: str, value: object, choices: Collection[str], what: str = "") -> str:
@@ -88,7 +143,7 @@ def check_choice(name: str, value: object, choices: Collection[str], what: str =
     if not isinstance(value, str) or value not in choices:
         kind = f" {what}" if what else ""
         raise ValueError(
-            f"{name} = {value!r} is not a known{kind or ' value'}: allowed {sorted(choices)}"
+            f"{name} = {shown(value)} is not a known{kind or ' value'}: allowed {sorted(choices)}"
         )
     return value
 
@@ -98,7 +153,7 @@ def check_unknown(
 ) -> None:
     """``TypeError`` ``"unrecognized {what}(s)[ for {owner}]: ...; valid {what}s: ..."`` for
     names not in ``valid`` (python-control's convention for keyword arguments)."""
-    unknown = sorted(set(given) - set(valid))
+    unknown = sorted((printable(name) for name in set(given) - set(valid)), key=str)
     if unknown:
         scope = f" for {owner}" if owner else ""
         raise TypeError(
@@ -122,6 +177,6 @@ def check_finite_fields(owner: Any, prefix: str = "", coerce: bool = True) -> No
         name = f"{prefix}{field.name}"
         value = check_real(name, getattr(owner, field.name))
         if not math.isfinite(value):
-            raise ValueError(f"{name} must be finite, got {value!r}")
+            raise ValueError(f"{name} must be finite, got {shown(value)}")
         if coerce:
             object.__setattr__(owner, field.name, value)

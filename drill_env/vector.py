@@ -26,8 +26,11 @@ from drill_env.layout import (
     STATUS_OK,
     STATUS_PAUSED,
 )
+from drill_env.limits import MAX_EPISODE_S, MAX_NUM_ENVS
 from drill_env.options import EnvConfig, FieldEnvConfig
+from drill_env.parameters import PLANT_DT_S
 from drill_env.rewards import TERMS, reward_terms, total_reward
+from drill_env.validation import check_int, shown
 
 __all__ = ["DrillStringFieldVectorEnv", "DrillStringVectorEnv"]
 
@@ -44,17 +47,12 @@ class DrillStringVectorEnv(VectorEnv):
     def __init__(
         self, num_envs: int = 1, max_episode_steps: int | None = None, **kwargs: Any
     ) -> None:
-        if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
-            raise ValueError(f"num_envs = {num_envs!r} is out of range: allowed an integer >= 1")
+        num_envs = check_int("num_envs", num_envs, 1, MAX_NUM_ENVS)
         self.config = self.config_type.from_kwargs(kwargs)
-        if max_episode_steps is not None and (
-            isinstance(max_episode_steps, bool)
-            or not isinstance(max_episode_steps, int)
-            or max_episode_steps < 1
-        ):
-            raise ValueError(
-                f"max_episode_steps = {max_episode_steps!r} is out of range: allowed an integer >= 1"
-            )
+        if max_episode_steps is not None:
+            # An episode has at most MAX_EPISODE_S / plant step decisions: a longer limit is moot.
+            most = round(MAX_EPISODE_S / PLANT_DT_S)
+            max_episode_steps = check_int("max_episode_steps", max_episode_steps, 1, most)
         # Like gym.make's TimeLimit on the single env: an episode also ends after this many steps.
         self.max_episode_steps = max_episode_steps
         self.num_envs = num_envs
@@ -102,12 +100,20 @@ class DrillStringVectorEnv(VectorEnv):
                 raise ValueError("the first reset must reset every string (reset_mask all True)")
         if seed is None:
             seeds: list[int | None] = [None] * self.num_envs
-        elif isinstance(seed, int):
+        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            seed = check_int("seed", seed, 0)
             seeds = [seed + i for i in range(self.num_envs)]
         else:
-            seeds = list(seed)
-            if len(seeds) != self.num_envs:
-                raise ValueError(f"seed list must have {self.num_envs} entries, got {len(seeds)}")
+            if not isinstance(seed, (list, tuple)):
+                raise TypeError(
+                    f"seed must be None, an integer >= 0 or a list of {self.num_envs} of them, "
+                    f"got {shown(seed)}"
+                )
+            if len(seed) != self.num_envs:
+                raise ValueError(f"seed list must have {self.num_envs} entries, got {len(seed)}")
+            seeds = [
+                None if s is None else check_int(f"seed[{i}]", s, 0) for i, s in enumerate(seed)
+            ]
         if seed is not None:
             self._np_random, self._np_random_seed = gym.utils.seeding.np_random(
                 seed if isinstance(seed, int) else None
@@ -168,7 +174,9 @@ class DrillStringVectorEnv(VectorEnv):
         infos = self._infos(terms)
         infos["action_clipped"] = clipped
         infos["_action_clipped"] = np.ones(self.num_envs, dtype=bool)
-        infos["termination_reason"] = np.where(terminated, "diverged", "")
+        infos["termination_reason"] = np.array(
+            [b.end_reason(i) if ended else "" for i, ended in enumerate(terminated.tolist())]
+        )
         infos["_termination_reason"] = terminated
         return b.observations(), rewards, terminated, truncated, infos
 

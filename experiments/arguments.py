@@ -16,6 +16,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Final, NoReturn
 
+from drill_env.validation import printable, shown
+
 __all__ = [
     "BASE_SEED_HIGH",
     "SEED_HIGH",
@@ -41,9 +43,15 @@ BASE_SEED_HIGH: Final = 2**31 - 1
 reset with ``seed + i``), so that every derived seed stays within :data:`SEED_HIGH`."""
 
 
+MAX_MESSAGE_CHARS: Final = 1000
+"""Longest error message printed (longer is cut with ...)."""
+
+
 def one_line(text: str) -> str:
-    """``text`` with every run of white space (newlines included) replaced by one space."""
-    return " ".join(str(text).split())
+    """``text`` with every run of white space (newlines included) replaced by one space, and
+    every other control character (escape sequences) shown escaped
+    (:func:`drill_env.validation.printable`)."""
+    return printable(" ".join(str(text).split()), MAX_MESSAGE_CHARS)
 
 
 def error_line(prog: str, message: str) -> str:
@@ -133,14 +141,20 @@ def number_type(
         try:
             value: float = int(text) if integer else float(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not {kind}") from None
+            if integer and text.strip().lstrip("+-").isdigit():  # too many digits to convert
+                raise argparse.ArgumentTypeError(
+                    f"{shown(text)} is out of range: allowed {allowed}"
+                ) from None
+            raise argparse.ArgumentTypeError(f"{shown(text)} is not {kind}") from None
         ok = math.isfinite(value)
         if ok and low is not None:
             ok = value > low if open_low else value >= low
         if ok and high is not None:
             ok = value <= high
         if not ok:
-            raise argparse.ArgumentTypeError(f"{text} is out of range: allowed {allowed}")
+            raise argparse.ArgumentTypeError(
+                f"{printable(text)} is out of range: allowed {allowed}"
+            )
         return value
 
     parse.__name__ = "integer" if integer else "number"
@@ -166,7 +180,9 @@ def names_type(valid: Callable[[], Sequence[str]], what: str) -> Callable[[str],
     def parse(text: str) -> str:
         names = list(valid())
         if text not in names:
-            raise argparse.ArgumentTypeError(f"unknown {what} {text!r}: allowed {', '.join(names)}")
+            raise argparse.ArgumentTypeError(
+                f"unknown {what} {shown(text)}: allowed {', '.join(names)}"
+            )
         return text
 
     parse.__name__ = what
@@ -239,7 +255,9 @@ def run_command(prog: str, main: Callable[[], int], debug: bool) -> int:
             file=sys.stderr,
         )
         return USAGE_ERROR
-    except (ValueError, OSError) as exc:
+    except (ValueError, OSError, OverflowError, RecursionError) as exc:
+        # OverflowError and RecursionError: a number or a nesting from outside too large for
+        # a check that should have refused it first; still one line, never a traceback.
         if debug:
             raise
         print(error_line(prog, str(exc)), file=sys.stderr)

@@ -15,6 +15,7 @@ import os
 import sys
 from collections.abc import Sequence
 
+from drill_env.validation import shown
 from experiments.arguments import USAGE_ERROR, run_command
 
 __all__ = ["DEBUG_VARIABLE", "SUBCOMMANDS", "main"]
@@ -113,7 +114,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if name not in SUBCOMMANDS:
         kind = "option" if name.startswith("-") else "command"
         print(
-            f"drill-gym: error: unknown {kind} {name!r}: allowed commands "
+            f"drill-gym: error: unknown {kind} {shown(name)}: allowed commands "
             f"{', '.join(SUBCOMMANDS)} (see drill-gym --help)",
             file=sys.stderr,
         )

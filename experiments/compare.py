@@ -51,6 +51,7 @@ from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, 
 from experiments.arguments import (
     ArgumentParser,
     number_type,
+    one_line,
     output_folder,
     seed_option,
 )
@@ -73,6 +74,7 @@ from experiments.field import (
     run_label,
     run_on,
 )
+from experiments.paths import output_file
 from experiments.sweep import COMPARE_TASK_RUNS, add_sweep_options, sweep_requested
 from experiments.tables import Column, write_csv, write_json
 from experiments.tables import markdown_table as _markdown
@@ -748,7 +750,7 @@ def write_figures(
 
     folder.mkdir(parents=True, exist_ok=True)
     return [
-        save_figure(fig, folder / name)
+        save_figure(fig, output_file(folder, name))
         for name, fig in comparison_figures(rows, runs, cases, focus)
     ]
 
@@ -777,10 +779,13 @@ def load_agent(loader: Callable[[], Any] | None = None, env_id: str = PAPER_ENV)
     try:
         policy = shipped_agent(env_id) if loader is None else loader()
     except ImportError as exc:
-        print(f"compare: no agent row ({exc})", file=sys.stderr)
+        print(f"compare: no agent row ({one_line(str(exc))})", file=sys.stderr)
         return None
     except Exception as exc:  # a broken model must not stop the baseline comparison
-        print(f"compare: the shipped agent failed to load, skipped: {exc!r}", file=sys.stderr)
+        print(
+            f"compare: the shipped agent failed to load, skipped: {one_line(repr(exc))}",
+            file=sys.stderr,
+        )
         return None
     return policy
 

@@ -51,6 +51,7 @@ from agents.policy import (
 from drill_env.control import controller_names
 from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
+from drill_env.validation import printable
 from experiments.arguments import ArgumentParser, check_output_folder, names_type, output_folder
 from experiments.controllers import CONTROLLERS_HELP, controller_type, refuse_on_ray
 from experiments.field import (
@@ -72,6 +73,7 @@ from experiments.heldout import (
     HeldOutScenario,
     held_out_set,
 )
+from experiments.paths import output_file
 from experiments.sweep import EVALUATE_TASK_SCENARIOS, add_sweep_options, sweep_requested
 from experiments.tables import write_csv, write_json
 
@@ -556,7 +558,10 @@ def write_figures(
     """Write :func:`heldout_figures` as PNG files into ``out``; returns their paths."""
     from experiments.plots import save_figure
 
-    return [save_figure(fig, out / name) for name, fig in heldout_figures(rows, traces, labels)]
+    return [
+        save_figure(fig, output_file(out, name))
+        for name, fig in heldout_figures(rows, traces, labels)
+    ]
 
 
 def shipped_models() -> list[Path]:
@@ -701,8 +706,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             if args.models:
                 parser.error(f"MODEL {path} is for {agent.env_id}, not for {args.env}")
             print(
-                f"evaluate: {path.name} is for {agent.env_id}, left out (drill-gym evaluate "
-                f"--env {agent.env_id} scores it)",
+                f"evaluate: {printable(path.name)} is for {printable(agent.env_id)}, left out "
+                f"(drill-gym evaluate --env {printable(agent.env_id)} scores it)",
                 file=sys.stderr,
             )
     paths = [p for a, p in zip(agents, paths, strict=True) if a.env_id == args.env]

@@ -40,6 +40,7 @@ from matplotlib.patches import Patch
 from matplotlib.text import Text
 
 from drill_env.evaluation import Trace
+from drill_env.validation import printable
 
 if TYPE_CHECKING:  # pragma: no cover
     from experiments.probability_map import ProbabilityMap
@@ -314,10 +315,25 @@ def _suptitle(fig: Figure, text: str) -> None:
         fig.suptitle(_wrap(text, fig.get_figwidth() - 0.3))
 
 
+def _plain_texts(fig: Figure) -> None:
+    """Draw names from outside as they are written: a ``$`` in a controller's or a model's
+    name does not start mathtext (which could fail to parse), and control characters other
+    than newlines are shown escaped. Only the labels of :data:`METRIC_LABELS` use mathtext."""
+    ours = set(METRIC_LABELS.values())
+    for artist in fig.findobj(Text):
+        text = artist.get_text()
+        if "$" in text and text not in ours:
+            artist.set_parse_math(False)
+        if not all(c.isprintable() or c == "\n" for c in text):
+            lines = (printable(line, len(line) * 6 + 3) for line in text.split("\n"))
+            artist.set_text("\n".join(lines))
+
+
 def save_figure(fig: Figure, path: str | Path) -> Path:
     """Write ``fig`` as PNG to ``path`` (its folder is created); returns the path."""
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
+    _plain_texts(fig)
     fig.savefig(out, dpi=DPI)
     return out
 

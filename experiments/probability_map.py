@@ -62,6 +62,7 @@ from drill_env.limits import MAX_REFERENCE_RAD_S, MAX_WOB_N
 from drill_env.metrics import WindowStatistics
 from drill_env.parameters import PLANT_DT_S, PRESETS
 from drill_env.scenarios import FieldRandomization, Randomization
+from drill_env.validation import printable
 from experiments.arguments import (
     ArgumentParser,
     names_type,
@@ -69,6 +70,7 @@ from experiments.arguments import (
     output_folder,
     seed_option,
 )
+from experiments.paths import output_path
 from experiments.results_db import Fields, Number, Schema, Values
 from experiments.stick_slip_map import DEFAULT_WINDOW_S, grid_values, stick_slip
 from experiments.sweep import (
@@ -761,13 +763,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         + (f"; results in {path}" if path else "")
     )
     for result in study.maps(outcome):
-        name = result.controller
-        written = [write_probability_csv(result, args.out / f"stick_slip_probability_{name}.csv")]
+        name = printable(result.controller)
+        stem = f"stick_slip_probability_{result.controller}"
+        csv_path = output_path(args.out, stem, suffix=".csv")
+        written = [write_probability_csv(result, csv_path)]
         if not args.no_plots:
             from experiments.plots import probability_figure, save_figure
 
             figure = probability_figure(result)
-            written.append(save_figure(figure, args.out / f"stick_slip_probability_{name}.png"))
+            written.append(save_figure(figure, output_path(args.out, stem, suffix=".png")))
         p = result.probability
         print(
             f"{name}: probability of stick-slip {p.min():.2f} to {p.max():.2f} over "

@@ -72,6 +72,7 @@ from experiments.arguments import (
 )
 from experiments.evaluate import FIELD_HELD_OUT, HELD_OUT, HeldOutScenario
 from experiments.field import ENV_IDS, FIELD_ENV, PAPER_ENV, run_on
+from experiments.paths import output_file
 from experiments.results_db import Fields, Flag, Number, Schema
 from experiments.sweep import (
     Task,
@@ -1079,7 +1080,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         from experiments.plots import save_figure
 
         written += [
-            save_figure(fig, out / "figures" / name) for name, fig in realism_figures(means, breaks)
+            save_figure(fig, output_file(out / "figures", name))
+            for name, fig in realism_figures(means, breaks)
         ]
     for env_id in envs:
         prone = ", ".join(s for s in scenarios[env_id] if s in PRONE[env_id]) or "none"

@@ -51,6 +51,7 @@ from drill_env.metrics import WindowStatistics
 from drill_env.options import REALISM_LEVELS, realism_keywords
 from drill_env.parameters import PLANT_DT_S, PRESETS
 from drill_env.scenarios import RPM
+from drill_env.validation import printable
 from experiments.arguments import (
     ArgumentParser,
     number_type,
@@ -66,6 +67,7 @@ from experiments.field import (
     is_field,
     observations_of,
 )
+from experiments.paths import output_path
 from experiments.plots import map_figure, maps_figure, save_figure
 from experiments.sweep import MAP_TASK_CELLS, add_sweep_options, sweep_requested
 from experiments.tables import write_csv
@@ -825,12 +827,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     results: dict[float | None, list[StickSlipMap]] = {}
     for result, depth in computed:
         stem = result.file_stem()
-        written = [write_map_csv(result, args.out / f"{stem}.csv")]
+        written = [write_map_csv(result, output_path(args.out, stem, suffix=".csv"))]
         if not args.no_plots:
-            written.append(save_figure(map_figure(result), args.out / f"{stem}.png"))
+            figure = map_figure(result)
+            written.append(save_figure(figure, output_path(args.out, stem, suffix=".png")))
         simulated = result.cells * result.duration_s
         print(
-            f"{result.label}{'' if depth is None else f' at {depth:g} m'}: {result.cells} cells "
+            f"{printable(result.label)}{'' if depth is None else f' at {depth:g} m'}: "
+            f"{result.cells} cells "
             f"x {result.duration_s:g} s in {result.wall_time_s:.1f} s "
             f"({simulated / result.wall_time_s:,.0f} simulated s per wall s); "
             f"{int(result.unstable().sum())} cells in stick-slip; wrote "
@@ -840,8 +844,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     for depth, maps in results.items():
         if len(maps) > 1 and not args.no_plots:
             name = "stick_slip_maps" + ("" if depth is None else f"_{depth:g}m")
-            name += ("" if level is None else f"_{level}") + ".png"
-            print(f"wrote {save_figure(maps_figure(maps), args.out / name)}")
+            name += "" if level is None else f"_{level}"
+            path = output_path(args.out, name, suffix=".png")
+            print(f"wrote {save_figure(maps_figure(maps), path)}")
     return 0
 
 

@@ -57,6 +57,7 @@ from experiments.arguments import (
     output_folder,
     seed_type,
 )
+from experiments.paths import output_path
 from experiments.sweep import ADDRESS_VARIABLE, Backend, ray_session
 from experiments.tables import Column, markdown_table, write_csv, write_json
 
@@ -348,7 +349,7 @@ def train_trial(config: dict[str, Any]) -> None:
     seed = int(config["seed"] if "seed" in config else settings.pop("seed"))
     settings.pop("seed", None)
     trial = tune.get_context().get_trial_id()
-    run_dir = Path(config["runs_dir"]) / f"{trial}__seed{seed}"
+    run_dir = output_path(config["runs_dir"], f"{trial}__seed{seed}")
     train_config = TrainConfig.for_env(
         config.get("env_id", "DrillString-v0"),
         **{**settings, **chosen, "seed": seed, "run_dir": str(run_dir)},

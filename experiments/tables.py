@@ -2,7 +2,9 @@
 
 A row is a mapping of column keys to values; ``None`` (and a non-finite float in JSON) means
 "no value". Every study (``compare``, ``map``, ``evaluate``) writes its tables through these
-functions, so their files read alike.
+functions, so their files read alike. Names in the rows may come from files (a model's name, a
+controller's): a Markdown cell shows them through :func:`drill_env.validation.printable`, so a
+newline, a ``|`` or an escape sequence can neither break the table nor reach the terminal raw.
 """
 
 from __future__ import annotations
@@ -12,9 +14,14 @@ import json
 import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, Final, NamedTuple
 
-__all__ = ["Column", "json_clean", "markdown_table", "write_csv", "write_json"]
+from drill_env.validation import printable
+
+__all__ = ["MAX_CELL_CHARS", "Column", "json_clean", "markdown_table", "write_csv", "write_json"]
+
+MAX_CELL_CHARS: Final = 200
+"""Longest text of a Markdown cell (longer is cut with ...)."""
 
 
 class Column(NamedTuple):
@@ -52,7 +59,7 @@ def markdown_table(
             if text is None:
                 value = row.get(column.key)
                 text = column.missing if value is None else column.fmt.format(value)
-            cells.append(text)
+            cells.append(printable(text, MAX_CELL_CHARS, cell=True))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

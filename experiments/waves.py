@@ -75,6 +75,7 @@ from experiments.field import (
     observations_of,
     run_label,
 )
+from experiments.paths import output_file
 from experiments.tables import Column, markdown_table, write_json
 
 __all__ = [
@@ -758,7 +759,8 @@ def write_figures(
     ]
     for r in runs:
         fig = space_time_figure(r.history.window(duration_s - SPACE_TIME_S), f"{r.label}, {title}")
-        paths.append(save_figure(fig, folder / f"field_space_time_{file_label(r.label)}.png"))
+        name = f"field_space_time_{file_label(r.label)}.png"
+        paths.append(save_figure(fig, output_file(folder, name)))
     return paths
 
 

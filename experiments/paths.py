@@ -1,0 +1,98 @@
+"""Safe output paths: every name that becomes part of a written file's path goes through here.
+
+Names come from the command line and from files (a model's ``name``, a controller, a preset, a
+level of realism, a duration read from results); none of them is trusted. :func:`safe_file_name`
+reduces a name to one harmless path component, and :func:`output_path` joins such components
+under a command's output folder and refuses any path that would leave it (through a symbolic
+link, say). The studies build every path they write with :func:`output_path`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+import unicodedata
+from pathlib import Path
+from typing import Final
+
+__all__ = ["MAX_NAME_CHARS", "output_file", "output_path", "safe_file_name"]
+
+MAX_NAME_CHARS: Final = 120
+"""Longest file name :func:`safe_file_name` returns (file systems allow 255 bytes)."""
+
+_KEEP: Final = re.compile(r"[^A-Za-z0-9._+=-]+")
+_DOTS: Final = re.compile(r"\.{2,}")
+_RESERVED: Final = frozenset(
+    ["con", "prn", "aux", "nul", "conin$", "conout$"]
+    + [f"{device}{i}" for device in ("com", "lpt") for i in range(10)]
+)
+"""Device names Windows reserves, with any extension (``CON``, ``nul.txt``, ``COM1``)."""
+
+
+def _digest(name: str) -> str:
+    return hashlib.sha256(name.encode("utf-8", "surrogatepass")).hexdigest()[:8]
+
+
+def safe_file_name(name: object, max_chars: int = MAX_NAME_CHARS) -> str:
+    """``name`` as one safe path component (a file name or a part of one).
+
+    Letters, digits and ``. _ + = -`` are kept (accented letters lose their accents), every
+    other run of characters (separators ``/`` and ``\\``, spaces, control characters, escape
+    sequences, and runs of dots) becomes ``_``; leading dots, dashes and underscores go (no hidden files, no
+    ``..``, nothing that reads as an option). Reserved device names get a leading ``_``. When
+    anything was changed, or the result is longer than ``max_chars``, 8 hexadecimal digits of
+    the original's SHA-256 are appended, so different names never map to one file
+    (``a/b`` -> ``a_b-<digest>``, while ``a_b`` stays ``a_b``). The result is never empty and
+    never longer than ``max_chars``.
+    """
+    text = str(name)
+    ascii_text = unicodedata.normalize("NFKD", text).encode("ascii", "ignore").decode("ascii")
+    clean = _KEEP.sub("_", _DOTS.sub("_", ascii_text)).lstrip("._-")
+    if clean.split(".")[0].lower() in _RESERVED:
+        clean = "_" + clean
+    if clean == text and 0 < len(clean) <= max_chars:
+        return clean
+    tag = _digest(text)
+    room = max(1, max_chars - len(tag) - 1)
+    stem = clean[:room].rstrip("._-") or "unnamed"
+    return f"{stem}-{tag}"
+
+
+def output_path(out: Path | str, *parts: object, suffix: str = "") -> Path:
+    """``out / part / ... / part`` with every part reduced by :func:`safe_file_name` and
+    ``suffix`` (``".csv"``) appended to the last; the result is checked to lie inside ``out``
+    once symbolic links are resolved.
+
+    Raises:
+        ValueError: naming the path when it would leave ``out`` (a link inside ``out`` that
+            points elsewhere).
+    """
+    if not parts:
+        raise ValueError("output_path needs at least one name under the output folder")
+    if suffix and not re.fullmatch(r"\.[A-Za-z0-9]{1,8}", suffix):
+        raise ValueError(f"suffix = {suffix!r} is not a file extension")
+    base = Path(out)
+    names = [safe_file_name(p) for p in parts]
+    last = names[-1]
+    room = MAX_NAME_CHARS - len(suffix)
+    if len(last) > room:
+        last = safe_file_name(parts[-1], room)
+    names[-1] = last + suffix
+    path = base.joinpath(*names)
+    root = base.resolve()
+    resolved = path.resolve()
+    if resolved != root and root not in resolved.parents:
+        raise ValueError(
+            f"refusing to write {str(path)!r}: it resolves to {str(resolved)!r}, outside the "
+            f"output folder {str(root)!r}"
+        )
+    return path
+
+
+def output_file(out: Path | str, file_name: str) -> Path:
+    """:func:`output_path` of a file name with its extension (``"speed_torque_csmc.png"``):
+    the stem is reduced by :func:`safe_file_name`, a short alphanumeric extension is kept."""
+    stem, dot, extension = str(file_name).rpartition(".")
+    if dot and stem and re.fullmatch(r"[A-Za-z0-9]{1,8}", extension):
+        return output_path(out, stem, suffix=f".{extension}")
+    return output_path(out, file_name)
