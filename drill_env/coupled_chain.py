@@ -36,18 +36,20 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
-from numba import njit
+from numba import njit, prange
 
+from drill_env.chain import CP_N, chain_probe_state, chain_surface_torque
 from drill_env.coupled import (
     _AIR,
     _DOWN,
     _HOLD,
     _N_P,
     _P_BLADE,
+    _P_SPACING,
     _RING_SPAN,
     _SPACING_FRACTION,
     _STUCK,
@@ -58,7 +60,6 @@ from drill_env.coupled import (
     SteadyState,
     _from_rest,
     _kernel_parameters,
-    _record,
     _resolve,
     _surface,
     bit_load,
@@ -67,6 +68,9 @@ from drill_env.coupled import (
     switch_rule,
     switching_functions,
 )
+from drill_env.coupled import (
+    _record as _record_surface,
+)
 from drill_env.distributed import (
     Chain,
     DistributedStringParameters,
@@ -74,6 +78,50 @@ from drill_env.distributed import (
     resolve_distributed_parameters,
     section_element_counts,
 )
+from drill_env.friction import STUCK
+from drill_env.kernel import (
+    _base_torque,
+    _check_noise_room,
+    _command_and_torque,
+    _finish,
+    _record,
+    _sense,
+    _slot,
+    _sums,
+)
+from drill_env.layout import (
+    CH_ACTUATOR,
+    CH_HOLD,
+    CH_TELEMETRY,
+    F_BASE_TORQUE,
+    F_COMMAND,
+    F_LAST_COMMAND,
+    F_LAST_TORQUE,
+    F_NOISE_STD,
+    F_TELEMETRY_NOISE_STD,
+    F_TORQUE_NOISE_STD,
+    I_MODE,
+    I_NOISE_POS,
+    I_REF_KNOTS,
+    I_STATUS,
+    I_STEP,
+    I_WOB_KNOTS,
+    N_CHANNEL,
+    N_RECORD,
+    PROF_REF_T,
+    PROF_REF_V,
+    PROF_WOB_T,
+    PROF_WOB_V,
+    REP_BASE_TORQUE,
+    REP_WOB,
+    SRC_STATE,
+    STATUS_DIVERGED,
+    STATUS_OK,
+    X_BIT_SPEED,
+)
+from drill_env.limits import MAX_SPEED_RAD_S, MAX_TWIST_RAD
+from drill_env.rewards import tracking_error
+from drill_env.scenarios import profile_value
 from drill_env.validation import check_choice, check_range, check_real, require
 
 __all__ = [
@@ -591,7 +639,7 @@ def coupled_chain_step(
                         break
             for i in range(size):
                 y[i] = trial[i]
-            _record(y[4 * n], y[4 * n - 1], q, ring_phi, ring_r, ring)
+            _record_surface(y[4 * n], y[4 * n - 1], q, ring_phi, ring_r, ring)
             if late >= 0:
                 regime, loss = _switch(regime, late, y, q, ring_phi, ring_r, ring)
                 acc[_A_LOSS] += loss
@@ -601,7 +649,7 @@ def coupled_chain_step(
         for i in range(size):
             y[i] = trial[i]
         t = h if when >= dt else t + when
-        _record(y[4 * n], y[4 * n - 1], q, ring_phi, ring_r, ring)
+        _record_surface(y[4 * n], y[4 * n - 1], q, ring_phi, ring_r, ring)
         regime, loss = _switch(regime, first, y, q, ring_phi, ring_r, ring)
         acc[_A_LOSS] += loss
         acc[_A_SWITCHES] += 1
@@ -946,3 +994,379 @@ def simulate_field(
         step_s=h,
         diverged=done < n_steps + 1,
     )
+
+
+# ---------------------------------------------------------------------------------------------
+# The closed loop of DrillStringField-v0 with bit="rgd"
+# ---------------------------------------------------------------------------------------------
+
+ENV_STEP_S: Final = 1e-4
+"""Integration step of the coupled string in the env: each plant step of ``PLANT_DT_S`` is
+taken in equal steps of this length with the torque and applied force held."""
+ENV_SPACING_FRACTION: Final = 1e-4
+"""The env stores the rock surface at most every ``1e-4`` blade angles (a smaller ring)."""
+ENV_RING_CAPACITY: Final = math.ceil(_RING_SPAN / ENV_SPACING_FRACTION) + 16
+"""Samples of the rock surface each string of the env keeps."""
+
+# Columns of the per-string outputs of the coupled loop.
+OUT_WOB, OUT_TOB, OUT_ROP, OUT_DEPTH, OUT_OFF_BOTTOM, OUT_WOB_MEAN = range(6)
+N_OUT: Final = 6
+
+
+class CoupledArrays(NamedTuple):
+    """The per-string arrays of the coupled strings of a batch (N strings), beside
+    :class:`drill_env.kernel.BatchArrays` (whose ``x`` holds the torsional part of ``y``).
+
+    Attributes:
+        y: Coupled states, (N, state_size(n_max)) (layout in the module docstring).
+        q: Parameter vectors (:func:`parameter_vector`), (N, length for n_max).
+        regime: Bit regimes (``drill_env.coupled.REGIME_NAMES``), (N,) int64.
+        ring_phi, ring_r: Rock-surface rings (angles, rad; depths, m), (N, ENV_RING_CAPACITY).
+        ring: Ring indices (first, last, cursor), (N, 3) int64.
+        work: Scratch, (N, 9, max(state size, 8)).
+        acc: Switch statistics (:func:`coupled_chain_step`), (N, 3).
+        out: Per-call outputs (``OUT_*``): weight and torque on bit at the end (N, N m), rate of
+            penetration over the call (m/s), bit depth (m), 1.0 when off the rock at the end,
+            mean weight on bit over the call (N); (N, N_OUT).
+        sources: Entries of the observation's source vector this loop fills (weight on bit,
+            rate of penetration), (2,) int64.
+    """
+
+    y: npt.NDArray[np.float64]
+    q: npt.NDArray[np.float64]
+    regime: npt.NDArray[np.int64]
+    ring_phi: npt.NDArray[np.float64]
+    ring_r: npt.NDArray[np.float64]
+    ring: npt.NDArray[np.int64]
+    work: npt.NDArray[np.float64]
+    acc: npt.NDArray[np.float64]
+    out: npt.NDArray[np.float64]
+    sources: npt.NDArray[np.int64]
+
+
+@njit(cache=True)
+def _coupled_plant_step(
+    y: np.ndarray, saved: np.ndarray, regime: int, u: float, force: float, dt: float,
+    q: np.ndarray, ring_phi: np.ndarray, ring_r: np.ndarray, ring: np.ndarray, work: np.ndarray,
+    acc: np.ndarray,
+) -> tuple[int, bool, float]:  # fmt: skip
+    """One plant step of ``dt`` (s) of the coupled string under the top-drive torque ``u``
+    (N m) and applied force ``force`` (N), in steps of at most ``ENV_STEP_S``. Returns the new
+    regime, whether the step was accepted (finite and within the speed and twist bounds; else
+    ``y`` is restored) and the time integral of the weight on bit (N s)."""
+    n = int(q[_Q_N])
+    size = y.shape[0]
+    for i in range(size):
+        saved[i] = y[i]
+    q[_Q_TOP_TORQUE] = u
+    q[_Q_FORCE] = force
+    count = max(1, int(math.ceil(dt / ENV_STEP_S - 1e-9)))
+    h = dt / count
+    new = regime
+    wob_integral = 0.0
+    for _ in range(count):
+        new = coupled_chain_step(y, new, h, q, ring_phi, ring_r, ring, work, acc)
+        dn, f_ax, ts, w, tq = _bit_forces(new, y, q, ring_phi, ring_r, ring, y[4 * n - 3])
+        wob_integral += w * h
+    ok = True
+    for i in range(2 * n - 1):
+        limit = MAX_SPEED_RAD_S if i % 2 == 0 else MAX_TWIST_RAD
+        if not abs(y[i]) <= limit:
+            ok = False
+    for i in range(2 * n - 1, size):
+        if not math.isfinite(y[i]):
+            ok = False
+    if not ok:
+        for i in range(size):
+            y[i] = saved[i]
+        return regime, False, 0.0
+    return new, True, wob_integral
+
+
+@njit(cache=True)
+def _advance_coupled_one(i, b, s, c):
+    """One coupled string of the field env: :func:`drill_env.kernel._advance_chain_one` with
+    the coupled plant step (the bit's regime in ``c.regime``; the kernel's slip mode reads
+    stuck while the bit does not rotate)."""
+    p = b.plant[i]
+    xs = b.x[i]
+    probes = b.probes[i]
+    n = int(p[CP_N])
+    size = 2 * n - 1
+    y = c.y[i]
+    q = c.q[i]
+    work = c.work[i]
+    saved = work[8]
+    ints = b.ints[i]
+    f = b.scalars[i]
+    ch = b.channel[i]
+    prof = b.profiles[i]
+    regime = c.regime[i]
+    mi = STUCK if regime >= _STUCK else 1
+    lp = b.law_params[i]
+    ls = b.law_state[i]
+    rep = b.report[i]
+    rec = b.records[i]
+    meas = b.measurement[i]
+    hold = ch[CH_HOLD:CH_TELEMETRY]
+    tel = ch[CH_TELEMETRY:CH_ACTUATOR]
+    tel_buf = b.telemetry_buffer[i]
+    act = ch[CH_ACTUATOR:N_CHANNEL]
+    line = b.delay_line[i]
+    noise = b.noise[i]
+    sensor = b.sensor_noise[i]
+    wob_t, wob_v, wob_n = prof[PROF_WOB_T], prof[PROF_WOB_V], ints[I_WOB_KNOTS]
+    ref_t, ref_v, ref_n = prof[PROF_REF_T], prof[PROF_REF_V], ints[I_REF_KNOTS]
+    std, torque_std, tel_std = f[F_NOISE_STD], f[F_TORQUE_NOISE_STD], f[F_TELEMETRY_NOISE_STD]
+    command = f[F_COMMAND]
+    external = f[F_BASE_TORQUE]
+    k = ints[I_STEP]
+    row = ints[I_NOISE_POS]
+    active = ints[I_STATUS] == STATUS_OK
+    ok = active
+    u_prev = f[F_LAST_TORQUE]
+    u_base_last = rep[REP_BASE_TORQUE]
+    command_last = f[F_LAST_COMMAND]
+    wob = rep[REP_WOB]
+    tracking = 0.0
+    variation = 0.0
+    torque_squared = 0.0
+    residual_squared = 0.0
+    stuck = 0.0
+    n_done = 0
+    depth_start = y[4 * n - 1]
+    wob_integral = 0.0
+    for j in range(s.n_sub):
+        if not ok:
+            for col in range(N_RECORD):
+                rec[j, col] = math.nan
+            continue
+        t = k * s.dt
+        wob = profile_value(wob_t, wob_v, wob_n, t)
+        ref = profile_value(ref_t, ref_v, ref_n, t)
+        xi = chain_probe_state(xs, probes)
+        surface = chain_surface_torque(xs, p)
+        _sense(meas, hold, tel, tel_buf, s, k, xi, surface, std, torque_std, tel_std, u_prev,
+               noise, sensor, row + j)  # fmt: skip
+        gain = _slot(ls, s.gain_slot)
+        u_base = _base_torque(s, lp, ls, meas, external, ref)
+        u_command, u = _command_and_torque(s, act, line, u_base, command)
+        _record(rec, j, xi, mi, u, u_command, ref, u_base, wob, _slot(ls, s.error_slot), gain,
+                surface)  # fmt: skip
+        tracking += tracking_error(ref, xi[X_BIT_SPEED])
+        variation += abs(u - u_prev)
+        torque_squared += u * u
+        residual_squared += (u - u_base) * (u - u_base)
+        u_prev = u
+        u_base_last = u_base
+        command_last = u_command
+        if mi == STUCK:
+            stuck += 1.0
+        n_done += 1
+        accepted = False
+        if math.isfinite(u):
+            regime, accepted, w_int = _coupled_plant_step(
+                y, saved, regime, u, wob, s.dt, q, c.ring_phi[i], c.ring_r[i], c.ring[i], work,
+                c.acc[i],
+            )  # fmt: skip
+        if accepted:
+            wob_integral += w_int
+            k += 1
+            mi = STUCK if regime >= _STUCK else 1
+            for col in range(size):
+                xs[col] = y[col]
+        else:
+            ok = False
+            ints[I_STATUS] = STATUS_DIVERGED
+    _sums(rep, tracking, variation, stuck, n_done, torque_squared, residual_squared)
+    if not active:
+        return
+    c.regime[i] = regime
+    ints[I_MODE] = mi
+    ints[I_STEP] = k
+    f[F_LAST_TORQUE] = u_prev
+    f[F_LAST_COMMAND] = command_last
+    row += s.n_sub
+    ints[I_NOISE_POS] = row
+    xi = chain_probe_state(xs, probes)
+    _sense(meas, hold, tel, tel_buf, s, k, xi, chain_surface_torque(xs, p), std, torque_std,
+           tel_std, u_prev, noise, sensor, row)  # fmt: skip
+    src = b.sources[i]
+    node_noise = b.node_noise[i]
+    for col in range(size):  # the measured state of every node
+        src[SRC_STATE + col] = xs[col] + std * node_noise[col // 2] if col % 2 == 0 else xs[col]
+    coupled_outputs(i, c, n_done * s.dt, depth_start, wob_integral)
+    src[c.sources[0]] = c.out[i, OUT_WOB]
+    src[c.sources[1]] = c.out[i, OUT_ROP]
+    _finish(i, b, s, xi, mi, k, wob, u_base_last, command_last)
+
+
+@njit(cache=True)
+def coupled_outputs(i, c, span_s: float, depth_start: float, wob_integral: float) -> None:
+    """Fill ``c.out[i]`` at the end of a call that lasted ``span_s`` seconds (0: the start of
+    an episode, then the rate of penetration is 0 and the mean weight the weight now)."""
+    q = c.q[i]
+    y = c.y[i]
+    n = int(q[_Q_N])
+    regime = c.regime[i]
+    dn, f_ax, ts, w, tq = _bit_forces(
+        regime, y, q, c.ring_phi[i], c.ring_r[i], c.ring[i], y[4 * n - 3]
+    )
+    out = c.out[i]
+    out[OUT_WOB] = w
+    out[OUT_TOB] = tq
+    out[OUT_DEPTH] = y[4 * n - 1]
+    out[OUT_ROP] = (y[4 * n - 1] - depth_start) / span_s if span_s > 0 else 0.0
+    out[OUT_OFF_BOTTOM] = 1.0 if regime in (_AIR, _STUCK_AIR) else 0.0
+    out[OUT_WOB_MEAN] = wob_integral / span_s if span_s > 0 else w
+
+
+@njit(cache=True)
+def advance_coupled_batch(b, s, c):
+    """:func:`drill_env.kernel.advance_chain_batch` for coupled strings (``bit="rgd"``)."""
+    _check_noise_room(b.noise, b.ints, s.n_sub)
+    for i in range(b.x.shape[0]):
+        _advance_coupled_one(i, b, s, c)
+
+
+@njit(cache=True, parallel=True)
+def advance_coupled_batch_parallel(b, s, c):
+    """:func:`advance_coupled_batch` with the strings spread over numba's threads."""
+    _check_noise_room(b.noise, b.ints, s.n_sub)
+    for i in prange(b.x.shape[0]):
+        _advance_coupled_one(i, b, s, c)
+
+
+def rest_state(chain: CoupledChain, applied_force_n: float) -> FloatArray:
+    """The coupled state of a string at rest on the bottom under the applied force: no
+    motion, no twist, every element compressed by the force (energy integrals 0)."""
+    n = chain.n_nodes
+    y = np.zeros(state_size(n))
+    a = 2 * n - 1
+    y[a + 1 : a + 2 * n - 1 : 2] = applied_force_n / chain.axial.element_stiffness_n_m
+    return y
+
+
+def rest_surface_slope_m_rad(
+    chain: CoupledChain, bit: RgdParameters, top_drive_speed_rad_s: float, applied_force_n: float
+) -> float:
+    """Slope ``r`` (m/rad) of the rock surface left by steady drilling at this speed and
+    force (0 when the force does not exceed the wear-flat force): the history of a bit put
+    down at rest in the hole it drilled."""
+    speed = max(float(top_drive_speed_rad_s), 1e-6)
+    damping = float(chain.axial.node_damping_ns_m.sum())
+    depth = max(applied_force_n - bit.contact_force_n, 0.0) / (
+        bit.k_a + damping * bit.blades * speed / (2 * math.pi)
+    )
+    return bit.blades * depth / (2 * math.pi)
+
+
+BIT_LAWS: Final = ("karnopp", "rgd")
+"""Bit laws of ``DrillStringField-v0``: Karnopp's velocity-weakening friction (the default) or
+the regenerative RGD bit on a string with axial elements."""
+
+
+def coupled_arrays(num: int, max_nodes: int, sources: tuple[int, int]) -> CoupledArrays:
+    """Zeroed :class:`CoupledArrays` for ``num`` strings of up to ``max_nodes`` nodes whose
+    weight on bit and rate of penetration go to the source-vector entries ``sources``."""
+    size = state_size(max_nodes)
+    return CoupledArrays(
+        y=np.zeros((num, size)),
+        q=np.zeros((num, _parameter_length(max_nodes))),
+        regime=np.zeros(num, dtype=np.int64),
+        ring_phi=np.zeros((num, ENV_RING_CAPACITY)),
+        ring_r=np.zeros((num, ENV_RING_CAPACITY)),
+        ring=np.zeros((num, 3), dtype=np.int64),
+        work=np.zeros((num, 9, max(size, 8))),
+        acc=np.zeros((num, 3)),
+        out=np.zeros((num, N_OUT)),
+        sources=np.array(sources, dtype=np.int64),
+    )
+
+
+def reset_coupled_string(
+    c: CoupledArrays,
+    i: int,
+    string: DistributedStringParameters,
+    bit: RgdParameters,
+    *,
+    axial_top: str,
+    hook_speed_m_s: float | None,
+    hook_stiffness_n_m: float,
+    applied_force_n: float,
+    reference_speed_rad_s: float,
+) -> FloatArray:
+    """Put string ``i`` of ``c`` at rest on the bottom of the hole it drilled at the reference
+    speed and applied force (:func:`rest_state`, :func:`rest_surface_slope_m_rad`), the hook
+    line preloaded to the applied force, the bit's regime from the rules (stuck on the rock).
+    Returns the torsional part of the state ``(2 n - 1,)``."""
+    chain = coupled_chain(string)
+    n = chain.n_nodes
+    q = parameter_vector(
+        chain, bit, axial_top=axial_top, applied_force_n=applied_force_n,
+        hook_speed_m_s=hook_speed_m_s, hook_stiffness_n_m=hook_stiffness_n_m,
+        top_speed_held=False,
+    )  # fmt: skip
+    q[_P_SPACING] = ENV_SPACING_FRACTION * bit.blade_angle_rad
+    y = rest_state(chain, applied_force_n)
+    if int(q[_Q_AXIAL_TOP]) == _MODE_SPRING:
+        y[4 * n - 2] = applied_force_n / q[_Q_HOOK_K]
+    elif int(q[_Q_AXIAL_TOP]) == _MODE_RIGID:
+        y[2 * n - 1] = q[_Q_HOOK_V]
+    slope = rest_surface_slope_m_rad(chain, bit, reference_speed_rad_s, applied_force_n)
+    c.ring_phi[i] = 0.0
+    c.ring_r[i] = 0.0
+    c.ring_phi[i, 0] = -3.0 * bit.blade_angle_rad
+    c.ring_r[i, 0] = slope * c.ring_phi[i, 0]
+    c.ring[i] = (0, 1, 0)
+    c.q[i] = 0.0
+    c.q[i, : q.shape[0]] = q
+    c.y[i] = 0.0
+    c.y[i, : y.shape[0]] = y
+    c.work[i] = 0.0
+    c.acc[i] = 0.0
+    c.regime[i] = initial_regime(
+        c.y[i, : y.shape[0]], c.q[i], c.ring_phi[i], c.ring_r[i], c.ring[i]
+    )
+    coupled_outputs(i, c, 0.0, 0.0, 0.0)
+    return c.y[i, : 2 * n - 1].copy()
+
+
+def coupled_info(c: CoupledArrays) -> dict[str, npt.NDArray[np.float64] | npt.NDArray[np.bool_]]:
+    """The ``info`` entries of the coupled strings after the last step, (N,) each:
+    ``weight_on_bit_n`` and ``torque_on_bit_nm`` (at the end), ``mean_weight_on_bit_n`` and
+    ``rate_of_penetration_m_s`` (over the step), ``bit_depth_m`` (from the start of the
+    episode), ``bit_off_bottom``."""
+    out = c.out
+    return {
+        "weight_on_bit_n": out[:, OUT_WOB].copy(),
+        "torque_on_bit_nm": out[:, OUT_TOB].copy(),
+        "mean_weight_on_bit_n": out[:, OUT_WOB_MEAN].copy(),
+        "rate_of_penetration_m_s": out[:, OUT_ROP].copy(),
+        "bit_depth_m": out[:, OUT_DEPTH].copy(),
+        "bit_off_bottom": out[:, OUT_OFF_BOTTOM] > 0.5,
+    }
+
+
+def check_bit_keywords(
+    bit: str,
+    rgd_parameters: object,
+    axial_top: str,
+    hook_speed_m_s: float | None,
+    hook_stiffness_n_m: float,
+) -> RgdParameters | None:
+    """Validate the bit keywords of ``DrillStringField-v0``; the RGD parameters with
+    ``bit="rgd"``, else ``None`` (then the other keywords must keep their defaults)."""
+    check_choice("bit", bit, BIT_LAWS, "bit law")
+    if bit == "karnopp":
+        for name, value, default in (
+            ("rgd_parameters", rgd_parameters, "rgd_a"), ("axial_top", axial_top, "force"),
+            ("hook_speed_m_s", hook_speed_m_s, None),
+            ("hook_stiffness_n_m", hook_stiffness_n_m, math.inf),
+        ):  # fmt: skip
+            if not (value is default or value == default):
+                raise ValueError(f"{name} = {value!r} applies only with bit='rgd'")
+        return None
+    p = _resolve(rgd_parameters)  # type: ignore[arg-type]
+    _check_top(axial_top, hook_speed_m_s, hook_stiffness_n_m)
+    return p

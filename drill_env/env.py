@@ -414,6 +414,8 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
             info["residual_torque_nm"] = float(b.command[0])
         if b.reports_law_slots:
             info.update(b.law_info_of(0))
+        if b.coupled:
+            info.update(b.coupled_info_of(0))
         return info
 
 
