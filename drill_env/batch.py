@@ -249,10 +249,14 @@ class StringBatch:
             else None
         )
         if self.coupled_arrays is not None:
-            serial = coupled_chain.advance_coupled_batch
-            parallel = coupled_chain.advance_coupled_batch_parallel
-            dispatcher = parallel if n >= PARALLEL_THRESHOLD else serial
-            entry = kernel.fast_entry(dispatcher, self.arrays, self.settings, self.coupled_arrays)
+            coupled_dispatcher = (
+                coupled_chain.advance_coupled_batch_parallel
+                if n >= PARALLEL_THRESHOLD
+                else coupled_chain.advance_coupled_batch
+            )
+            entry = kernel.fast_entry(
+                coupled_dispatcher, self.arrays, self.settings, self.coupled_arrays
+            )
             coupled = self.coupled_arrays
 
             def advance(arrays: kernel.BatchArrays, settings: kernel.LoopSettings) -> None:
