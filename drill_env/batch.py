@@ -538,6 +538,10 @@ class StringBatch:
         one_step = self.settings._replace(n_sub=1)
         step_arrays = a._replace(records=np.zeros((n, 1, N_RECORD)))
         sums = np.zeros((n, _SUMS.stop))
+        coupled = self.coupled_arrays
+        if coupled is not None:  # the bit's outputs over the whole decision, not its last step
+            depth_start = coupled.out[:, coupled_chain.OUT_DEPTH].copy()
+            wob_sum = np.zeros(n)
         for j in range(self.substeps):
             for i in range(n):
                 t = a.ints[i, I_STEP] * PLANT_DT_S
@@ -548,9 +552,37 @@ class StringBatch:
             self._advance(step_arrays, one_step)
             a.records[:, j] = step_arrays.records[:, 0]
             sums += a.report[:, _SUMS]
+            if coupled is not None:
+                wob_sum += coupled.out[:, coupled_chain.OUT_WOB_MEAN] * a.report[:, REP_STEPS]
         a.report[:, _SUMS] = sums
+        if coupled is not None:
+            self._coupled_decision_outputs(coupled, depth_start, wob_sum, sums[:, REP_STEPS])
         a.report[:, REP_LAW_ERROR] = 0.0  # a Python controller's state is its own
         a.report[:, REP_LAW_GAIN] = 0.0
+
+    def _coupled_decision_outputs(
+        self,
+        coupled: coupled_chain.CoupledArrays,
+        depth_start: npt.NDArray[np.float64],
+        wob_sum: npt.NDArray[np.float64],
+        steps: npt.NDArray[np.float64],
+    ) -> None:
+        """The slow path's rate of penetration and mean weight on bit over the decision
+        (the kernel, called one plant step at a time, gave those of the last step), and the
+        observation entries that show them."""
+        a = self.arrays
+        out = coupled.out
+        for i in np.flatnonzero(steps > 0).tolist():
+            span = steps[i] * PLANT_DT_S
+            out[i, coupled_chain.OUT_ROP] = (
+                out[i, coupled_chain.OUT_DEPTH] - depth_start[i]
+            ) / span
+            out[i, coupled_chain.OUT_WOB_MEAN] = wob_sum[i] / steps[i]
+            a.sources[i, -2] = out[i, coupled_chain.OUT_WOB]
+            a.sources[i, -1] = out[i, coupled_chain.OUT_ROP]
+            kernel.write_observation(
+                a.obs[i], a.sources[i], self.settings.obs_source, self.settings.obs_scale
+            )
 
     # ---------------------------------------------------------------- outputs
     def observations(self) -> npt.NDArray[np.float32]:
