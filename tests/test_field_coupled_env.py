@@ -13,7 +13,6 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import drill_env
-from drill_env.control import resolve_controller
 from drill_env.coupled import RGD_PRESETS
 from drill_env.evaluation import ZeroAction, rollout
 from drill_env.layout import FORCE_SCALE_N, ROP_SCALE_M_S
@@ -156,35 +155,39 @@ def test_rgd_parameters_object_and_fixed_at_make() -> None:
         env.reset(options={"bit": "karnopp"})
 
 
-class _PythonController:
-    """The soft speed loop behind a plain Python object (no ``compiled_law``): the env calls
-    it at every plant step from Python (the slow path)."""
+class _ConstantTorque:
+    """A plain Python controller (no ``compiled_law``) holding one torque: the env calls it at
+    every plant step from Python (the slow path)."""
 
-    def __init__(self) -> None:
-        inner = resolve_controller("soft_speed")
-        assert inner is not None
-        self.inner = inner
+    def __init__(self, torque_nm: float) -> None:
+        self.torque_nm = torque_nm
 
     def reset(self) -> None:
-        self.inner.reset()
+        pass
 
     def torque(self, measurement: np.ndarray, reference_speed_rad_s: float, dt_s: float) -> float:
-        return self.inner.torque(measurement, reference_speed_rad_s, dt_s)
+        return self.torque_nm
 
 
-def test_python_controller_matches_compiled_controller() -> None:
+def test_python_controller_path_reports_the_whole_decision() -> None:
     """On the slow path the weight on bit and rate of penetration still cover the whole
-    decision: a Python controller drives the coupled string like the compiled one."""
-    kwargs = {**RGD, "randomize": False, "noise_std_rad_s": 0.0, "torque_noise_std_nm": 0.0}
-    kwargs["telemetry_noise_std_rad_s"] = 0.0
-    compiled = gym.make(FIELD, base_controller="soft_speed", **kwargs)
-    python = gym.make(FIELD, base_controller=_PythonController(), **kwargs)
+    decision: a Python controller holding a torque drives the coupled string exactly as the
+    same torque commanded by the action on the compiled path."""
+    kwargs = {**RGD, "randomize": False, "episode_s": 3.0}
+    low, high = 0.0, 50_800.0
+    torque = 20_000.0
+    action = np.full(1, 2 * (torque - low) / (high - low) - 1, np.float32)
+    compiled = gym.make(FIELD, **kwargs)
+    python = gym.make(
+        FIELD, base_controller=_ConstantTorque(float(action[0] + 1) / 2 * high), **kwargs
+    )
     obs_c, _ = compiled.reset(seed=4)
     obs_p, _ = python.reset(seed=4)
     np.testing.assert_array_equal(obs_c[-2:], obs_p[-2:])
-    for _ in range(10):
-        obs_c, _, _, _, info_c = compiled.step(np.zeros(1, np.float32))
+    for _ in range(30):
+        obs_c, _, _, _, info_c = compiled.step(action)
         obs_p, _, _, _, info_p = python.step(np.zeros(1, np.float32))
+        assert info_p["top_drive_torque_nm"] == pytest.approx(info_c["top_drive_torque_nm"])
         np.testing.assert_allclose(obs_p[-2:], obs_c[-2:], rtol=1e-6, atol=1e-9)
         for key in ("rate_of_penetration_m_s", "mean_weight_on_bit_n", "bit_depth_m"):
             assert info_p[key] == pytest.approx(info_c[key], rel=1e-6, abs=1e-12)
