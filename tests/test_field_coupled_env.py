@@ -4,6 +4,7 @@ vs vector, bad input); the default Karnopp bit is unchanged."""
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from typing import Any
 
@@ -192,3 +193,20 @@ def test_python_controller_path_reports_the_whole_decision() -> None:
         for key in ("rate_of_penetration_m_s", "mean_weight_on_bit_n", "bit_depth_m"):
             assert info_p[key] == pytest.approx(info_c[key], rel=1e-6, abs=1e-12)
     assert info_c["bit_depth_m"] > 0.0  # the bit drilled
+
+
+def test_diverging_string_ends_the_episode_with_a_reason() -> None:
+    """A rock so hard that the cutting stiffness is beyond the RK4 step makes the state blow
+    up: the episode ends, ``termination_reason`` says so, the observation stays finite."""
+    hard = dataclasses.replace(RGD_PRESETS["rgd_a"], intrinsic_energy_pa=1e14)
+    env = gym.make(
+        FIELD, bit="rgd", rgd_parameters=hard, randomize=False, episode_s=5.0,
+        control_dt_s=0.1, torque_rate_limit_nm_per_s=None,
+    )  # fmt: skip
+    env.reset(seed=0)
+    for _ in range(50):
+        obs, reward, terminated, truncated, info = env.step(np.ones(1, np.float32))
+        assert np.isfinite(obs).all()
+        if terminated or truncated:
+            break
+    assert terminated and info["termination_reason"] == "diverged" and reward == -1.0
