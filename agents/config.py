@@ -68,7 +68,7 @@ ENV_DEFAULTS: Final[dict[str, dict[str, Any]]] = {
 }
 """Per-env training defaults: for each env id, the fields whose default differs from the
 dataclass's (``DrillString-v0``'s), and ``frame_stack`` named for the field string (1: frame
-stacking of 16 or 48 observations did not train better, docs/field-agent.md). Applied by :meth:`TrainConfig.for_env` and the command line
+stacking of 16 or 48 observations did not train better, docs/reports/field-agent.md). Applied by :meth:`TrainConfig.for_env` and the command line
 to the fields the caller did not set."""
 
 

@@ -3,22 +3,38 @@
 from __future__ import annotations
 
 import copy
-from typing import Any
+from typing import Any, Final
 
 import numpy as np
 import numpy.typing as npt
 
-from drill_env.control import Controller
-from drill_env.layout import unscale_measurement
+from baselines.base import measurement_vector
+from drill_env.control import Controller, Measurement
+from drill_env.layout import (
+    M_STATE,
+    M_TOP_DRIVE_SPEED,
+    MEASUREMENT_NAMES,
+    N_STATE,
+    unscale_measurement,
+)
 from drill_env.limits import DEFAULT_TORQUE_LIMITS
 
 __all__ = ["ControllerPolicy"]
+
+_NOT_OBSERVED: Final = frozenset(
+    name
+    for k, name in enumerate(MEASUREMENT_NAMES)
+    if not (M_STATE <= k < M_STATE + N_STATE or k == M_TOP_DRIVE_SPEED)
+)
+"""The signals an observation of the default ``state`` mode does not carry."""
 
 
 class ControllerPolicy:
     """Run a controller as a policy of an env in direct mode (no base controller).
 
-    The measured state and the reference are recovered from the observation; the torque is
+    The measured state and the reference are recovered from the observation and handed to the
+    controller as a :class:`drill_env.control.Measurement` (the state entries and the top-drive
+    speed by name; the other signals are not in the observation); the torque is
     mapped to the action ``a = 2 (u - min_torque) / (max_torque - min_torque) - 1`` and
     clipped to [-1, 1]. Run it with ``control_dt_s = 0.001`` to reproduce the controller inside
     the plant loop.
@@ -87,6 +103,7 @@ class ControllerPolicy:
         span = self.max_torque_nm - self.min_torque_nm
         actions = np.empty((n, 1), dtype=np.float32)
         for k, controller in enumerate(self._controllers):
-            u = controller.torque(meas[k], float(ref[k]), self.control_dt_s)
+            measured = Measurement(measurement_vector(meas[k]), _NOT_OBSERVED)
+            u = controller.torque(measured, float(ref[k]), self.control_dt_s)
             actions[k, 0] = np.clip(2.0 * (u - self.min_torque_nm) / span - 1.0, -1.0, 1.0)
         return (actions[0] if single else actions), state

@@ -6,14 +6,14 @@ the rig's surface signals and the mud-pulse telemetry (``frame_stack`` 1: the cu
 observation only).
 Prints the wall time (the whole run: simulation, PPO updates, validations, checkpoints) and
 the selected model; ``--ship`` copies the model to ``agents/models/field_agent/`` (recording
-the command that retrains it) and the learning curves to ``docs/figures/``. Then
+the command that retrains it) and the learning curves to ``docs/reports/figures/``. Then
 ``drill-gym evaluate --env DrillStringField-v0`` scores it on the field held-out set.
 
 ``--curves LABEL=RUN_DIR ...`` only draws the learning curves of finished runs (for example
-the tries of docs/field-agent.md) into ``--figure``. ``--figures [MODEL]`` only draws the
+the tries of docs/reports/field-agent.md) into ``--figure``. ``--figures [MODEL]`` only draws the
 hardest held-out scenarios (:data:`FIGURE_SCENARIOS`: bit speed, top-drive speed and torque
 of the agent against ``soft_speed`` and ``z_torque`` on surface signals, the same noise
-samples) into ``docs/figures/field_agent_<id>.png``, from the shipped model by default.
+samples) into ``docs/reports/figures/field_agent_<id>.png``, from the shipped model by default.
 ``--groups HELDOUT_CSV`` prints the means of a field ``heldout.csv`` (written by ``drill-gym
 evaluate --env DrillStringField-v0``) by group (:data:`GROUPS`: within the training ranges, the
 deep string, outside the ranges, all): IAE, RMSD and the stick-slip severity of the prone
@@ -47,7 +47,7 @@ from drill_env.evaluation import ZeroAction
 from experiments.plots import save_figure, text_problems
 
 NAME = "field_agent"
-FIGURE = Path("docs/figures/field_agent_learning_curve.png")
+FIGURE = Path("docs/reports/figures/field_agent_learning_curve.png")
 RETRAIN = f"drill-gym train --env {FIELD_ENV_ID}"
 FIGURE_SCENARIOS = ("f02", "f04", "f10", "f15")
 """Held-out scenarios drawn: one the agent wins (f02), the hardest in the training ranges
@@ -245,7 +245,7 @@ def main() -> None:
         default=None,
         metavar="MODEL",
         help="only draw the hardest held-out scenarios with this model (default: the shipped "
-        "one) into docs/figures/",
+        "one) into docs/reports/figures/",
     )
     parser.add_argument(
         "--groups",

@@ -8,7 +8,7 @@ Runs, one after the other and with the default :class:`agents.config.TrainConfig
   (``agents/models/direct_ppo/config.json``: 2 M decisions and the reward of that run);
 
 prints the wall time of each, draws the learning curves, and with ``--ship`` copies the two
-final models to ``agents/models/`` and the figure to ``docs/figures/``. Then
+final models to ``agents/models/`` and the figure to ``docs/reports/figures/``. Then
 ``drill-gym evaluate`` scores them on the held-out set.
 
 Run from the repository root::
@@ -33,7 +33,7 @@ from agents.policy import DEFAULT_MODEL_DIR
 from agents.train import train
 from experiments.plots import plot_learning_curves
 
-FIGURE = Path("docs/figures/residual_ppo_learning_curve.png")
+FIGURE = Path("docs/reports/figures/residual_ppo_learning_curve.png")
 
 
 def _shipped_settings(name: str) -> dict[str, Any]:

@@ -24,6 +24,7 @@ from drill_env.control import (
     CompiledController,
     CompiledLaw,
     Controller,
+    Measurement,
     compile_law,
     resolve_controller,
 )
@@ -176,6 +177,8 @@ class StringBatch:
                     config.measurement_channel(),
                 )
         self.compiled = law is not None
+        # What a Python controller cannot read by name (drill_env.control.Measurement).
+        self._missing_signals = Measurement.missing_signals(config.measurement_channel())
         self._info_slots = () if law is None else law.info_slots
         self._estimate_slots = () if law is None else law.estimate_slots
         self._estimate_keys = [
@@ -547,7 +550,8 @@ class StringBatch:
                 t = a.ints[i, I_STEP] * PLANT_DT_S
                 prof = a.profiles[i]
                 ref = profile_value(prof[PROF_REF_T], prof[PROF_REF_V], a.ints[i, I_REF_KNOTS], t)
-                torque = float(self.controllers[i].torque(self.measurement(i), ref, PLANT_DT_S))
+                measured = Measurement(self.measurement(i), self._missing_signals)
+                torque = float(self.controllers[i].torque(measured, ref, PLANT_DT_S))
                 a.scalars[i, F_BASE_TORQUE] = torque if math.isfinite(torque) else math.nan
             self._advance(step_arrays, one_step)
             a.records[:, j] = step_arrays.records[:, 0]

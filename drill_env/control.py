@@ -34,7 +34,14 @@ from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
-from drill_env.layout import N_MEASUREMENT, N_STATE
+from drill_env.layout import (
+    M_STATE,
+    M_TELEMETRY_AGE,
+    M_TELEMETRY_BIT_SPEED,
+    MEASUREMENT_NAMES,
+    N_MEASUREMENT,
+    N_STATE,
+)
 from drill_env.limits import TorqueLimits
 from drill_env.parameters import DrillStringParameters
 from drill_env.sensors import MeasurementChannel
@@ -45,6 +52,8 @@ __all__ = [
     "CompiledController",
     "CompiledLaw",
     "Controller",
+    "Measurement",
+    "MissingSignalError",
     "call_law",
     "compile_law",
     "controller_names",
@@ -52,6 +61,105 @@ __all__ = [
     "register_controller",
     "resolve_controller",
 ]
+
+
+class MissingSignalError(LookupError):
+    """A controller read a signal by name that the env's measurement channel does not provide."""
+
+
+_PROVIDERS: Final = {
+    **{name: "observation='state'" for name in MEASUREMENT_NAMES[M_STATE : M_STATE + N_STATE]},
+    MEASUREMENT_NAMES[M_TELEMETRY_BIT_SPEED]: "telemetry_period_s=<period in s>",
+    MEASUREMENT_NAMES[M_TELEMETRY_AGE]: "telemetry_period_s=<period in s>",
+}
+"""The env keyword that makes each optional signal available (the surface signals always
+are)."""
+
+
+class Measurement(np.ndarray):
+    """The measurement a Python controller receives at every plant step: the float64 vector
+    of ``N_MEASUREMENT`` entries (``drill_env.layout.M_*``; index access works as on any
+    array) whose entries are also attributes, named by ``drill_env.layout.MEASUREMENT_NAMES``:
+
+    * ``top_drive_speed_rad_s``, ``top_drive_pipe_twist_rad``, ``pipe_speed_rad_s``,
+      ``pipe_collar_twist_rad``, ``collar_speed_rad_s``, ``collar_bit_twist_rad``,
+      ``bit_speed_rad_s``: the measured 4-DOF state x1..x7 (speeds rad/s with the speed
+      noise, twists rad); only with ``observation="state"`` (the default of
+      ``DrillString-v0``, not of ``DrillStringField-v0``);
+    * ``surface_top_drive_speed_rad_s`` (rad/s) and ``surface_torque_nm`` (N m): the surface
+      signals, sampled every ``sensor_period_s`` and held; always;
+    * ``telemetry_bit_speed_rad_s`` (rad/s) and ``telemetry_age_s`` (s): the last bit speed
+      received by telemetry and its age; only with a ``telemetry_period_s``, NaN until the
+      first value arrives;
+    * ``applied_torque_nm``: the torque the drive applied over the last step, N m; always.
+
+    Reading by name a signal the env does not provide raises :class:`MissingSignalError`
+    naming the signal and the env keyword that provides it (by index it reads NaN).
+    """
+
+    _missing: frozenset[str]
+
+    def __new__(
+        cls, values: npt.ArrayLike, missing: frozenset[str] | set[str] = frozenset()
+    ) -> Measurement:
+        array = np.asarray(values, dtype=np.float64)
+        if array.shape != (N_MEASUREMENT,):
+            raise ValueError(f"a measurement has shape ({N_MEASUREMENT},), got {array.shape}")
+        unknown = sorted(set(missing) - set(MEASUREMENT_NAMES))
+        if unknown:
+            raise ValueError(
+                f"missing = {unknown} is not valid: allowed {', '.join(MEASUREMENT_NAMES)}"
+            )
+        obj = array.view(cls)
+        obj._missing = frozenset(missing)
+        return obj
+
+    def __array_finalize__(self, obj: Any) -> None:
+        self._missing = getattr(obj, "_missing", frozenset())
+
+    @staticmethod
+    def missing_signals(channel: MeasurementChannel) -> frozenset[str]:
+        """The signals ``channel`` does not provide (their entries read NaN)."""
+        missing = set()
+        if channel.observation != "state":
+            missing |= set(MEASUREMENT_NAMES[M_STATE : M_STATE + N_STATE])
+        if channel.telemetry_period_s is None:
+            missing |= {MEASUREMENT_NAMES[M_TELEMETRY_BIT_SPEED]}
+            missing |= {MEASUREMENT_NAMES[M_TELEMETRY_AGE]}
+        return frozenset(missing)
+
+    def signal(self, name: str) -> float:
+        """The entry ``name`` of ``MEASUREMENT_NAMES`` (also readable as an attribute).
+
+        Raises:
+            MissingSignalError: the env does not provide it.
+            KeyError: an unknown name.
+        """
+        if name not in MEASUREMENT_NAMES:
+            raise KeyError(
+                f"{name!r} is not a signal of the measurement: allowed "
+                f"{', '.join(MEASUREMENT_NAMES)}"
+            )
+        if name in self._missing:
+            if name in _PROVIDERS:
+                raise MissingSignalError(
+                    f"measurement.{name} is not provided by this env's measurement channel: "
+                    f"make the env with {_PROVIDERS[name]} to measure it"
+                )
+            raise MissingSignalError(
+                f"measurement.{name} is not available here: this measurement was rebuilt from "
+                "an observation that does not carry it (run the controller as the env's "
+                "base_controller to receive every signal)"
+            )
+        return float(self[MEASUREMENT_NAMES.index(name)])
+
+    def __getattr__(self, name: str) -> float:
+        if name in MEASUREMENT_NAMES:
+            return self.signal(name)
+        raise AttributeError(
+            f"Measurement has no attribute {name!r}; its signals are {', '.join(MEASUREMENT_NAMES)}"
+        )
+
 
 _DOUBLE_P = types.CPointer(types.float64)
 LAW_SIGNATURE: Final = types.float64(_DOUBLE_P, _DOUBLE_P, _DOUBLE_P, types.float64, types.float64)
@@ -204,11 +312,10 @@ class Controller(Protocol):
     def reset(self) -> None:
         """Forget the state of the last episode (integrals, adaptive gains)."""
 
-    def torque(
-        self, measurement: npt.NDArray[np.float64], reference_speed_rad_s: float, dt_s: float
-    ) -> float:
-        """Top-drive torque (N m) from the measured state (7,), the reference (rad/s) and the
-        time until the next call (s)."""
+    def torque(self, measurement: Measurement, reference_speed_rad_s: float, dt_s: float) -> float:
+        """Top-drive torque (N m) from the measurement (:class:`Measurement`: its signals by
+        name, ``measurement.surface_top_drive_speed_rad_s``, or by index), the reference
+        (rad/s) and the time until the next call (s)."""
         ...
 
 

@@ -166,10 +166,10 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
     ``Box(-1, 1, (1,), float32)``; out-of-range values are clipped and counted in ``info``, and
     a NaN, infinite or wrongly shaped action raises ``ValueError``.
 
-    | mode | top-drive torque ``u`` (N m) |
-    |---|---|
-    | direct (``base_controller=None``) | ``min_torque + (a + 1) / 2 (max_torque - min_torque)`` |
-    | residual | ``clip(u_base + residual_scale_nm a, min_torque, max_torque)`` |
+    | mode | top-drive torque ``u`` (N m) | action 0 means |
+    |---|---|---|
+    | direct (``base_controller=None``) | ``min_torque + (a + 1) / 2 (max_torque - min_torque)`` | the middle of the torque range, 25 kN m by default: about twice the steady drilling torque of the default scenario (13.0 kN m, ``a = -0.48``), so the bit overspins |
+    | residual | ``clip(u_base + residual_scale_nm a, min_torque, max_torque)`` | the base controller alone (``drill_env.evaluation.ZeroAction``) |
 
     In residual mode the base controller computes ``u_base`` at every 1 ms plant step.
 
@@ -189,13 +189,22 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
     ## Rewards
     Per decision period, with ``e = V_ref - w_bit`` (true bit speed) at every plant step:
 
-    ``r = -(w_t T + w_c C + w_s S) / (w_t + w_c + w_s) - w_q Q - w_r R``, in ``[-1, 0]`` with
-    the default weights, where ``T = mean(min(|e| / max(V_ref, 1 rad/s), 1))`` (tracking),
-    ``C = min(TV(u) / 5000 N m, 1)`` (chattering: total variation of the applied torque), ``S``
-    the share of plant steps with the bit stuck, ``Q = mean(u^2) / max_torque^2`` (torque) and
-    ``R = mean((u - u_base)^2) / residual_scale^2`` (residual mode). Weights
-    ``RewardWeights(tracking=1, chattering=0.1, stuck=0.5, torque=0, residual=0)`` by default
-    (``drill_env.rewards``); the terms are in ``info["reward_terms"]``. A diverged step gets -1.
+    ``r = -(w_t T + w_c C + w_s S) / (w_t + w_c + w_s) - w_q Q - w_r R``, in ``[-2, 0]`` with
+    the default weights ``RewardWeights(tracking=1, chattering=0.1, stuck=0,
+    chattering_scale_nm=50_000, torque=1, residual=0)``: the shipped agents' training recipe
+    (``drill_env.rewards``). Each term is in ``[0, 1]``; ``info["reward_terms"]`` gives them
+    all, weighted or not. A diverged step gets -1.
+
+    | term | definition | typical range (5th-95th percentile) |
+    |---|---|---|
+    | ``T`` tracking | ``mean(min(abs(e) / max(V_ref, 1 rad/s), 1))`` (1: the bit stuck) | 0.02-1 |
+    | ``C`` chattering | ``min(TV(u) / 50 kN m, 1)``, TV the total variation of the applied torque over the period | 0.3-0.4 for ``proposed`` with the 0.1 rad/s noise, 0-0.8 for random direct actions |
+    | ``S`` stuck | share of the plant steps with the bit stuck (weight 0 by default: ``T`` already counts a stuck bit as a full error) | 0-1 |
+    | ``Q`` torque | ``mean(u^2) / max_torque^2`` (the paper's RMSD, an energy penalty) | 0.04-0.4 |
+    | ``R`` residual | ``mean((u - u_base)^2) / residual_scale^2`` (residual mode) | 0-0.9 for random residuals |
+
+    The typical ranges are printed by ``benchmarks/reward_terms.py`` (default keywords,
+    randomised episodes).
 
     ## Starting State
     At rest, ``x = 0``, bit stuck. The scenario (WOB profile, reference, uncertainty) is drawn
@@ -206,7 +215,7 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
 
     ## Episode End
     Truncation after ``episode_s`` (the env truncates itself; no step limit is registered, and
-    ``env.spec.max_episode_steps`` is ``episode_s / control_dt_s``, 2000 by default). An explicit
+    ``env.spec.max_episode_steps`` is ``episode_s / control_dt_s``, 1000 by default). An explicit
     ``gym.make(..., max_episode_steps=n)`` adds Gymnasium's ``TimeLimit``, which may end an
     episode earlier. Termination when the state is not finite or leaves the physical bounds
     (1000 rad/s, 1000 rad, ``drill_env.limits``): ``info["termination_reason"] = "diverged"``,
@@ -224,9 +233,9 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
     | ``uncertainty_reading`` | ``plant`` or ``controller`` | ``plant`` |
     | ``noise_std_rad_s`` | measurement noise on the speeds, rad/s | 0.1 |
     | ``episode_s`` | episode length, s | 100 |
-    | ``control_dt_s`` | decision period, multiple of 1 ms | 0.05 |
+    | ``control_dt_s`` | decision period, multiple of 1 ms (``episode_s`` a multiple of it) | 0.1 |
     | ``base_controller`` | ``None``, a registered name or a controller object | ``None`` |
-    | ``residual_scale_nm`` | residual torque per unit action, N m | 5,000 |
+    | ``residual_scale_nm`` | residual torque per unit action, N m | 20,000 |
     | ``min_torque_nm``, ``max_torque_nm`` | torque limits, N m | 0, 50,000 |
     | ``randomization`` | ``Randomization`` ranges | see Starting State |
     | ``reward_weights`` | ``RewardWeights`` | see Rewards |
@@ -269,7 +278,7 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
 
     metadata: dict[str, Any] = {
         "render_modes": list(render.RENDER_MODES),
-        "render_fps": 20,  # one frame per decision at the default control_dt_s = 0.05 s
+        "render_fps": 10,  # one frame per decision at the default control_dt_s = 0.1 s
     }
 
     config_type: ClassVar[type[EnvConfig]] = EnvConfig
@@ -436,7 +445,8 @@ class DrillStringFieldEnv(DrillStringEnv):
 
     ## Action Space
     ``Box(-1, 1, (1,), float32)`` as in ``DrillString-v0``; the torque range is that of the top
-    drive (0 to 50.8 kN m by default).
+    drive (0 to 50.8 kN m by default). Action 0 is the base controller alone in residual mode,
+    and 25.4 kN m (the middle of the range) in direct mode.
 
     ## Observation Space
     ``Box(-50, 50, (n,), float32)``. ``observation="surface"`` (default): measured top-drive
@@ -468,6 +478,8 @@ class DrillStringFieldEnv(DrillStringEnv):
     | keyword | meaning | default |
     |---|---|---|
     | ``parameters`` | distributed preset (``field_2500m``, ``deep_5000m``) or parameters | ``field_2500m`` |
+    | ``control_dt_s`` | decision period, s (the shipped field agent's) | 0.2 |
+    | ``residual_scale_nm`` | residual torque per unit action, N m (the field agent's) | 10,000 |
     | ``measured_depth_m`` | change the string's depth (drill pipe length), m | the preset's |
     | ``controller_parameters`` | the controllers' model of the string | the plant's |
     | ``observation`` | ``"surface"`` or ``"state"`` | ``"surface"`` |

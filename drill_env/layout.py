@@ -15,6 +15,7 @@ import numpy.typing as npt
 
 __all__ = [
     "N_FIXED_SOURCES",
+    "MEASUREMENT_NAMES",
     "N_MEASUREMENT",
     "OBSERVATION_MODES",
     "N_PLANT_PARAMS",
@@ -74,6 +75,16 @@ M_TELEMETRY_BIT_SPEED: Final = 9  # last bit speed received by telemetry, rad/s 
 M_TELEMETRY_AGE: Final = 10  # its age, s (NaN: none)
 M_APPLIED_TORQUE: Final = 11  # the torque the drive applied over the last step, N m
 N_MEASUREMENT: Final = 12
+MEASUREMENT_NAMES: Final = (
+    *STATE_NAMES,  # M_STATE..M_STATE + 6: the measured state ("state" mode)
+    "surface_top_drive_speed_rad_s",  # M_TOP_DRIVE_SPEED
+    "surface_torque_nm",  # M_SURFACE_TORQUE
+    "telemetry_bit_speed_rad_s",  # M_TELEMETRY_BIT_SPEED
+    "telemetry_age_s",  # M_TELEMETRY_AGE
+    "applied_torque_nm",  # M_APPLIED_TORQUE
+)
+"""The name of each entry of the measurement vector, with its unit (``drill_env.control
+.Measurement`` reads them as attributes)."""
 
 # ------------------------------------------------------------------- per-plant-step records
 REC_X0: Final = 0  # columns 0..6: the true state at the start of the step

@@ -137,9 +137,9 @@ class EnvConfig:
     uncertainty_reading: str = "plant"
     noise_std_rad_s: float = 0.1
     episode_s: float = 100.0
-    control_dt_s: float = 0.05
+    control_dt_s: float = 0.1  # the shipped agent's (agents/models/residual_ppo)
     base_controller: str | Controller | None = None
-    residual_scale_nm: float = 5_000.0
+    residual_scale_nm: float = 20_000.0  # the shipped agent's
     min_torque_nm: float = DEFAULT_TORQUE_LIMITS.min_nm
     max_torque_nm: float = DEFAULT_TORQUE_LIMITS.max_nm
     randomization: Randomization | FieldRandomization = field(default_factory=Randomization)
@@ -435,7 +435,8 @@ class FieldEnvConfig(EnvConfig):
     actuator_lag_s: float = 0.02
     torque_rate_limit_nm_per_s: float | None = 100e3
     episode_s: float = 100.0
-    control_dt_s: float = 0.05
+    control_dt_s: float = 0.2  # the shipped field agent's (agents/models/field_agent)
+    residual_scale_nm: float = 10_000.0  # the shipped field agent's
     bit: str = "karnopp"
     rgd_parameters: str | RgdParameters = "rgd_a"
     axial_top: str = "force"

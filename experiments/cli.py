@@ -2,7 +2,8 @@
 
 Subcommands, each a module with ``main(argv)`` imported only when used (so the core needs no
 torch): ``compare``, ``map``, ``probability-map``, ``train``, ``sweep-train``, ``evaluate``,
-``convert``, ``waves``, ``realism``, ``tune``, ``coupled``. Every user error ends with
+``convert``, ``waves``, ``realism``, ``tune``, ``coupled``, ``benchmark``,
+``calibrate``, ``replay``. Every user error ends with
 one line on standard error and exit code 2 (:mod:`experiments.arguments`); ``DRILL_GYM_DEBUG=1``
 shows the traceback instead.
 """
@@ -59,6 +60,18 @@ SUBCOMMANDS = {
     "coupled": (
         "experiments.coupled",
         "the coupled axial-torsional string with the regenerative bit: standard run, stability map",
+    ),
+    "benchmark": (
+        "experiments.benchmark",
+        "score any controller or agent on the versioned suites: IQM, bootstrap intervals, profiles",
+    ),
+    "calibrate": (
+        "experiments.calibrate",
+        "fit a torsional plant to a measured log (plant.json, report, figures)",
+    ),
+    "replay": (
+        "experiments.replay",
+        "drive a calibrated plant with a log's top-drive speed; stick-slip features",
     ),
 }
 """Subcommand name -> (module with ``main(argv)``, one line of help)."""

@@ -3,8 +3,8 @@
 By default every registered controller (the paper's four first: ``csmc``, ``msmc``, ``asmc``,
 ``proposed``) runs on the docs/specification.md section 2 scenario (WOB 97,347 N, V_ref 12 rad/s, 150 s from
 rest) under each Table 3 uncertainty condition, without and with 0.1 rad/s measurement noise:
-32 runs for the four SMCs. When a trained residual agent is shipped (``agents``, the ``[rl]``
-extra) it is added as one more row per scenario.
+32 runs for the four SMCs. The agent shipped for the env (:func:`shipped_agent`; numpy
+inference, no extra needed) is added as one more row per scenario.
 
 Every run goes through the one scoring path of the project::
 
@@ -17,7 +17,9 @@ Python overhead low; the controller still runs inside the compiled plant loop at
 metrics do not depend on the decision period.
 
 Outputs (``--out``, default ``results/``): ``compare.csv`` and ``compare.json`` (one row per
-run), PNG figures under ``figures/``, and a markdown table on standard output.
+run) and ``compare.md`` (the same as a markdown table), PNG figures under ``figures/``; on
+standard output a ranked summary (:func:`summary_table`: one line per controller, the means of
+the paper's metrics over its runs, lowest mean IAE first).
 
 Example::
 
@@ -48,11 +50,11 @@ from drill_env.parameters import PLANT_DT_S, resolve_parameters
 from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, WobProfile
 from experiments.arguments import (
     ArgumentParser,
-    names_type,
     number_type,
     output_folder,
     seed_option,
 )
+from experiments.controllers import CONTROLLERS_HELP, controller_type, refuse_on_ray
 from experiments.field import (
     COMPARE_CONDITIONS,
     COMPARE_DEPTHS_M,
@@ -486,6 +488,72 @@ def markdown_table(rows: Sequence[Mapping[str, Any]]) -> str:
     return _markdown(rows, FIELD_TABLE_COLUMNS if field else TABLE_COLUMNS, _diverged_cell)
 
 
+SUMMARY_COLUMNS: Final = (
+    Column("rank", "rank", "{:d}"),
+    Column("label", "controller", align="left"),
+    Column("runs", "runs", "{:d}"),
+    Column("ise", "ISE", "{:.1f}"),
+    Column("iae", "IAE", "{:.1f}"),
+    Column("rmse", "RMSE (rad/s)", "{:.3f}"),
+    Column("rmsd_nm", "RMSD (N m)", "{:,.0f}"),
+    Column("overshoot_pct", "overshoot %", "{:.1f}"),
+    Column("settling_time_s", "settling (s)", "{:.1f}", missing="never"),
+    Column("unsettled", "unsettled", "{:d}"),
+    Column("chattering_nm_per_s", "chattering (N m/s)", "{:,.0f}"),
+    Column("stick_slip_severity", "severity", "{:.3f}"),
+    Column("diverged", "diverged", "{:d}"),
+)
+"""The columns of the ranked summary: the means of the paper's metrics per controller."""
+
+SUMMARY_METRICS: Final = (
+    "ise",
+    "iae",
+    "rmse",
+    "rmsd_nm",
+    "overshoot_pct",
+    "chattering_nm_per_s",
+    "stick_slip_severity",
+)
+"""The metrics the summary averages over every run of a controller."""
+
+
+def _finite_mean(values: Sequence[Any]) -> float | None:
+    clean = [float(v) for v in values if v is not None and math.isfinite(float(v))]
+    return float(np.mean(clean)) if clean else None
+
+
+def ranked_summary(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """One entry per controller (on the field string per controller and observation mode,
+    :func:`experiments.field.run_label`): the mean of each of :data:`SUMMARY_METRICS` over its
+    runs, the mean settling time of the runs that settle (``None``: none does), the number of
+    runs that never settle and of those that diverge; ranked by mean IAE, lowest first (a
+    controller with a diverged run after every one without)."""
+    entries = []
+    for label in dict.fromkeys(run_label(r) for r in rows):
+        mine = [r for r in rows if run_label(r) == label]
+        entry: dict[str, Any] = {"label": label, "runs": len(mine)}
+        for key in SUMMARY_METRICS:
+            entry[key] = _finite_mean([r[key] for r in mine])
+        entry["settling_time_s"] = _finite_mean([r["settling_time_s"] for r in mine])
+        entry["unsettled"] = sum(r["settling_time_s"] is None for r in mine)
+        entry["diverged"] = sum(bool(r["diverged"]) for r in mine)
+        entries.append(entry)
+    entries.sort(key=lambda e: (e["diverged"] > 0, math.inf if e["iae"] is None else e["iae"]))
+    for rank, entry in enumerate(entries, start=1):
+        entry["rank"] = rank
+    return entries
+
+
+def _write_text(text: str, path: Path) -> Path:
+    path.write_text(text)
+    return path
+
+
+def summary_table(rows: Sequence[Mapping[str, Any]]) -> str:
+    """:func:`ranked_summary` as a markdown table: one line per controller."""
+    return _markdown(ranked_summary(rows), SUMMARY_COLUMNS)
+
+
 INDUSTRY_CONTROLLERS: Final = (
     "stiff_pi",
     "stiff_pi_tuned",
@@ -686,19 +754,28 @@ def write_figures(
 
 
 # ---------------------------------------------------------------------------- the agent
-def load_agent(loader: Callable[[], Any] | None = None) -> Any:
-    """The shipped agent (``agents.load_default_policy``, or ``loader()`` when given): a policy
-    with ``predict``, ``env_kwargs`` and ``name``, or ``None``.
+def shipped_agent(env_id: str = PAPER_ENV) -> Any:
+    """The agent shipped for ``env_id``: the model ``agents/models/<name>`` that the env's
+    training recipe writes (``agents.config.TrainConfig.for_env(env_id).exp_name``:
+    ``residual_ppo`` on ``DrillString-v0``, ``field_agent`` on ``DrillStringField-v0``), or
+    ``None`` when it is not shipped."""
+    from agents import DEFAULT_MODEL_DIR, load_policy
+    from agents.config import TrainConfig
+    from agents.policy import is_model_folder
+
+    folder = DEFAULT_MODEL_DIR / TrainConfig.for_env(env_id).exp_name
+    return load_policy(folder) if is_model_folder(folder) else None
+
+
+def load_agent(loader: Callable[[], Any] | None = None, env_id: str = PAPER_ENV) -> Any:
+    """The shipped agent of ``env_id`` (:func:`shipped_agent`, or ``loader()`` when given): a
+    policy with ``predict``, ``env_kwargs`` and ``name``, or ``None``.
 
     ``None`` when the loader needs a missing package or no model is shipped; a model that fails
     to load is reported on standard error and skipped.
     """
-    if loader is None:
-        from agents import load_default_policy
-
-        loader = load_default_policy
     try:
-        policy = loader()
+        policy = shipped_agent(env_id) if loader is None else loader()
     except ImportError as exc:
         print(f"compare: no agent row ({exc})", file=sys.stderr)
         return None
@@ -719,7 +796,9 @@ DESCRIPTION: Final = """\
 Run each controller on the paper's scenario (WOB 97,347 N, reference bit speed 12 rad/s,
 150 s from rest) under each uncertainty condition and measurement-noise level, score every run
 on the paper's metrics (ISE, IAE, RMSE, RMSD, overshoot, settling time, chattering, stick-slip
-severity), print a table and write compare.csv, compare.json and figures/ into --out.
+severity), print a ranked summary (one line per controller: the means over its runs, lowest
+IAE first) and write every run to compare.md, compare.csv and compare.json, and figures/ into
+--out.
 
 Uncertainty conditions: the paper's parametric-uncertainty conditions. nominal is the plant as
 specified; condition1, condition2 and condition3 raise the pipe damping c_pi, the pipe
@@ -781,10 +860,11 @@ def _parser() -> ArgumentParser:
         "--controllers",
         nargs="+",
         metavar="NAME",
-        type=names_type(controller_names, "controller"),
+        type=controller_type,
         help="controllers to compare, by registered name: "
         + ", ".join(controller_names())
-        + " (default: all, the paper's four first)",
+        + " (default: all, the paper's four first), "
+        + CONTROLLERS_HELP,
     )
     p.add_argument(
         "--conditions",
@@ -839,7 +919,12 @@ def _parser() -> ArgumentParser:
         "inertia J_dt)",
     )
     p.add_argument("--no-plots", action="store_true", help="write no figures")
-    p.add_argument("--no-agent", action="store_true", help="leave out the shipped residual agent")
+    p.add_argument(
+        "--no-agent",
+        action="store_true",
+        help="leave out the env's shipped agent (residual_ppo on DrillString-v0, field_agent "
+        "on DrillStringField-v0)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_sweep_options(
         p,
@@ -856,6 +941,7 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
     parser = _parser()
     args = parser.parse_args(argv)
     controllers = list(args.controllers) if args.controllers else default_controllers()
+    refuse_on_ray(parser.fail, args, controllers)
     try:
         decision_period(args.duration)
     except ValueError:
@@ -883,7 +969,7 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
         depths_m=list(dict.fromkeys(args.depths)),
         controller_model=args.controller_model,
     )
-    agent = None if args.no_agent else load_agent(agent_loader)
+    agent = None if args.no_agent else load_agent(agent_loader, args.env)
     start = time.perf_counter()
     figures = not args.no_plots
     if sweep_requested(args):  # on the sweep runner: Ray, a results database, a resume
@@ -933,12 +1019,21 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
             f"{SCENARIO.reference.value(0.0):g} rad/s, {args.duration:g} s from rest; uncertainty "
             f"reading '{args.reading}', gains '{args.gains}', seed {args.seed}.\n"
         )
-    print(markdown_table(rows))
     keys = FIELD_ROW_KEYS if field else ROW_KEYS
     written = [
         write_csv(rows, out / "compare.csv", keys),
         write_json([{k: r[k] for k in keys} for r in rows], out / "compare.json"),
+        _write_text(markdown_table(rows) + "\n", out / "compare.md"),
     ]
+    per = len(rows) // max(1, len({run_label(r) for r in rows}))
+    print(
+        f"Ranked by mean IAE (rad), lowest first: the means of the paper's metrics over the "
+        f"{per} run{'s' * (per != 1)} of each controller ({len(cases)} "
+        f"{'scenario' if field else 'condition'}{'s' * (len(cases) != 1)} x noise "
+        f"{', '.join(f'{n:g}' for n in noises)} rad/s); settling: mean over the runs that "
+        f"settle. Every run: {out / 'compare.md'} (also .csv, .json).\n"
+    )
+    print(summary_table(rows))
     if not args.no_plots and figures and rows:
         chosen, focus = (
             figure_cases([c.field for c in cases if c.field is not None]) if field else (None, None)

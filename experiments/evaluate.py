@@ -52,6 +52,7 @@ from drill_env.control import controller_names
 from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
 from experiments.arguments import ArgumentParser, check_output_folder, names_type, output_folder
+from experiments.controllers import CONTROLLERS_HELP, controller_type, refuse_on_ray
 from experiments.field import (
     ENV_IDS,
     FIELD_ENV,
@@ -88,6 +89,7 @@ __all__ = [
     "heldout_figures",
     "main",
     "run_scenario",
+    "goal_report",
     "summarize",
     "write_figures",
 ]
@@ -279,6 +281,75 @@ def summarize(
             goal["met"] = not goal["missed"]
             summary["goal"][label] = goal
     return summary
+
+
+def _best_engineered(
+    means: Mapping[str, Mapping[str, float]], label: str, agents: Sequence[str], key: str
+) -> str | None:
+    """The engineered controller with the lowest mean ``key`` (as :func:`summarize` picks it:
+    every label but ``label`` and the agents, run on every scenario)."""
+    engineered = [e for e in means if e != label and e not in agents and "runs" not in means[e]]
+    return min(engineered, key=lambda e: means[e][key], default=None)
+
+
+def goal_report(
+    summary: Mapping[str, Any], agents: Sequence[str], kinds: Mapping[str, str] | None = None
+) -> str:
+    """The goal check of each agent of ``agents`` in plain words: which criterion, the
+    agent's number, the number it is held against and whether it holds.
+
+    ``kinds`` describes each agent (``residual torque on proposed``); :func:`summarize`
+    decides every criterion, this only words them.
+    """
+    base = str(summary["base_controller"])
+    means = summary["means"]
+    lines = [
+        "Goal check. A learned agent's goal is to be the best controller of the set: lower "
+        "mean IAE and lower mean stick-slip severity (over the prone scenarios) than every "
+        f"engineered controller, at the RMSD and chattering of {base}, and in no scenario "
+        f"more than {GOAL_WORST_IAE_RATIO:g} x the IAE of {base}."
+    ]
+    for label in agents:
+        g = summary["goal"].get(label)
+        if g is None:
+            continue
+        m = means[label]
+        best_iae = _best_engineered(means, label, agents, "iae")
+        best_sev = _best_engineered(means, label, agents, "severity_prone")
+        rmsd_allowed = (GOAL_RMSD_RATIO - 1.0) * 100.0
+        checks = [
+            (
+                f"mean IAE {m['iae']:.1f} rad against {g['best_engineered_iae']:.1f} of the "
+                f"best engineered controller ({best_iae})",
+                m["iae"] < g["best_engineered_iae"],
+            ),
+            (
+                f"prone severity {m['severity_prone']:.3f} against "
+                f"{g['best_engineered_severity_prone']:.3f} ({best_sev})",
+                m["severity_prone"] < g["best_engineered_severity_prone"],
+            ),
+            (
+                f"RMSD {(g['rmsd_ratio'] - 1) * 100:+.1f} % of {base}'s "
+                f"(allowed up to {rmsd_allowed:+.0f} %)",
+                g["rmsd_ratio"] <= GOAL_RMSD_RATIO,
+            ),
+            (
+                f"chattering {(g['chattering_ratio'] - 1) * 100:+.1f} % of {base}'s "
+                "(allowed up to +0 %)",
+                g["chattering_ratio"] <= 1.0,
+            ),
+            (
+                f"worst scenario IAE {g['worst_iae_ratio']:.2f} x {base}'s "
+                f"(allowed up to {GOAL_WORST_IAE_RATIO:g} x)",
+                not g["worst_iae_ratio"] > GOAL_WORST_IAE_RATIO,
+            ),
+        ]
+        held = sum(ok for _, ok in checks)
+        kind = f", {kinds[label]}" if kinds and label in kinds else ""
+        verdict = "goal met" if g["met"] else "goal not met"
+        lines.append(f"{label}{kind}: {held} of {len(checks)} criteria hold, {verdict}")
+        lines += [f"  {'holds ' if ok else 'misses'}  {text}" for text, ok in checks]
+    return "\n".join(lines)
 
 
 def versus_rig_loops(summary: Mapping[str, Any], agents: Sequence[str]) -> dict[str, Any]:
@@ -559,10 +630,11 @@ def _parser() -> ArgumentParser:
         nargs="+",
         default=None,
         metavar="NAME",
-        type=names_type(controller_names, "controller"),
+        type=controller_type,
         help="controllers to score beside the agents, by registered name: "
         + ", ".join(controller_names())
-        + " (default: all; an agent's base controller is always added)",
+        + " (default: all; an agent's base controller is always added), "
+        + CONTROLLERS_HELP,
     )
     sets = {name: s for env_sets in SCENARIO_SETS.values() for name, s in env_sets.items()}
     parser.add_argument(
@@ -628,7 +700,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         if agent.env_id != args.env:
             if args.models:
                 parser.error(f"MODEL {path} is for {agent.env_id}, not for {args.env}")
-            print(f"evaluate: {path} is for {agent.env_id}: left out", file=sys.stderr)
+            print(
+                f"evaluate: {path.name} is for {agent.env_id}, left out (drill-gym evaluate "
+                f"--env {agent.env_id} scores it)",
+                file=sys.stderr,
+            )
     paths = [p for a, p in zip(agents, paths, strict=True) if a.env_id == args.env]
     agents = [a for a in agents if a.env_id == args.env]
     labels = [a.name for a in agents]
@@ -657,6 +733,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     controllers = args.controllers
     if controllers is not None:
         controllers = list(dict.fromkeys([*controllers, *base_names]))
+        refuse_on_ray(parser.fail, args, controllers)
     base_label = BASE_CONTROLLER
     bases = base_names
     if field:  # a run's label is its controller and observation mode
@@ -714,16 +791,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     print()
     print(per_scenario_table(rows, list(summary["means"]) if field else keep))
     print()
-    for label, g in summary["goal"].items():
-        if label in agent_labels:
-            print(
-                f"{label}: IAE {(g['iae_ratio'] - 1) * 100:+.1f} %, RMSD "
-                f"{(g['rmsd_ratio'] - 1) * 100:+.1f} %, severity (prone) "
-                f"{(g['severity_prone_ratio'] - 1) * 100:+.1f} %, chattering "
-                f"{(g['chattering_ratio'] - 1) * 100:+.1f} %, worst scenario IAE x"
-                f"{g['worst_iae_ratio']:.2f} vs {summary['base_controller']}: goal "
-                + ("met" if g["met"] else "NOT met (" + "; ".join(g["missed"]) + ")")
-            )
+    kinds = {
+        label: (
+            f"residual torque on {a.env_kwargs['base_controller']}"
+            if a.env_kwargs.get("base_controller")
+            else "direct torque, no base controller"
+        )
+        for label, a in zip(agent_labels, agents, strict=True)
+    }
+    if any(label in summary["goal"] for label in agent_labels):
+        print(goal_report(summary, agent_labels, kinds))
     for agent, loops in summary.get("versus_rig_loops", {}).items():
         for loop, v in loops.items():
             print(

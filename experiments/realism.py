@@ -36,7 +36,7 @@ Beside the break points the study gives what they meet (:func:`loop_numbers`): t
 dead-time and lag margins of the speed loops (:func:`loop_margins` of ``stiff_pi`` and
 ``soft_speed`` on the impedance the string presents to the top drive,
 :func:`chain_impedance`) and the memory of the sliding-mode controllers' observer on surface
-signals. docs/realism.md reports the study run with its defaults.
+signals. docs/reports/realism.md reports the study run with its defaults.
 
 Outputs (``--out``, default ``results/realism``): ``realism.csv`` and ``realism.json`` (one
 row per env, factor value and controller: the means over the scenarios and the mean severity

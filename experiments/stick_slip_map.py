@@ -53,11 +53,11 @@ from drill_env.parameters import PLANT_DT_S, PRESETS
 from drill_env.scenarios import RPM
 from experiments.arguments import (
     ArgumentParser,
-    names_type,
     number_type,
     output_folder,
     seed_option,
 )
+from experiments.controllers import CONTROLLERS_HELP, controller_type, refuse_on_ray
 from experiments.field import (
     ENV_IDS,
     FIELD_ENV,
@@ -590,7 +590,7 @@ def _default(name: str, unit: str = "") -> str:
 
 def _parser() -> ArgumentParser:
     parser = ArgumentParser(prog="drill-gym map", description=DESCRIPTION)
-    controllers = names_type(controller_names, "controller")
+    controllers = controller_type
     parser.add_argument(
         "--controllers",
         nargs="+",
@@ -598,7 +598,7 @@ def _parser() -> ArgumentParser:
         type=controllers,
         metavar="NAME",
         help=f"controllers to map, by registered name: {', '.join(controller_names())} "
-        "(default: stiff_pi, or none when --models are given)",
+        f"(default: stiff_pi, or none when --models are given), {CONTROLLERS_HELP}",
     )
     parser.add_argument(
         "--models",
@@ -755,6 +755,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     level = map_realism(args.env, args.realism)
     if args.controllers is None:
         args.controllers = [] if args.models else ["stiff_pi"]
+    refuse_on_ray(parser.fail, args, args.controllers)
     policies: list[MapPolicy] = []
     if args.models:
         if sweep_requested(args):

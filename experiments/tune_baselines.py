@@ -780,7 +780,7 @@ def write_gains(result: TuneResult, path: Path, command: str) -> tuple[Path, lis
     document = tuned_gains_document(
         entries,
         about="Relative factors of the industry speed loops selected by drill-gym tune "
-        "(experiments/tune_baselines.py, docs/tuned-baselines.md); read by the controllers "
+        "(experiments/tune_baselines.py, docs/reports/tuned-baselines.md); read by the controllers "
         "stiff_pi_tuned, soft_speed_tuned and z_torque_tuned. One entry per plant kind: "
         "DrillStringParameters (tuned on DrillString-v0) and DistributedStringParameters "
         "(tuned on DrillStringField-v0).",
@@ -818,7 +818,7 @@ search ranges (log-spaced):
 
 budget: the defaults run 3 loops x (32 + 16) candidates x 32 episodes of 100 s plus the
 validation (about 515,000 simulated s): about 5 CPU minutes on DrillString-v0 and 14 on
-the field string (docs/tuned-baselines.md gives the measured times).
+the field string (docs/reports/tuned-baselines.md gives the measured times).
 
 examples:
   drill-gym tune --write                                   # DrillString-v0

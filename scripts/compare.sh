@@ -8,5 +8,5 @@ cd "$(dirname "${BASH_SOURCE[0]}")/.."
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 unset NUMBA_CACHE_DIR
 
-bash scripts/setup.sh
+bash scripts/setup.sh  # the core install: the comparison needs no extra
 exec .venv/bin/drill-gym compare "$@"

@@ -8,7 +8,7 @@ cd "$(dirname "${BASH_SOURCE[0]}")/.."
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 unset NUMBA_CACHE_DIR
 
-bash scripts/setup.sh
+bash scripts/setup.sh rl,dev,video,scale,zoo  # the extras the tests import
 
 echo "== ruff check"
 .venv/bin/ruff check .

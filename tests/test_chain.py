@@ -100,8 +100,8 @@ def test_parameter_vector_too_short_is_rejected() -> None:
 
 # ----------------------------------------------------------------- the 4-DOF case (n = 4)
 def test_n4_chain_reproduces_the_four_dof_integrator() -> None:
-    """The 4-DOF plant run as a chain matches drill_env.integration step for step (the SPEC
-    open-loop case, 10 kN m at 97,347 N, which sticks and slips)."""
+    """The 4-DOF plant run as a chain matches drill_env.integration step for step (the open-loop
+    case of docs/specification.md section 1, 10 kN m at 97,347 N, which sticks and slips)."""
     s4, m4 = integrate_constant_torque(PRESETS["zribi2024"], 10_000.0, 97_347.0, 30.0)
     sc, mc = chain_integrate_constant_torque("zribi2024", 10_000.0, 97_347.0, 30.0)
     assert np.count_nonzero(np.diff(m4)) >= 6
@@ -266,7 +266,7 @@ def test_steady_drilling_torque_closed_form(name: str) -> None:
     v = 12.0
     expected = ground * v + t_0 + (t_a - t_0) * math.exp(-xi * v)
     assert steady_drilling_torque_nm(name, WOB_N, v) == pytest.approx(expected, rel=1e-13)
-    if name == "zribi2024":  # SPEC section 2: 13,011.9 N m at 97,347 N
+    if name == "zribi2024":  # docs/specification.md section 2: 13,011.9 N m at 97,347 N
         assert steady_drilling_torque_nm(name, 97_347.0, v) == pytest.approx(13_011.9, abs=0.05)
 
 

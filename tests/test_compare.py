@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import csv
 import json
-import sys
-import types
 from pathlib import Path
 from typing import Any
 
@@ -99,8 +97,14 @@ def test_table_and_noise_levels(tmp_path: Path, capsys: pytest.CaptureFixture[st
     argv = ["--controllers", "asmc", "--noise", "0", "0.1", "--no-plots", *SHORT]
     assert main([*argv, "--out", str(tmp_path)]) == 0
     text = capsys.readouterr().out
-    assert "| controller | condition | noise (rad/s) | ISE | IAE |" in text
-    assert "| asmc | nominal | 0.1 |" in text
+    # The terminal gets the ranked summary: one line per controller, means over its 2 runs.
+    assert "| rank | controller | runs | ISE | IAE |" in text
+    assert "| 1 | asmc | 2 |" in text
+    assert "| asmc | nominal |" not in text
+    # Every run goes to the files, compare.md as the readable table.
+    table = (tmp_path / "compare.md").read_text()
+    assert "| controller | condition | noise (rad/s) | ISE | IAE |" in table
+    assert "| asmc | nominal | 0.1 |" in table
     rows = json.loads((tmp_path / "compare.json").read_text())
     assert [r["noise_std_rad_s"] for r in rows] == [0.0, 0.1]
     assert rows[1]["chattering_nm_per_s"] > 20 * rows[0]["chattering_nm_per_s"]
@@ -162,14 +166,57 @@ def test_command_line_passes_the_agent_loader(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """``drill-gym compare`` looks the agent up in ``agents`` (baselines does not)."""
-    fake = types.ModuleType("agents")
-    fake.load_default_policy = FakeAgent  # type: ignore[attr-defined]
-    monkeypatch.setitem(sys.modules, "agents", fake)
+    asked: list[str] = []
+
+    def shipped(env_id: str) -> FakeAgent:
+        asked.append(env_id)
+        return FakeAgent()
+
+    monkeypatch.setattr(compare, "shipped_agent", shipped)
     argv = ["compare", "--controllers", "proposed", "--noise", "0", "--no-plots"]
     argv += ["--duration", "1", "--conditions", "nominal", "--out", str(tmp_path)]
     assert cli_main(argv) == 0
     rows = json.loads((tmp_path / "compare.json").read_text())
     assert [r["controller"] for r in rows] == ["proposed", "fake_agent"]
+    assert asked == ["DrillString-v0"]
+
+
+@pytest.mark.parametrize(
+    ("env_id", "name"),
+    [("DrillString-v0", "residual_ppo"), ("DrillStringField-v0", "field_agent")],
+)
+def test_the_shipped_agent_of_each_env(env_id: str, name: str) -> None:
+    agent = compare.shipped_agent(env_id)
+    assert agent is not None and agent.name == name and agent.env_id == env_id
+
+
+def _row(controller: str, iae: float, diverged: bool = False, settling: Any = 5.0) -> dict:
+    row: dict[str, Any] = {key: 1.0 for key in compare.SUMMARY_METRICS}
+    row.update(controller=controller, iae=iae, diverged=diverged, settling_time_s=settling)
+    return row
+
+
+def test_ranked_summary() -> None:
+    rows = [
+        _row("a", 30.0),
+        _row("b", 10.0, settling=None),
+        _row("a", 10.0),
+        _row("b", 20.0),
+        _row("c", 1.0, diverged=True),
+        {**_row("d", 40.0), "observation": "surface"},
+    ]
+    summary = compare.ranked_summary(rows)
+    assert [(e["rank"], e["label"]) for e in summary] == [
+        (1, "b"),
+        (2, "a"),
+        (3, "d (surface)"),
+        (4, "c"),  # a diverged run ranks last, whatever its IAE
+    ]
+    assert summary[0]["iae"] == 15.0 and summary[0]["runs"] == 2
+    assert summary[0]["unsettled"] == 1 and summary[0]["settling_time_s"] == 5.0
+    assert summary[3]["diverged"] == 1
+    lines = compare.summary_table(rows).splitlines()
+    assert len(lines) == 2 + 4 and lines[2].startswith("| 1 | b | 2 |")
 
 
 class TestArguments:
@@ -206,3 +253,22 @@ class TestArguments:
     )
     def test_decision_period(self, duration: float, period: float) -> None:
         assert decision_period(duration) == period
+
+
+def test_field_comparison_includes_the_field_agent(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = [
+        "--env", "DrillStringField-v0", "--controllers", "soft_speed", "--depths", "1500",
+        "--conditions", "nominal", "--noise", "0", "--duration", "2", "--observations",
+        "surface", "--no-plots", "--no-progress", "--out", str(tmp_path),
+    ]  # fmt: skip
+    assert main(argv) == 0
+    rows = json.loads((tmp_path / "compare.json").read_text())
+    assert [(r["controller"], r["observation"]) for r in rows] == [
+        ("soft_speed", "surface"),
+        ("soft_speed", "surface"),
+        ("field_agent", "surface"),
+        ("field_agent", "surface"),
+    ]
+    assert "| field_agent (surface) | 2 |" in capsys.readouterr().out

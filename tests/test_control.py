@@ -12,6 +12,7 @@ import pytest
 from numba import carray, cfunc, njit
 
 import drill_env  # noqa: F401  (registers DrillString-v0)
+import drill_env.options
 from baselines import BUILT_IN, COMPILED_LAWS
 from drill_env import control
 from drill_env.control import (
@@ -146,3 +147,90 @@ def test_a_registered_controller_is_found_by_name_in_the_env(
     env.reset(seed=0)
     _, _, _, _, info = env.step(np.zeros(1, dtype=np.float32))
     assert info["base_torque_nm"] > 0
+
+
+# ------------------------------------------------------------------- the named measurement
+def test_measurement_reads_its_signals_by_name_and_by_index() -> None:
+    from drill_env.layout import M_SURFACE_TORQUE, MEASUREMENT_NAMES
+
+    values = np.arange(N_MEASUREMENT, dtype=float)
+    m = control.Measurement(values)
+    assert len(MEASUREMENT_NAMES) == N_MEASUREMENT
+    for k, name in enumerate(MEASUREMENT_NAMES):
+        assert getattr(m, name) == m[k] == values[k] == m.signal(name)
+    assert m.surface_torque_nm == values[M_SURFACE_TORQUE]
+    assert np.array_equal(m[:7], values[:7]) and float(np.sum(m)) == values.sum()
+    with pytest.raises(AttributeError, match="no attribute 'bit_speed'; its signals are "):
+        _ = m.bit_speed
+    with pytest.raises(KeyError, match="'x7' is not a signal of the measurement"):
+        m.signal("x7")
+    with pytest.raises(ValueError, match=r"a measurement has shape \(12,\), got \(7,\)"):
+        control.Measurement(np.zeros(7))
+
+
+def test_a_missing_signal_names_the_keyword_that_provides_it() -> None:
+    channel = drill_env.options.FieldEnvConfig().measurement_channel()
+    missing = control.Measurement.missing_signals(channel)
+    assert "bit_speed_rad_s" in missing and "surface_torque_nm" not in missing
+    assert "telemetry_bit_speed_rad_s" not in missing  # the field env's telemetry
+    m = control.Measurement(np.full(N_MEASUREMENT, np.nan), missing)
+    assert np.isnan(m[6])  # by index: NaN, as before
+    with pytest.raises(control.MissingSignalError, match="observation='state'"):
+        _ = m.bit_speed_rad_s
+    paper = control.Measurement.missing_signals(drill_env.options.EnvConfig().measurement_channel())
+    assert paper == {"telemetry_bit_speed_rad_s", "telemetry_age_s"}
+    with pytest.raises(control.MissingSignalError, match="telemetry_period_s"):
+        _ = control.Measurement(np.zeros(N_MEASUREMENT), paper).telemetry_age_s
+
+
+class _BitSpeedLoop:
+    """A Python controller that reads the bit speed by name."""
+
+    def __init__(self) -> None:
+        self.seen: list[type] = []
+
+    def reset(self) -> None:
+        pass
+
+    def torque(self, measurement: Any, reference_speed_rad_s: float, dt_s: float) -> float:
+        self.seen.append(type(measurement))
+        return 13_000.0 + 2_000.0 * (reference_speed_rad_s - measurement.bit_speed_rad_s)
+
+
+def test_python_controllers_get_the_named_measurement_in_both_envs() -> None:
+    loop = _BitSpeedLoop()
+    env = gym.make("DrillString-v0", randomize=False, base_controller=loop, episode_s=0.1)
+    rollout(env, ZeroAction(), seed=0)
+    assert loop.seen and set(loop.seen) == {control.Measurement}
+    field = gym.make("DrillStringField-v0", randomize=False, base_controller=_BitSpeedLoop())
+    field.reset(seed=0)
+    with pytest.raises(control.MissingSignalError, match="measurement.bit_speed_rad_s .*'state'"):
+        field.step(np.zeros(1, dtype=np.float32))
+    state = gym.make(
+        "DrillStringField-v0", randomize=False, base_controller=_BitSpeedLoop(),
+        observation="state", episode_s=0.05, control_dt_s=0.05,
+    )  # fmt: skip
+    rollout(state, ZeroAction(), seed=0)
+
+
+def test_controller_policy_hands_a_named_measurement_of_what_the_observation_carries() -> None:
+    from baselines import ControllerPolicy
+
+    class Reads:
+        def __init__(self, name: str) -> None:
+            self.name = name
+
+        def reset(self) -> None:
+            pass
+
+        def torque(self, measurement: Any, reference_speed_rad_s: float, dt_s: float) -> float:
+            return 13_000.0 + 0.0 * getattr(measurement, self.name)
+
+    env = gym.make("DrillString-v0", randomize=False, episode_s=0.1)
+    obs, _ = env.reset(seed=0)
+    for name in ("bit_speed_rad_s", "surface_top_drive_speed_rad_s"):
+        action, _ = ControllerPolicy.for_env(Reads(name), env).predict(obs)
+        assert action.shape == (1,)
+    policy = ControllerPolicy.for_env(Reads("surface_torque_nm"), env)
+    with pytest.raises(control.MissingSignalError, match="surface_torque_nm is not available"):
+        policy.predict(obs)

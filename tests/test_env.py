@@ -53,8 +53,9 @@ V_REF = 12.0
 
 
 def make(mode: str = "direct", **kwargs: Any) -> gym.Env[Any, Any]:
-    """``gym.make`` of the env in ``mode`` with extra keywords."""
-    return gym.make(ENV_ID, **MODES[mode], **kwargs)
+    """``gym.make`` of the env in ``mode`` with extra keywords, at a 50 ms decision period
+    unless ``control_dt_s`` is given (the step counts of these tests are written for it)."""
+    return gym.make(ENV_ID, **MODES[mode], **{"control_dt_s": 0.05, **kwargs})
 
 
 def act(value: float) -> np.ndarray:
@@ -64,11 +65,12 @@ def act(value: float) -> np.ndarray:
 # ------------------------------------------------------------------------ registration
 def test_import_registers_env() -> None:
     """Importing ``drill_env`` registers ``DrillString-v0`` without a registered step limit
-    (the env truncates itself); a made env's spec states its own: 2000 decisions by default."""
+    (the env truncates itself); a made env's spec states its own: 1000 decisions by default
+    (100 s at the default 0.1 s decision period)."""
     spec = gym.spec(ENV_ID)
     assert spec.entry_point == "drill_env.env:DrillStringEnv"
     assert spec.max_episode_steps is None
-    assert gym.make(ENV_ID).spec.max_episode_steps == 2000  # type: ignore[union-attr]
+    assert gym.make(ENV_ID).spec.max_episode_steps == 1000  # type: ignore[union-attr]
     made = gym.make(ENV_ID, episode_s=150.0, control_dt_s=0.1)
     assert made.spec.max_episode_steps == 1500  # type: ignore[union-attr]
     assert drill_env.ENV_ID == ENV_ID

@@ -6,7 +6,7 @@ from typing import Any
 
 import pytest
 
-from experiments.evaluate import HELD_OUT, summarize
+from experiments.evaluate import HELD_OUT, goal_report, summarize
 
 
 def test_held_out_set_covers_the_training_ranges() -> None:
@@ -59,6 +59,27 @@ def test_summary_goal_check() -> None:
         "chattering no higher than the base's",
         "IAE at most 1.05 x the base's in every scenario",
     ]
+
+
+def test_goal_report_names_each_criterion_and_its_numbers() -> None:
+    rows = [_row("proposed", "a", 100, 10, 1.0, True), _row("agent", "a", 60, 10.1, 0.5, True)]
+    rows += [_row("proposed", "b", 100, 10, 0.0, False), _row("agent", "b", 80, 10.1, 0.9, False)]
+    rows += [_row("loop", "a", 75, 12, 0.6, True), _row("loop", "b", 75, 12, 0.1, False)]
+    rows += [_row("better", "a", 90, 9, 0.2, True), _row("better", "b", 90, 9, 0.1, False)]
+    rows[1] = _row("agent", "a", 60, 10.1, 0.5, True, chattering=1.5)
+    summary = summarize(rows, agents=["agent"])
+    text = goal_report(summary, ["agent"], {"agent": "residual torque on proposed"})
+    lines = text.splitlines()
+    assert lines[0].startswith("Goal check. A learned agent's goal is to be the best controller")
+    assert lines[1:] == [
+        "agent, residual torque on proposed: 3 of 5 criteria hold, goal not met",
+        "  holds   mean IAE 70.0 rad against 75.0 of the best engineered controller (loop)",
+        "  misses  prone severity 0.500 against 0.200 (better)",
+        "  holds   RMSD +1.0 % of proposed's (allowed up to +1 %)",
+        "  misses  chattering +25.0 % of proposed's (allowed up to +0 %)",
+        "  holds   worst scenario IAE 0.80 x proposed's (allowed up to 1.05 x)",
+    ]
+    assert len(summary["goal"]["agent"]["missed"]) == 2
 
 
 def test_corner_set_lies_at_or_beyond_the_edges_of_the_training_randomisation() -> None:

@@ -378,12 +378,12 @@ def test_evaluate_picks_the_field_model_only_on_its_env(
         == 0
     )
     captured = capsys.readouterr()
-    assert "residual_ppo is for DrillString-v0: left out" in captured.err
+    assert "residual_ppo is for DrillString-v0, left out" in captured.err
     assert "| field_agent (surface) |" in captured.out
     paper = ["--scenarios", "h01", "--controllers", "proposed", "--no-plots", "--no-progress"]
     assert evaluate_main([*paper, "--out", str(tmp_path / "paper")]) == 0
     captured = capsys.readouterr()
-    assert "field_agent is for DrillStringField-v0: left out" in captured.err
+    assert "field_agent is for DrillStringField-v0, left out" in captured.err
     assert "field_agent" not in captured.out
 
 

@@ -288,7 +288,7 @@ def test_field_evaluate_command_leaves_out_models_of_the_other_env(
     ]  # fmt: skip
     assert evaluate.main(argv) == 0
     out = capsys.readouterr()
-    assert "is for DrillString-v0: left out" in out.err
+    assert "is for DrillString-v0, left out" in out.err
     assert "| stiff_pi (surface) |" in out.out
     rows = json.loads((tmp_path / "heldout.json").read_text())
     shipped = [evaluate.load_policy(p) for p in evaluate.shipped_models()]

@@ -12,7 +12,7 @@ from drill_env.scenarios import Scenario, SpeedProfile, WobProfile, spawn_genera
 
 def test_defaults() -> None:
     config = EnvConfig()
-    assert config.substeps == 50 and config.max_steps == 2000 and config.duration_s == 100.0
+    assert config.substeps == 100 and config.max_steps == 1000 and config.duration_s == 100.0
     assert config.torque_limits == DEFAULT_TORQUE_LIMITS and config.torque_scale_nm == 50_000.0
     assert not config.residual and config.randomize
 
@@ -85,3 +85,30 @@ def test_realism_levels_are_the_defaults_of_the_two_envs() -> None:
         FieldEnvConfig(**realism_keywords(level))
     with pytest.raises(ValueError, match=r"realism = 'lab' is not a known level: allowed"):
         realism_keywords("lab")
+
+
+@pytest.mark.parametrize(
+    ("config_type", "model"),
+    [("EnvConfig", "residual_ppo"), ("FieldEnvConfig", "field_agent")],
+)
+def test_the_defaults_are_the_shipped_agents_recipe(config_type: str, model: str) -> None:
+    """Plain ``gym.make`` with a base controller trains as the shipped agent did: its decision
+    period, residual scale and reward weights (read from its config.json)."""
+    import json
+    from pathlib import Path
+
+    from drill_env import options
+
+    recorded = json.loads(
+        (
+            Path(__file__).resolve().parents[1] / "agents" / "models" / model / "config.json"
+        ).read_text()
+    )
+    config = getattr(options, config_type)()
+    for key in ("control_dt_s", "residual_scale_nm", "min_torque_nm", "max_torque_nm"):
+        assert getattr(config, key) == recorded["env_kwargs"][key], key
+    train = recorded["train_config"]
+    weights = config.reward_weights
+    for field in ("tracking", "chattering", "chattering_scale_nm", "stuck", "torque", "residual"):
+        assert getattr(weights, field) == train[f"reward_{field}"], field
+    assert config.noise_std_rad_s == train["noise_std_rad_s"]

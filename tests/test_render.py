@@ -295,9 +295,9 @@ def test_human_mode_shows_a_window() -> None:
 def test_metadata_declares_render_modes_and_fps() -> None:
     """Both modes are declared; render_fps is one frame per decision (real-time video)."""
     assert DrillStringEnv.metadata["render_modes"] == ["human", "rgb_array"]
-    assert DrillStringEnv.metadata["render_fps"] == 20
-    env = make(control_dt_s=0.1)
-    assert env.metadata["render_fps"] == pytest.approx(10.0)
+    assert DrillStringEnv.metadata["render_fps"] == 10  # the default 0.1 s decision period
+    env = make(control_dt_s=0.05)
+    assert env.metadata["render_fps"] == pytest.approx(20.0)
     assert env.render_mode == "rgb_array"
     assert "rgb_array" in env.metadata["render_modes"]
 
@@ -340,7 +340,7 @@ def test_record_video(tmp_path: Path) -> None:
     from gymnasium.wrappers import RecordVideo
 
     env = RecordVideo(
-        make(episode_s=2.0, max_episode_steps=-1),
+        make(episode_s=2.0, control_dt_s=0.05, max_episode_steps=-1),
         str(tmp_path / "videos"),
         episode_trigger=lambda episode: episode == 0,
     )

@@ -173,9 +173,10 @@ def test_surface_noise_is_held_with_the_sample() -> None:
 
 
 FEATURES = {
-    "DrillStringField-v0": {"base_controller": "proposed", "episode_s": 3.0},
+    "DrillStringField-v0": {"base_controller": "proposed", "episode_s": 3.0, "control_dt_s": 0.05},
     "DrillString-v0": {
         "base_controller": "proposed", "observation": "surface", "episode_s": 3.0,
+        "control_dt_s": 0.05,
         "torque_noise_std_nm": 100.0, "sensor_period_s": 0.005, "telemetry_period_s": 0.4,
         "telemetry_delay_s": 0.6, "telemetry_noise_std_rad_s": 0.2,
         "actuator_dead_time_s": 0.01, "actuator_lag_s": 0.03,

@@ -4,7 +4,8 @@ At each operating point P1-P4 of ``drill_env.coupled.STANDARD_POINTS`` (RGD-A bi
 ``field_2500m`` string has its top drive held at ``Omega_0`` and the applied force ``W_0`` at
 its top, from steady drilling with the bit at ``0.9 Omega_0``; the features over ``[100, 400]
 s`` are printed beside the lumped model's (``drill_env.coupled.standard_run``). Run:
-``OMP_NUM_THREADS=1 .venv/bin/python examples/field_coupled_points.py`` (about 2 minutes).
+``OMP_NUM_THREADS=1 .venv/bin/python -m experiments.field_coupled_points`` (about 1.5 min of
+CPU).
 """
 
 from __future__ import annotations

@@ -1,0 +1,218 @@
+"""The bit-side torsional model that ``drill-gym calibrate`` fits to a measured log
+(docs/calibration.md section 2), as a pure compiled simulator.
+
+The top drive's measured speed ``w_t(t)`` is a kinematic boundary. One spring-damper (stiffness
+``k``, damping ``c``) joins it to the bit (inertia ``J``), on which the rock acts:
+
+    twist'  = w_t - w_b
+    J w_b'  = T_e - T_bit,      T_e = k twist + c (w_t - w_b)
+
+The torque on bit ``T_bit`` follows one of three nested friction families:
+
+* ``karnopp``: the project's law (docs/specification.md section 1) with a zero-width stick
+  band: a stuck bit holds ``|T_e| <= T_a`` (``T_bit = T_e``); a slipping one feels
+  ``sign(w_b) [T_0 + (T_a - T_0) exp(-xi |w_b|)]``.
+* ``stribeck_viscous``: the same plus a viscous term ``c_v w_b``.
+* ``memory``: the Stribeck term is a function of a lagged speed ``v`` with
+  ``tau v' = |w_b| - v`` (frictional memory): the torque on bit is larger while the bit
+  accelerates than while it decelerates at the same speed, so the torque-speed plot draws a
+  loop, which no single-valued law can.
+
+With a measured weight on bit the two friction torques scale with it: ``T_a = a_a WOB`` and
+``T_0 = a_0 WOB`` (``a = mu R``, in m). The simulator steps every sample interval in
+``substeps`` equal steps (semi-implicit Euler, the boundary speed interpolated linearly),
+detects the stops of the bit inside a step, and returns the bit speed and torque on bit at
+the log's sample times.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Final
+
+import numpy as np
+import numpy.typing as npt
+from numba import njit
+
+__all__ = [
+    "FAMILIES",
+    "FAMILY_CODES",
+    "MAX_SUBSTEPS",
+    "N_MODEL_PARAMS",
+    "P_A0",
+    "P_AA",
+    "P_C",
+    "P_CV",
+    "P_J",
+    "P_K",
+    "P_TAU",
+    "P_XI",
+    "simulate_bit",
+    "substeps_for",
+]
+
+FAMILIES: Final = ("karnopp", "stribeck_viscous", "memory")
+"""Friction families, simplest first; each contains the one before it."""
+FAMILY_CODES: Final = {name: i for i, name in enumerate(FAMILIES)}
+"""Family name -> integer code of the compiled simulator."""
+
+P_J, P_K, P_C, P_AA, P_A0, P_XI, P_CV, P_TAU = range(8)
+"""Indices of the model parameter vector: bit inertia (kg m^2), stiffness (N m/rad), damping
+(N m s/rad), static and sliding friction (N m, or m per N of WOB), Stribeck decline rate
+(s/rad), viscous bit friction (N m s/rad), friction memory time (s)."""
+N_MODEL_PARAMS: Final = 8
+"""Length of the model parameter vector."""
+STEPS_PER_PERIOD: Final = 40_000
+"""The simulator's step is at most this fraction of the string's natural period."""
+MAX_SUBSTEPS: Final = 2000
+"""Most steps per sample interval (a bound on the cost of a simulation)."""
+
+
+def substeps_for(p: npt.NDArray[np.float64], sample_period_s: float) -> int:
+    """Steps per sample interval: at least :data:`STEPS_PER_PERIOD` per natural period
+    ``2 pi sqrt(J/k)``, and a step below ``J / (10 c)`` and ``tau / 4``; at most
+    :data:`MAX_SUBSTEPS`."""
+    period = 2.0 * math.pi * math.sqrt(p[P_J] / p[P_K])
+    h = period / STEPS_PER_PERIOD
+    if p[P_C] + p[P_CV] > 0:
+        h = min(h, 0.1 * p[P_J] / (p[P_C] + p[P_CV]))
+    if p[P_TAU] > 0:
+        h = min(h, 0.25 * p[P_TAU])
+    return max(1, min(MAX_SUBSTEPS, int(math.ceil(sample_period_s / h))))
+
+
+@njit(cache=True)
+def _simulate(time_s, top_speed, wob, use_wob, family, p, twist0, speed0, substeps, out_speed, out_torque, out_stuck):  # fmt: skip
+    n = time_s.shape[0]
+    j_bit = p[0]
+    k = p[1]
+    c = p[2]
+    a_a = p[3]
+    a_0 = p[4]
+    xi = p[5]
+    c_v = p[6] if family >= 1 else 0.0
+    tau = p[7] if family >= 2 else 0.0
+    twist = twist0
+    w = speed0
+    v = abs(speed0)
+    direction = 0
+    # Stuck at the start when the bit is (nearly) at rest and the string cannot move it.
+    t_e0 = k * twist + c * (top_speed[0] - w)
+    scale0 = wob[0] if use_wob else 1.0
+    if abs(w) < 1e-9 and abs(t_e0) <= a_a * scale0:
+        direction = 0
+        w = 0.0
+    else:
+        direction = 1 if (w > 0 or (w == 0 and t_e0 > 0)) else -1
+    out_speed[0] = w
+    out_stuck[0] = direction == 0
+    if direction == 0:
+        out_torque[0] = t_e0
+    else:
+        out_torque[0] = direction * (a_0 + (a_a - a_0) * math.exp(-xi * v)) * scale0 + c_v * w
+    for i in range(n - 1):
+        dt = time_s[i + 1] - time_s[i]
+        h = dt / substeps
+        wt0 = top_speed[i]
+        dwt = (top_speed[i + 1] - wt0) / substeps
+        s0 = wob[i] if use_wob else 1.0
+        ds = ((wob[i + 1] - wob[i]) / substeps) if use_wob else 0.0
+        t_bit = 0.0
+        for s in range(substeps):
+            wt_a = wt0 + dwt * s
+            wt_b = wt_a + dwt
+            scale = s0 + ds * (s + 0.5)
+            t_a = a_a * scale
+            t_0 = a_0 * scale
+            t_e = k * twist + c * (wt_a - w)
+            if direction == 0:
+                if abs(t_e) <= t_a:
+                    t_bit = t_e
+                    twist += h * 0.5 * (wt_a + wt_b)
+                    if tau > 0:
+                        v += (0.0 - v) * (1.0 - math.exp(-h / tau))
+                    else:
+                        v = 0.0
+                    continue
+                direction = 1 if t_e > 0 else -1
+            slip = direction * (t_0 + (t_a - t_0) * math.exp(-xi * v))
+            # Damping implicit for stability: J (w1 - w) = h (k twist + c (wt - w1) - slip - c_v w1).
+            w1 = (j_bit * w + h * (k * twist + c * wt_b - slip)) / (j_bit + h * (c + c_v))
+            if w1 * direction <= 0.0:
+                # The bit stops inside the step: stick if the string cannot turn it.
+                w1 = 0.0
+                t_e1 = k * twist + c * wt_b
+                if abs(t_e1) <= t_a:
+                    direction = 0
+                    t_bit = t_e1
+                else:
+                    direction = 1 if t_e1 > 0 else -1
+                    t_bit = slip
+            else:
+                t_bit = slip + c_v * w1
+            twist += h * (0.5 * (wt_a + wt_b) - w1)
+            w = w1
+            if tau > 0:
+                v += (abs(w) - v) * (1.0 - math.exp(-h / tau))
+            else:
+                v = abs(w)
+        if direction == 0:
+            t_bit = k * twist + c * top_speed[i + 1]
+            scale_end = wob[i + 1] if use_wob else 1.0
+            if abs(t_bit) > a_a * scale_end:
+                t_bit = a_a * scale_end if t_bit > 0 else -a_a * scale_end
+        out_speed[i + 1] = w
+        out_torque[i + 1] = t_bit
+        out_stuck[i + 1] = direction == 0
+        if not (abs(w) < 1e9 and abs(twist) < 1e9):
+            for m in range(i + 2, n):
+                out_speed[m] = np.nan
+                out_torque[m] = np.nan
+                out_stuck[m] = False
+            return False
+    return True
+
+
+def simulate_bit(
+    time_s: npt.NDArray[np.float64],
+    top_speed_rad_s: npt.NDArray[np.float64],
+    p: npt.NDArray[np.float64],
+    family: str,
+    twist0_rad: float,
+    speed0_rad_s: float,
+    wob_n: npt.NDArray[np.float64] | None = None,
+    substeps: int | None = None,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
+    """Simulate the bit driven by a measured top-drive speed.
+
+    Args:
+        time_s: Sample times, s, shape ``(n,)``, strictly increasing.
+        top_speed_rad_s: Top-drive speed at those times, rad/s, shape ``(n,)``.
+        p: Model parameter vector, shape ``(N_MODEL_PARAMS,)`` (``P_*`` indices).
+        family: One of :data:`FAMILIES`.
+        twist0_rad: Twist of the string at ``time_s[0]``, rad.
+        speed0_rad_s: Bit speed at ``time_s[0]``, rad/s (0: the bit may start stuck).
+        wob_n: Weight on bit, N, shape ``(n,)``; with it the friction parameters are per
+            newton of WOB (m), without it in N m.
+        substeps: Steps per sample interval (default :func:`substeps_for`).
+
+    Returns:
+        ``(bit_speed_rad_s, bit_torque_nm, stuck)`` at the sample times, each shape ``(n,)``;
+        NaN after a divergence (speed or twist beyond 1e9).
+    """
+    t = np.ascontiguousarray(time_s, dtype=np.float64)
+    top = np.ascontiguousarray(top_speed_rad_s, dtype=np.float64)
+    params = np.ascontiguousarray(p, dtype=np.float64)
+    if family not in FAMILY_CODES:
+        raise ValueError(f"family = {family!r} is not known: allowed {', '.join(FAMILIES)}")
+    n_sub = substeps or substeps_for(params, float(np.median(np.diff(t))))
+    use_wob = wob_n is not None
+    wob = np.ascontiguousarray(wob_n if use_wob else np.zeros(1), dtype=np.float64)
+    speed = np.empty_like(t)
+    torque = np.empty_like(t)
+    stuck = np.empty(t.shape, dtype=np.bool_)
+    _simulate(
+        t, top, wob, use_wob, FAMILY_CODES[family], params, float(twist0_rad),
+        float(speed0_rad_s), int(n_sub), speed, torque, stuck,
+    )  # fmt: skip
+    return speed, torque, stuck

@@ -1,0 +1,391 @@
+"""A calibrated plant file (``plant.json``, docs/calibration.md section 3): read with a schema
+check, written without pickles, and turned into a plant the environments run.
+
+The file is plain JSON: ``format`` (:data:`PLANT_FORMAT`), ``family`` (a friction family of
+:mod:`drill_env.bit_model`), ``uses_wob``, ``parameters`` (name -> value, unit, whether the
+data identified it, its relative standard deviation, a note), ``initial_twist_rad``, the
+``window`` and ``log`` it was fitted on, the ``fit`` settings and numbers, and optional
+``top_drive`` (the identified speed loop of the top drive). Nothing read becomes code or a
+path.
+
+:func:`drill_string_parameters` maps the plant onto the 4-DOF ``DrillString-v0`` plant and
+:func:`env_keywords` gives the keywords of ``gym.make`` that follow from it (torque limits,
+reference speed, WOB, noise), so that controllers run on a twin of the rig.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Final
+
+import numpy as np
+import numpy.typing as npt
+
+from drill_env.bit_model import (
+    FAMILIES,
+    N_MODEL_PARAMS,
+    P_A0,
+    P_AA,
+    P_C,
+    P_CV,
+    P_J,
+    P_K,
+    P_TAU,
+    P_XI,
+)
+from drill_env.parameters import PLANT_DT_S, DrillStringParameters
+
+__all__ = [
+    "MODEL_PARAMETERS",
+    "PLANT_FORMAT",
+    "CalibratedPlant",
+    "FittedParameter",
+    "drill_string_parameters",
+    "env_keywords",
+    "load_plant",
+    "parameter_unit",
+]
+
+PLANT_FORMAT: Final = "drill-string-gym/calibrated-plant/1"
+"""The ``format`` of every plant file this version reads and writes."""
+MAX_PLANT_BYTES: Final = 1 << 20
+"""Largest plant file read, bytes."""
+
+MODEL_PARAMETERS: Final = {
+    "bit_inertia": (P_J, "kg m^2"),
+    "stiffness": (P_K, "N m/rad"),
+    "damping": (P_C, "N m s/rad"),
+    "static_friction": (P_AA, "N m"),
+    "sliding_friction": (P_A0, "N m"),
+    "stribeck_rate": (P_XI, "s/rad"),
+    "viscous_friction": (P_CV, "N m s/rad"),
+    "memory_time": (P_TAU, "s"),
+}
+"""Name of each model parameter -> (index in the model vector, unit without WOB)."""
+FAMILY_PARAMETERS: Final = {
+    "karnopp": tuple(list(MODEL_PARAMETERS)[:6]),
+    "stribeck_viscous": tuple(list(MODEL_PARAMETERS)[:7]),
+    "memory": tuple(MODEL_PARAMETERS),
+}
+"""The parameters each friction family has."""
+
+
+def parameter_unit(name: str, uses_wob: bool) -> str:
+    """Unit of the parameter ``name``: the friction torques are in m (per N of WOB) with WOB."""
+    if uses_wob and name in ("static_friction", "sliding_friction"):
+        return "m"
+    return MODEL_PARAMETERS[name][1]
+
+
+@dataclass(frozen=True)
+class FittedParameter:
+    """One parameter of a calibrated plant.
+
+    Attributes:
+        value: Its value, in ``unit``.
+        unit: SI unit.
+        identified: Whether the data determined it (False: fixed, ``note`` says at what).
+        relative_std: Relative standard deviation of the fitted value (Laplace), or None.
+        note: How it was obtained.
+    """
+
+    value: float
+    unit: str
+    identified: bool = True
+    relative_std: float | None = None
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class CalibratedPlant:
+    """A bit-side plant fitted to a log (see the module docstring for the file)."""
+
+    family: str
+    uses_wob: bool
+    parameters: Mapping[str, FittedParameter]
+    initial_twist_rad: float = 0.0
+    window_s: tuple[float, float] = (0.0, 0.0)
+    log: str = ""
+    fit: Mapping[str, Any] = field(default_factory=dict)
+    top_drive: Mapping[str, float] | None = None
+    operating_point: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.family not in FAMILIES:
+            raise ValueError(
+                f"family = {self.family!r} is not known: allowed {', '.join(FAMILIES)}"
+            )
+        expected = FAMILY_PARAMETERS[self.family]
+        missing = [n for n in expected if n not in self.parameters]
+        extra = [n for n in self.parameters if n not in expected]
+        if missing or extra:
+            raise ValueError(
+                f"parameters of family {self.family!r}: missing {missing}, unknown {extra}: "
+                f"expected {', '.join(expected)}"
+            )
+        for name, p in self.parameters.items():
+            if not (isinstance(p.value, (int, float)) and math.isfinite(p.value)):
+                raise ValueError(f"parameters.{name}.value = {p.value!r} is not a finite number")
+            low_zero = name in ("damping", "viscous_friction", "stribeck_rate")
+            if p.value < 0 or (not low_zero and p.value <= 0):
+                raise ValueError(
+                    f"parameters.{name}.value = {p.value!r} is out of range: allowed "
+                    f"{'>= 0' if low_zero else '> 0'}"
+                )
+            if p.unit != parameter_unit(name, self.uses_wob):
+                raise ValueError(
+                    f"parameters.{name}.unit = {p.unit!r}: expected "
+                    f"{parameter_unit(name, self.uses_wob)!r}"
+                )
+        a_a = self.parameters["static_friction"].value
+        a_0 = self.parameters["sliding_friction"].value
+        if a_0 > a_a:
+            raise ValueError(
+                f"parameters.sliding_friction.value = {a_0!r} is out of range: allowed <= "
+                f"static_friction = {a_a!r}"
+            )
+
+    def model_vector(self) -> npt.NDArray[np.float64]:
+        """The model parameter vector of :func:`drill_env.bit_model.simulate_bit`."""
+        p = np.zeros(N_MODEL_PARAMS)
+        for name, fp in self.parameters.items():
+            p[MODEL_PARAMETERS[name][0]] = fp.value
+        return p
+
+    def value(self, name: str) -> float:
+        """The value of parameter ``name`` (0 for a term its family does not have)."""
+        if name in self.parameters:
+            return float(self.parameters[name].value)
+        if name in MODEL_PARAMETERS:
+            return 0.0
+        raise ValueError(f"unknown parameter {name!r}: allowed {', '.join(MODEL_PARAMETERS)}")
+
+    def to_json(self) -> dict[str, Any]:
+        """The plant as the JSON object of the file."""
+        return {
+            "format": PLANT_FORMAT,
+            "family": self.family,
+            "uses_wob": self.uses_wob,
+            "parameters": {
+                n: {
+                    "value": p.value,
+                    "unit": p.unit,
+                    "identified": p.identified,
+                    "relative_std": p.relative_std,
+                    "note": p.note,
+                }
+                for n, p in self.parameters.items()
+            },
+            "initial_twist_rad": self.initial_twist_rad,
+            "window_s": list(self.window_s),
+            "log": self.log,
+            "fit": dict(self.fit),
+            "top_drive": None if self.top_drive is None else dict(self.top_drive),
+            "operating_point": dict(self.operating_point),
+        }
+
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write the plant file (JSON; NaN written as null)."""
+        p = Path(path)
+        p.write_text(json.dumps(_clean(self.to_json()), indent=1) + "\n")
+        return p
+
+
+def _clean(value: Any) -> Any:
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, Mapping):
+        return {k: _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    return value
+
+
+def _field(data: Mapping[str, Any], name: str, kinds: tuple[type, ...], where: str) -> Any:
+    if name not in data:
+        raise ValueError(f"{where}: missing field {name!r}")
+    value = data[name]
+    if not isinstance(value, kinds) or isinstance(value, bool) and bool not in kinds:
+        names = "/".join(k.__name__ for k in kinds)
+        raise ValueError(f"{where}.{name} = {value!r} is not {names}")
+    return value
+
+
+def plant_from_json(data: Any, where: str = "plant") -> CalibratedPlant:
+    """Check the JSON object of a plant file against the schema and build the plant."""
+    if not isinstance(data, Mapping):
+        raise ValueError(f"{where}: expected a JSON object, got {type(data).__name__}")
+    known = {
+        "format", "family", "uses_wob", "parameters", "initial_twist_rad", "window_s", "log",
+        "fit", "top_drive", "operating_point",
+    }  # fmt: skip
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise ValueError(f"{where}: unknown field(s) {unknown}: allowed {sorted(known)}")
+    fmt = _field(data, "format", (str,), where)
+    if fmt != PLANT_FORMAT:
+        raise ValueError(f"{where}.format = {fmt!r}: this version reads {PLANT_FORMAT!r}")
+    number = (int, float)
+    parameters = {}
+    raw = _field(data, "parameters", (dict,), where)
+    for name, entry in raw.items():
+        if name not in MODEL_PARAMETERS:
+            raise ValueError(
+                f"{where}.parameters: unknown parameter {name!r}: allowed "
+                f"{', '.join(MODEL_PARAMETERS)}"
+            )
+        w = f"{where}.parameters.{name}"
+        if not isinstance(entry, Mapping):
+            raise ValueError(f"{w}: expected an object with value and unit")
+        rel = entry.get("relative_std")
+        if rel is not None and (not isinstance(rel, number) or isinstance(rel, bool)):
+            raise ValueError(f"{w}.relative_std = {rel!r} is not a number or null")
+        note = entry.get("note", "")
+        if not isinstance(note, str):
+            raise ValueError(f"{w}.note = {note!r} is not text")
+        parameters[name] = FittedParameter(
+            float(_field(entry, "value", number, w)),
+            _field(entry, "unit", (str,), w),
+            bool(_field(entry, "identified", (bool,), w)),
+            None if rel is None else float(rel),
+            note,
+        )
+    window = _field(data, "window_s", (list,), where)
+    if len(window) != 2 or not all(isinstance(v, number) for v in window):
+        raise ValueError(f"{where}.window_s = {window!r} is not a pair of numbers")
+    top = data.get("top_drive")
+    if top is not None:
+        if not isinstance(top, Mapping) or not all(
+            isinstance(v, number) and math.isfinite(v) for v in top.values()
+        ):
+            raise ValueError(f"{where}.top_drive = {top!r} is not an object of numbers")
+        top = {str(k): float(v) for k, v in top.items()}
+    operating = data.get("operating_point", {})
+    if not isinstance(operating, Mapping) or not all(
+        isinstance(v, number) for v in operating.values()
+    ):
+        raise ValueError(f"{where}.operating_point = {operating!r} is not an object of numbers")
+    fit = data.get("fit", {})
+    if not isinstance(fit, Mapping):
+        raise ValueError(f"{where}.fit = {fit!r} is not an object")
+    log = data.get("log", "")
+    if not isinstance(log, str):
+        raise ValueError(f"{where}.log = {log!r} is not text")
+    return CalibratedPlant(
+        family=_field(data, "family", (str,), where),
+        uses_wob=bool(_field(data, "uses_wob", (bool,), where)),
+        parameters=parameters,
+        initial_twist_rad=float(_field(data, "initial_twist_rad", number, where)),
+        window_s=(float(window[0]), float(window[1])),
+        log=log,
+        fit=dict(fit),
+        top_drive=top,
+        operating_point={str(k): float(v) for k, v in operating.items()},
+    )
+
+
+def load_plant(path: str | os.PathLike[str]) -> CalibratedPlant:
+    """Read and schema-check a plant file; ``ValueError`` naming the bad field otherwise."""
+    p = Path(path)
+    size = os.stat(p).st_size
+    if size > MAX_PLANT_BYTES:
+        raise ValueError(f"plant file {str(p)!r} is {size} bytes: allowed {MAX_PLANT_BYTES}")
+    try:
+        data = json.loads(p.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"plant file {str(p)!r} is not JSON: {exc}") from None
+    return plant_from_json(data, where=p.name)
+
+
+MAP_INERTIA_FRACTION: Final = 0.05
+"""Pipe and collar inertias of the 4-DOF map, as a fraction of the bit inertia each."""
+MAP_TOP_INERTIA_FACTOR: Final = 5.0
+"""Top-drive inertia of the 4-DOF map (when the plant has no identified top drive), in bit
+inertias."""
+
+
+def drill_string_parameters(
+    plant: CalibratedPlant, wob_n: float | None = None
+) -> DrillStringParameters:
+    """The calibrated plant as 4-DOF ``DrillString-v0`` parameters.
+
+    The string's stiffness ``k`` becomes three equal springs in series (``3 k`` each) joined by
+    pipe and collar inertias of :data:`MAP_INERTIA_FRACTION` bit inertias (the bit-side model
+    has none; they set modes far above the stick-slip one); its damping ``c`` three dampers of
+    ``3 c``. The friction maps exactly for ``karnopp`` and ``stribeck_viscous`` (``R`` = 1 m,
+    so ``mu = a`` with WOB; without WOB ``mu R WOB`` = the torque at ``wob_n`` = 1 N unless
+    ``wob_n`` is given); a ``memory`` plant loses its memory time (the compiled 4-DOF kernel
+    has no friction state): its lag is dropped and the rest kept. The top drive is the
+    identified one (``top_drive``) or :data:`MAP_TOP_INERTIA_FACTOR` bit inertias with no
+    damping to ground.
+    """
+    j = plant.value("bit_inertia")
+    k = plant.value("stiffness")
+    c = plant.value("damping")
+    wob = 1.0 if plant.uses_wob or wob_n is None else float(wob_n)
+    a_a = plant.value("static_friction") / wob
+    a_0 = plant.value("sliding_friction") / wob
+    top = plant.top_drive or {}
+    return DrillStringParameters(
+        J_dt=float(top.get("inertia_kg_m2", MAP_TOP_INERTIA_FACTOR * j)),
+        J_pi=MAP_INERTIA_FRACTION * j,
+        J_co=MAP_INERTIA_FRACTION * j,
+        J_bi=j,
+        c_dt=float(top.get("damping_nm_s_rad", 0.0)),
+        c_pi=3 * c,
+        c_co=3 * c,
+        c_bi=3 * c,
+        c_bit=plant.value("viscous_friction"),
+        k_pi=3 * k,
+        k_co=3 * k,
+        k_bi=3 * k,
+        R=1.0,
+        mu_a=a_a,
+        mu_0=a_0,
+        xi=plant.value("stribeck_rate"),
+        Dw=1e-3 * max(1.0, plant.operating_point.get("mean_bit_speed_rad_s", 1.0)),
+    )
+
+
+def env_keywords(plant: CalibratedPlant, plant_dt_s: float = PLANT_DT_S) -> dict[str, Any]:
+    """Keywords of ``gym.make("DrillString-v0", **keywords)`` for a twin of the rig.
+
+    * ``parameters``: :func:`drill_string_parameters`.
+    * ``wob_n``: the window's mean WOB (1 N without WOB, the friction then being in N m).
+    * ``reference_speed_rad_s``: the window's mean top-drive speed.
+    * torque limits: ``[0, 3 T_a]`` with ``T_a`` the static torque at that WOB;
+      ``residual_scale_nm``: ``0.5 T_a``.
+    * ``noise_std_rad_s``: the measured bit speed's noise (the log's high-frequency part),
+      floored at 0.1 % of the reference speed.
+    * ``randomize``: False (the calibrated plant, not the paper's ranges).
+
+    ``ValueError`` if a stiff map does not fit the env's ``plant_dt_s`` (the highest mode of the
+    map must stay below ``1 / plant_dt_s``).
+    """
+    params = drill_string_parameters(plant)
+    op = plant.operating_point
+    wob = float(op.get("mean_wob_n", 1.0)) if plant.uses_wob else 1.0
+    t_a = params.static_torque_nm(wob)
+    highest = math.sqrt(2 * 3 * plant.value("stiffness") / (MAP_INERTIA_FRACTION * params.J_bi))
+    if highest * plant_dt_s > 2.0:
+        raise ValueError(
+            f"the calibrated plant's 4-DOF map has a mode at {highest:.4g} rad/s, too fast for "
+            f"the env's plant step {plant_dt_s} s (allowed below {2.0 / plant_dt_s:g} rad/s)"
+        )
+    reference = float(op.get("mean_top_speed_rad_s", 1.0))
+    noise = max(float(op.get("bit_speed_noise_rad_s", 0.0)), 1e-3 * abs(reference))
+    return {
+        "parameters": params,
+        "randomize": False,
+        "wob_n": wob,
+        "reference_speed_rad_s": reference,
+        "min_torque_nm": 0.0,
+        "max_torque_nm": 3.0 * t_a,
+        "residual_scale_nm": 0.5 * t_a,
+        "noise_std_rad_s": noise,
+    }

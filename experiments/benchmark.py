@@ -1,0 +1,1064 @@
+"""``drill-gym benchmark [POLICY ...]``: any controller or agent scored on fixed, versioned
+scenario suites, with interquartile means, stratified-bootstrap intervals and performance
+profiles.
+
+A *suite* is data: one JSON file ``experiments/suites/NAME-vVERSION.json`` listing its env, its
+reference controller, the episode length, the noise and every scenario with its reset seeds
+(:func:`load_suite` reads and checks it). A shipped suite is never edited: a change is a new
+file with the next version, and ``tests/test_benchmark.py`` pins the SHA-256 of each shipped
+file's content (:func:`content_hash`). The shipped suites:
+
+* ``heldout-v1``: the held-out set of ``DrillString-v0`` (h01-h20, :data:`experiments.heldout.HELD_OUT`);
+* ``corners-v1``: its corner set (c01-c16, :data:`experiments.heldout.CORNERS`);
+* ``field-v1``: the held-out set of ``DrillStringField-v0`` (f01-f16,
+  :data:`experiments.heldout.FIELD_HELD_OUT`);
+* ``deep-v1``: deep strings on ``DrillStringField-v0`` (the distributed presets at 4-6 km).
+
+Each scenario runs with five reset seeds (they drive the noise; the first one is the seed of
+``drill-gym evaluate``). Every run goes through the one scoring path
+(:func:`experiments.field.run_on` and :func:`drill_env.evaluation.episode_metrics`): a
+controller as the env's ``base_controller`` with a zero residual, an agent with its own env
+keywords. On the field suites a speed loop runs on the rig's surface signals (the suite's
+``observation``); the paper's sliding-mode controllers need the whole state
+(:func:`experiments.field.observations_of`) and are labelled ``(state)``.
+
+The scorecard, per suite and metric (:data:`METRICS`: IAE, stick-slip severity over the
+stick-slip-prone scenarios, RMS torque deviation, chattering; all lower is better):
+
+* the interquartile mean (IQM: the mean of the middle 50 % of the runs) over every scenario
+  and seed, and its 95 % stratified-bootstrap confidence interval (percentile method; the
+  scenarios are the strata, a scenario's seeds are resampled with replacement within it:
+  :func:`iqm_interval`, ``scipy.stats.bootstrap``);
+* a normalised score, ``(IQM_ref - IQM) / (IQM_ref - IQM_best)``: 0 for the suite's reference
+  controller, 1 for the best entry of the table (its interval is the IQM's, mapped the same
+  way; none when no entry beats the reference);
+* performance profiles: the fraction of runs at or below each value of the metric, one curve
+  per entry (``profiles.png``).
+
+The intervals say how much the IQM moves with the noise seeds; the shipped agents were each
+trained with one seed, so they say nothing of how much a retrained agent would differ.
+
+Outputs (``--out``, default ``results/benchmark``): ``scorecard.md``, ``scorecard.csv`` (one
+row per suite, entry and metric), ``runs.csv`` (one row per run) and ``profiles.png``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import json
+import math
+import re
+import sys
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Final
+
+import numpy as np
+
+from drill_env.evaluation import Policy, ZeroAction, episode_metrics
+from drill_env.metrics import METRIC_KEYS
+from drill_env.scenarios import WobProfile
+from experiments.arguments import (
+    ArgumentParser,
+    number_type,
+    one_line,
+    output_folder,
+    seed_option,
+)
+from experiments.controllers import (
+    CONTROLLERS_HELP,
+    controller_type,
+    is_user_controller,
+    resolve_controller_name,
+)
+from experiments.field import (
+    CONTROLLER_MODELS,
+    ENV_IDS,
+    FieldCase,
+    FieldCondition,
+    is_field,
+    observations_of,
+    run_label,
+    run_on,
+)
+from experiments.heldout import HeldOutScenario, held_out_scenario
+from experiments.plots import METRIC_LABELS
+from experiments.tables import json_clean, write_csv
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.figure import Figure
+
+    from agents.policy import ResidualPolicy
+
+__all__ = [
+    "CONFIDENCE",
+    "DEFAULT_RESAMPLES",
+    "METRICS",
+    "MIN_SEEDS",
+    "PRONE_ONLY",
+    "SUITE_DIR",
+    "SUITE_FORMAT",
+    "Entry",
+    "Suite",
+    "SuiteScenario",
+    "content_hash",
+    "iqm",
+    "iqm_interval",
+    "load_suite",
+    "main",
+    "make_entry",
+    "normalised_score",
+    "profiles_figure",
+    "run_suite",
+    "score_suite",
+    "scorecard_markdown",
+    "shipped_suites",
+]
+
+SUITE_DIR: Final = Path(__file__).resolve().with_name("suites")
+"""Folder of the shipped suites, one ``NAME-vVERSION.json`` each."""
+SUITE_FORMAT: Final = 1
+"""Layout version of a suite file (its ``format``)."""
+MIN_SEEDS: Final = 2
+"""Fewest reset seeds of a scenario: the stratified bootstrap resamples a scenario's seeds."""
+METRICS: Final = ("iae", "stick_slip_severity", "rmsd_nm", "chattering_nm_per_s")
+"""The scorecard's metrics (keys of :data:`drill_env.metrics.METRIC_KEYS`), lower is better."""
+PRONE_ONLY: Final = frozenset({"stick_slip_severity"})
+"""Metrics scored over the stick-slip-prone scenarios only."""
+CONFIDENCE: Final = 0.95
+"""Confidence level of the intervals."""
+DEFAULT_RESAMPLES: Final = 2000
+"""Bootstrap resamples of each interval."""
+TRIM: Final = 0.25
+"""Share of the runs cut from each end for the interquartile mean."""
+IDLE_DECISION_S: Final = 1.0
+"""Decision period of a controller's run (its residual is zero; the controller itself runs at
+every plant step, and the noise samples do not depend on the decision period)."""
+
+SCORE_KEYS: Final = (
+    "suite", "suite_sha256", "env_id", "entry", "metric", "prone_only", "runs", "missing",
+    "diverged", "iqm", "ci_low", "ci_high", "score", "score_low", "score_high", "reference",
+    "best",
+)  # fmt: skip
+"""Columns of ``scorecard.csv``."""
+RUN_KEYS: Final = (
+    "suite", "entry", "scenario", "seed", "prone", *METRIC_KEYS, "diverged", "note",
+)  # fmt: skip
+"""Columns of ``runs.csv``."""
+
+_NAME: Final = re.compile(r"[a-z][a-z0-9_]*")
+_FILE_NAME: Final = re.compile(r"([a-z][a-z0-9_]*)-v([1-9][0-9]*)\.json")
+
+
+# ---------------------------------------------------------------------------------- suites
+@dataclass(frozen=True)
+class SuiteScenario:
+    """One scenario of a suite and its reset seeds.
+
+    Attributes:
+        held: The scenario (its ``seed`` is the first of ``seeds``).
+        seeds: Reset seeds of its runs (at least :data:`MIN_SEEDS`, distinct).
+    """
+
+    held: HeldOutScenario
+    seeds: tuple[int, ...]
+
+    @property
+    def id(self) -> str:
+        """The scenario's id."""
+        return self.held.id
+
+    @property
+    def prone(self) -> bool:
+        """Whether it is stick-slip prone (:attr:`HeldOutScenario.prone`)."""
+        return self.held.prone
+
+
+@dataclass(frozen=True)
+class Suite:
+    """A fixed, versioned scenario suite (read from its JSON file by :func:`load_suite`).
+
+    Attributes:
+        name: Its name (lower case).
+        version: Its version (>= 1).
+        env_id: The env of every run.
+        description: What it holds, in words.
+        reference: The registered controller whose score is 0.
+        observation: On the field string, the observation mode of the controllers that can run
+            on it (``None`` on ``DrillString-v0``).
+        episode_s: Length of every run, s.
+        noise_std_rad_s: Measurement noise on the speeds, rad/s.
+        controller_model: On the field string, what the controllers know of it (``nominal`` or
+            ``exact``; ``None`` on ``DrillString-v0``).
+        scenarios: The scenarios.
+        sha256: :func:`content_hash` of the file's content.
+        source: The file it was read from.
+    """
+
+    name: str
+    version: int
+    env_id: str
+    description: str
+    reference: str
+    observation: str | None
+    episode_s: float
+    noise_std_rad_s: float
+    controller_model: str | None
+    scenarios: tuple[SuiteScenario, ...]
+    sha256: str
+    source: str
+
+    @property
+    def label(self) -> str:
+        """``NAME-vVERSION``."""
+        return f"{self.name}-v{self.version}"
+
+    @property
+    def runs(self) -> int:
+        """Runs of one entry: every scenario with every seed."""
+        return sum(len(s.seeds) for s in self.scenarios)
+
+    def env_kwargs(self, scenario: SuiteScenario) -> dict[str, Any]:
+        """The env keywords of a run of ``scenario`` (its plant, profiles and noise)."""
+        return {**scenario.held.scenario.keywords(), "episode_s": self.episode_s}
+
+
+def content_hash(data: Any) -> str:
+    """SHA-256 of ``data`` (a suite file's parsed JSON) in canonical form (sorted keys, no
+    white space): the same for any layout of the same content."""
+    text = json.dumps(data, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+class _Reader:
+    """Typed access to one JSON object of a suite file; every error names the file and field."""
+
+    def __init__(self, data: Any, where: str, keys: Sequence[str]) -> None:
+        if not isinstance(data, dict):
+            raise ValueError(f"{where}: expected a JSON object, got {type(data).__name__}")
+        unknown = sorted(set(data) - set(keys))
+        missing = [k for k in keys if k not in data]
+        if unknown or missing:
+            parts = ([f"unknown field(s) {', '.join(unknown)}"] if unknown else []) + (
+                [f"missing field(s) {', '.join(missing)}"] if missing else []
+            )
+            raise ValueError(f"{where}: {'; '.join(parts)}: expected {', '.join(keys)}")
+        self.data, self.where = data, where
+
+    def fail(self, key: str, allowed: str) -> ValueError:
+        return ValueError(f"{self.where}: field {key} = {self.data[key]!r}: allowed {allowed}")
+
+    def text(self, key: str, pattern: re.Pattern[str] | None = None) -> str:
+        value = self.data[key]
+        if not isinstance(value, str) or not value or (pattern and not pattern.fullmatch(value)):
+            raise self.fail(
+                key, "a non-empty string" + (f" matching {pattern.pattern}" if pattern else "")
+            )
+        return value
+
+    def number(self, key: str, low: float, high: float, *, optional: bool = False) -> float | None:
+        value = self.data[key]
+        if value is None and optional:
+            return None
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.fail(
+                key, f"a number in [{low:g}, {high:g}]" + (" or null" if optional else "")
+            )
+        if not (math.isfinite(value) and low <= value <= high):
+            raise self.fail(key, f"[{low:g}, {high:g}]")
+        return float(value)
+
+    def real(self, key: str, low: float, high: float) -> float:
+        value = self.number(key, low, high)
+        assert value is not None
+        return value
+
+    def choice(self, key: str, allowed: Sequence[Any]) -> Any:
+        if self.data[key] not in allowed:
+            raise self.fail(key, ", ".join("null" if a is None else str(a) for a in allowed))
+        return self.data[key]
+
+
+_SUITE_KEYS: Final = (
+    "format", "name", "version", "env_id", "description", "reference", "observation",
+    "episode_s", "noise_std_rad_s", "controller_model", "scenarios",
+)  # fmt: skip
+_PAPER_KEYS: Final = (
+    "id", "condition", "uncertainty", "reference_speed_rad_s", "wob_n", "wob_step_time_s",
+    "wob_final_n", "seeds",
+)  # fmt: skip
+_FIELD_KEYS: Final = (
+    "id", "parameters", "measured_depth_m", "reference_rpm", "wob_n", "wob_step_time_s",
+    "wob_final_n", "friction", "seeds",
+)  # fmt: skip
+_FRICTION_KEYS: Final = ("name", "mu_a", "mu_0_ratio", "xi", "mud_damping_factor")
+
+
+def _seeds(r: _Reader) -> tuple[int, ...]:
+    from experiments.arguments import SEED_HIGH
+
+    seeds = r.data["seeds"]
+    ok = (
+        isinstance(seeds, list)
+        and len(seeds) >= MIN_SEEDS
+        and all(
+            isinstance(s, int) and not isinstance(s, bool) and 0 <= s <= SEED_HIGH for s in seeds
+        )
+        and len(set(seeds)) == len(seeds)
+    )
+    if not ok:
+        raise r.fail(
+            "seeds",
+            f"a list of at least {MIN_SEEDS} distinct integers in [0, {SEED_HIGH}] (the "
+            "stratified bootstrap resamples a scenario's seeds)",
+        )
+    return tuple(seeds)
+
+
+def _wob(r: _Reader) -> tuple[float, float | None, float | None]:
+    wob = r.real("wob_n", 1.0, 1e7)
+    step = r.number("wob_step_time_s", 0.0, 1e5, optional=True)
+    final = r.number("wob_final_n", 1.0, 1e7, optional=True)
+    if (step is None) != (final is None):
+        raise r.fail("wob_step_time_s", "a number together with wob_final_n, or both null")
+    return wob, step, final
+
+
+def _paper_scenario(r: _Reader, noise: float) -> SuiteScenario:
+    seeds = _seeds(r)
+    wob, step, final = _wob(r)
+    deltas = r.data["uncertainty"]
+    if not (
+        isinstance(deltas, list)
+        and len(deltas) == 3
+        and all(isinstance(d, (int, float)) and not isinstance(d, bool) for d in deltas)
+    ):
+        raise r.fail("uncertainty", "a list of three numbers (Delta1, Delta2, Delta3)")
+    held = held_out_scenario(
+        r.text("id"),
+        seeds[0],
+        r.real("reference_speed_rad_s", 0.0, 1e3),
+        wob / 1e3,
+        (float(deltas[0]), float(deltas[1]), float(deltas[2])),
+        None if step is None or final is None else (step, final / 1e3),
+    )
+    scenario = replace(held.scenario, noise_std_rad_s=noise)
+    return SuiteScenario(replace(held, condition=r.text("condition"), scenario=scenario), seeds)
+
+
+def _field_scenario(r: _Reader, noise: float, controller_model: str) -> SuiteScenario:
+    from drill_env.distributed import DISTRIBUTED_PRESETS
+
+    seeds = _seeds(r)
+    wob, step, final = _wob(r)
+    f = _Reader(r.data["friction"], f"{r.where}.friction", _FRICTION_KEYS)
+    condition = FieldCondition(
+        f.text("name"),
+        f.real("mu_a", 0.0, 10.0),
+        f.real("mu_0_ratio", 0.0, 1.0),
+        f.real("xi", 0.0, 100.0),
+        f.real("mud_damping_factor", 0.0, 100.0),
+    )
+    case = FieldCase(
+        r.text("id"),
+        r.choice("parameters", sorted(DISTRIBUTED_PRESETS)),
+        r.real("measured_depth_m", 1.0, 20_000.0),
+        WobProfile(wob, step, final),
+        r.real("reference_rpm", 0.0, 1e4),
+        condition,
+        seeds[0],
+    )
+    scenario = case.scenario(noise, controller_model)
+    return SuiteScenario(HeldOutScenario(case.id, seeds[0], condition.name, scenario, case), seeds)
+
+
+def parse_suite(data: Any, where: str) -> Suite:
+    """A :class:`Suite` from the parsed JSON ``data`` of the file ``where``.
+
+    Raises:
+        ValueError: one line naming the file and the field that is missing, unknown or out of
+            range (a scenario's physics is checked by the env's own validation).
+    """
+    r = _Reader(data, where, _SUITE_KEYS)
+    if r.data["format"] != SUITE_FORMAT:
+        raise r.fail("format", str(SUITE_FORMAT))
+    version = r.data["version"]
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1:
+        raise r.fail("version", "an integer >= 1")
+    env_id = r.choice("env_id", ENV_IDS)
+    field = is_field(env_id)
+    reference = r.text("reference")
+    observation = r.choice("observation", ("state", "surface") if field else (None,))
+    controller_model = r.choice("controller_model", CONTROLLER_MODELS if field else (None,))
+    episode_s = r.real("episode_s", 1.0, 1e5)
+    if episode_s != round(episode_s):  # every decision period of controllers and agents fits
+        raise r.fail("episode_s", "a whole number of seconds in [1, 100000]")
+    noise = r.real("noise_std_rad_s", 0.0, 10.0)
+    items = r.data["scenarios"]
+    if not isinstance(items, list) or not items:
+        raise r.fail("scenarios", "a non-empty list of scenarios")
+    scenarios: list[SuiteScenario] = []
+    for k, item in enumerate(items):
+        s = _Reader(item, f"{where}: scenarios[{k}]", _FIELD_KEYS if field else _PAPER_KEYS)
+        try:
+            scenario = (
+                _field_scenario(s, noise, str(controller_model))
+                if field
+                else _paper_scenario(s, noise)
+            )
+        except ValueError as err:
+            message = str(err)
+            raise ValueError(
+                message if message.startswith(where) else f"{s.where}: {message}"
+            ) from None
+        scenarios.append(scenario)
+    ids = [s.id for s in scenarios]
+    twice = sorted({i for i in ids if ids.count(i) > 1})
+    if twice:
+        raise ValueError(f"{where}: scenario id(s) {', '.join(twice)} appear more than once")
+    return Suite(
+        r.text("name", _NAME),
+        version,
+        env_id,
+        r.text("description"),
+        reference,
+        observation,
+        episode_s,
+        noise,
+        controller_model,
+        tuple(scenarios),
+        content_hash(data),
+        where,
+    )
+
+
+def shipped_suites() -> list[str]:
+    """Labels of the shipped suites (``heldout-v1``, ...), every version, by name then
+    version."""
+    found = [_FILE_NAME.fullmatch(p.name) for p in SUITE_DIR.glob("*.json")]
+    pairs = sorted((m.group(1), int(m.group(2))) for m in found if m)
+    return [f"{name}-v{version}" for name, version in pairs]
+
+
+def _latest(name: str) -> str | None:
+    versions = [label for label in shipped_suites() if label.rsplit("-v", 1)[0] == name]
+    return max(versions, key=lambda label: int(label.rsplit("-v", 1)[1]), default=None)
+
+
+def load_suite(suite: str | Path) -> Suite:
+    """Read and check a suite: a shipped one by label (``heldout-v1``) or name (``heldout``:
+    its latest version), or a JSON file of the same layout.
+
+    Raises:
+        ValueError: for an unknown suite, a file that is not JSON, breaks the layout, or whose
+            name ``NAME-vVERSION.json`` disagrees with its ``name`` and ``version``.
+        OSError: for a file that cannot be read.
+    """
+    text = str(suite)
+    if text.endswith(".json") or "/" in text:
+        path = Path(text)
+        if not path.is_file():
+            raise ValueError(f"suite {text!r}: no such file")
+    else:
+        label = text if text in shipped_suites() else _latest(text)
+        if label is None:
+            names = sorted({s.rsplit("-v", 1)[0] for s in shipped_suites()})
+            raise ValueError(
+                f"unknown suite {text!r}: allowed {', '.join(names + shipped_suites())}, or a "
+                "suite file (.json)"
+            )
+        path = SUITE_DIR / f"{label}.json"
+    where = str(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as err:
+        raise ValueError(f"{where}: not JSON: {err}") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"{where}: not UTF-8 text") from None
+    loaded = parse_suite(data, where)
+    named = _FILE_NAME.fullmatch(path.name)
+    if named and (named.group(1), int(named.group(2))) != (loaded.name, loaded.version):
+        raise ValueError(
+            f"{where}: the file name says {named.group(1)}-v{named.group(2)}, its content "
+            f"{loaded.label}: a changed suite is a new file with a new version"
+        )
+    return loaded
+
+
+# --------------------------------------------------------------------------------- entries
+@dataclass(frozen=True)
+class Entry:
+    """One line of the scorecard: a registered controller or a learned agent.
+
+    Attributes:
+        name: The controller's registered name or the agent's name.
+        agent: The agent (``None`` for a controller).
+        source: What the user named (a controller's name or spec, a model folder).
+    """
+
+    name: str
+    agent: ResidualPolicy | None = None
+    source: str = ""
+
+    def run(self, suite: Suite) -> tuple[str, Policy, dict[str, Any]] | None:
+        """``(label, policy, env keywords)`` of this entry's runs on ``suite`` (the
+        scenario's keywords are added per run), or ``None`` when it does not run there (an
+        agent made for another env)."""
+        field = is_field(suite.env_id)
+        if self.agent is None:
+            kwargs: dict[str, Any] = {
+                "base_controller": self.name,
+                "control_dt_s": IDLE_DECISION_S,
+            }
+            observation = None
+            if field:
+                observation = observations_of(self.name, (str(suite.observation),))[0]
+                kwargs["observation"] = observation
+            label = run_label({"controller": self.name, "observation": observation})
+            return label, ZeroAction(), kwargs
+        if self.agent.env_id != suite.env_id:
+            return None
+        own = dict(self.agent.env_kwargs)
+        observation = own.get("observation", "surface") if field else None
+        return run_label({"controller": self.name, "observation": observation}), self.agent, own
+
+
+def make_entry(text: str) -> Entry:
+    """An :class:`Entry` from what the user typed: a registered controller name,
+    ``MODULE:CLASS`` or ``PATH.py:CLASS`` (:func:`experiments.controllers.load_controller`),
+    or a model folder (:func:`agents.policy.load_policy`).
+
+    Raises:
+        ValueError: naming ``text`` and what it could have been.
+        FileNotFoundError: for an incomplete model folder.
+    """
+    from drill_env.control import controller_names
+
+    path = Path(text)
+    if text not in controller_names() and ":" not in text and path.exists():
+        from agents.policy import load_policy
+
+        agent = load_policy(path)
+        return Entry(agent.name, agent, text)
+    try:
+        return Entry(resolve_controller_name(text), None, text)
+    except ValueError as err:
+        if ":" in text:
+            raise
+        raise ValueError(f"{err}; or a model folder (no such folder {text!r})") from None
+
+
+def _default_entries() -> list[str]:
+    from drill_env.control import controller_names
+    from experiments.evaluate import shipped_models
+
+    return [*controller_names(), *(str(p) for p in shipped_models())]
+
+
+# --------------------------------------------------------------------------------- running
+def run_suite(
+    suite: Suite, entries: Sequence[Entry], progress: bool = False
+) -> list[dict[str, Any]]:
+    """Every run of every entry on ``suite``: one row per (entry, scenario, seed) with the
+    suite, the label, the scenario, the seed, ``prone`` and the metrics of
+    :data:`drill_env.metrics.METRIC_KEYS`. Entries that do not run on the suite's env are left
+    out."""
+    jobs = [(e, job) for e in entries if (job := e.run(suite)) is not None]
+    total = len(jobs) * suite.runs
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=total, desc=suite.label, unit="run", file=sys.stderr)
+    field = is_field(suite.env_id)
+    rows: list[dict[str, Any]] = []
+    for entry, (label, policy, kwargs) in jobs:
+        mine = entry.agent is None and is_user_controller(entry.name)
+        for scenario in suite.scenarios:
+            for seed in scenario.seeds:
+                head = {
+                    "suite": suite.label,
+                    "entry": label,
+                    "scenario": scenario.id,
+                    "seed": seed,
+                    "prone": scenario.prone,
+                }
+                try:
+                    trace = run_on(
+                        suite.env_id, {**suite.env_kwargs(scenario), **kwargs}, policy, seed
+                    )
+                except ValueError as err:
+                    if not field:
+                        raise
+                    # A controller that cannot be made for this string (its tuning or model
+                    # has no solution there): a row without metrics, and the reason.
+                    rows.append({**head, **dict.fromkeys(METRIC_KEYS), "note": one_line(str(err))})
+                except Exception as err:
+                    if not mine:
+                        raise
+                    raise ValueError(
+                        f"{label} failed on {suite.label} {scenario.id} seed {seed}: "
+                        f"{type(err).__name__}: {err}"
+                    ) from err
+                else:
+                    rows.append({**head, **episode_metrics(trace), "note": ""})
+                if bar is not None:
+                    bar.update()
+    if bar is not None:
+        bar.close()
+    return rows
+
+
+# ------------------------------------------------------------------------------ statistics
+def iqm(values: Any) -> float:
+    """Interquartile mean of ``values`` (any shape, flattened): the mean after cutting
+    :data:`TRIM` of the values from each end (``scipy.stats.trim_mean``, as rliable does)."""
+    from scipy.stats import trim_mean
+
+    return float(trim_mean(np.ravel(np.asarray(values, dtype=float)), TRIM))
+
+
+def _iqm_of_strata(*strata: Any, axis: int = -1) -> Any:
+    from scipy.stats import trim_mean
+
+    return trim_mean(np.concatenate(strata, axis=axis), TRIM, axis=axis)
+
+
+def iqm_interval(
+    strata: Sequence[Any],
+    resamples: int = DEFAULT_RESAMPLES,
+    seed: int | Sequence[int] = 0,
+    confidence: float = CONFIDENCE,
+) -> tuple[float, float, float]:
+    """The IQM over every value of ``strata`` and its stratified-bootstrap interval.
+
+    Args:
+        strata: One 1-D array per scenario: its runs' values (one per seed, at least two).
+        resamples: Bootstrap resamples.
+        seed: Seed of the resampling generator.
+        confidence: Confidence level.
+
+    Returns:
+        ``(iqm, low, high)``: each resample draws every scenario's runs with replacement from
+        that scenario's own runs (the scenarios are fixed, as in rliable), and the interval is
+        the percentile interval of the resampled IQMs (``scipy.stats.bootstrap``).
+
+    Raises:
+        ValueError: for no strata or a stratum with fewer than two values.
+    """
+    from scipy.stats import bootstrap
+
+    data = tuple(np.asarray(s, dtype=float).ravel() for s in strata)
+    if not data or any(d.size < MIN_SEEDS for d in data):
+        raise ValueError(f"every stratum needs at least {MIN_SEEDS} values")
+    point = iqm(np.concatenate(data))
+    if all(np.ptp(d) == 0.0 for d in data):  # nothing to resample: the interval is the point
+        return point, point, point
+    result = bootstrap(
+        data,
+        _iqm_of_strata,
+        n_resamples=int(resamples),
+        confidence_level=confidence,
+        method="percentile",
+        paired=False,
+        vectorized=True,
+        rng=np.random.default_rng(seed),
+    )
+    ci = result.confidence_interval
+    return point, float(ci.low), float(ci.high)
+
+
+def normalised_score(value: float, reference: float, best: float) -> float:
+    """``(reference - value) / (reference - best)`` for a lower-is-better metric: 0 at the
+    reference, 1 at the best; NaN when the best is not below the reference."""
+    if not (math.isfinite(reference) and math.isfinite(best) and best < reference):
+        return math.nan
+    return (reference - value) / (reference - best)
+
+
+def score_suite(
+    suite: Suite,
+    rows: Sequence[Mapping[str, Any]],
+    resamples: int = DEFAULT_RESAMPLES,
+    seed: int = 0,
+) -> list[dict[str, Any]]:
+    """The scorecard rows of ``suite``: one per (entry, metric of :data:`METRICS`) with the
+    number of runs, the IQM and its interval, the normalised score and its interval, the
+    reference's and the best entry's labels.
+
+    Raises:
+        ValueError: when the suite's reference controller has no runs in ``rows``.
+    """
+    mine = [r for r in rows if r["suite"] == suite.label]
+    labels = list(dict.fromkeys(r["entry"] for r in mine))
+    reference = run_label(
+        {
+            "controller": suite.reference,
+            "observation": (
+                observations_of(suite.reference, (str(suite.observation),))[0]
+                if is_field(suite.env_id)
+                else None
+            ),
+        }
+    )
+    if reference not in labels:
+        raise ValueError(f"suite {suite.label}: its reference controller {reference!r} was not run")
+    prone_ids = {s.id for s in suite.scenarios if s.prone}
+    stats: dict[tuple[str, str], tuple[float, float, float]] = {}
+    counts: dict[tuple[str, str], dict[str, int]] = {}
+    for m_index, metric in enumerate(METRICS):
+        for e_index, label in enumerate(labels):
+            strata = []
+            diverged = 0
+            for scenario in suite.scenarios:
+                if metric in PRONE_ONLY and scenario.id not in prone_ids:
+                    continue
+                runs = [r for r in mine if r["entry"] == label and r["scenario"] == scenario.id]
+                diverged += sum(bool(r.get("diverged")) for r in runs)
+                values = [math.nan if r[metric] is None else float(r[metric]) for r in runs]
+                strata.append(np.array(values))
+            counts[(label, metric)] = {
+                "runs": sum(s.size for s in strata),
+                "missing": sum(int((~np.isfinite(s)).sum()) for s in strata),
+                "diverged": diverged,
+            }
+            if not strata or counts[(label, metric)]["missing"]:
+                # a run without a value (a controller that could not run there): no IQM
+                stats[(label, metric)] = (math.nan, math.nan, math.nan)
+                continue
+            stats[(label, metric)] = iqm_interval(strata, resamples, (seed, m_index, e_index))
+    out: list[dict[str, Any]] = []
+    for metric in METRICS:
+        finite = {
+            lb: stats[(lb, metric)][0] for lb in labels if math.isfinite(stats[(lb, metric)][0])
+        }
+        best = min(finite, key=lambda lb: finite[lb]) if finite else None
+        ref_value = stats[(reference, metric)][0]
+        best_value = finite[best] if best is not None else math.nan
+        for label in labels:
+            point, low, high = stats[(label, metric)]
+            score = normalised_score(point, ref_value, best_value)
+            # the score falls as the metric rises: the IQM's high end is the score's low end
+            score_low = normalised_score(high, ref_value, best_value)
+            score_high = normalised_score(low, ref_value, best_value)
+            out.append(
+                {
+                    "suite": suite.label,
+                    "suite_sha256": suite.sha256,
+                    "env_id": suite.env_id,
+                    "entry": label,
+                    "metric": metric,
+                    "prone_only": metric in PRONE_ONLY,
+                    **counts[(label, metric)],
+                    "iqm": point,
+                    "ci_low": low,
+                    "ci_high": high,
+                    "score": score,
+                    "score_low": score_low,
+                    "score_high": score_high,
+                    "reference": reference,
+                    "best": best,
+                }
+            )
+    return out
+
+
+# ------------------------------------------------------------------------------- reporting
+def metric_title(metric: str) -> str:
+    """The scorecard's heading of ``metric`` (the figures' label, :data:`METRIC_LABELS`)."""
+    label = METRIC_LABELS[metric]
+    return f"{label}, prone scenarios" if metric in PRONE_ONLY else label
+
+
+def _number(value: float, metric: str) -> str:
+    if not math.isfinite(value):
+        return "n/a"
+    if metric in ("rmsd_nm", "chattering_nm_per_s"):
+        return f"{value:,.0f}"
+    if metric == "iae":
+        return f"{value:.1f}"
+    return f"{value:.3f}"
+
+
+def _interval(row: Mapping[str, Any], keys: tuple[str, str, str], metric: str | None) -> str:
+    point, low, high = (float(row[k]) for k in keys)
+    if not math.isfinite(point):
+        return "n/a"
+    if metric is None:
+        return f"{point:.2f} [{low:.2f}, {high:.2f}]"
+    return f"{_number(point, metric)} [{_number(low, metric)}, {_number(high, metric)}]"
+
+
+def suite_table(suite: Suite, scores: Sequence[Mapping[str, Any]]) -> str:
+    """The markdown table of ``suite``: one line per entry (by IQM of the first metric), each
+    metric's IQM [95 % interval] and normalised score [interval]."""
+    mine = [s for s in scores if s["suite"] == suite.label]
+    by = {(s["entry"], s["metric"]): s for s in mine}
+    labels = list(dict.fromkeys(s["entry"] for s in mine))
+    first = METRICS[0]
+    labels.sort(key=lambda lb: (not math.isfinite(by[(lb, first)]["iqm"]), by[(lb, first)]["iqm"]))
+    head = "| entry | " + " | ".join(f"{metric_title(m)} | score" for m in METRICS) + " |"
+    lines = [head, "|---|" + "---:|---:|" * len(METRICS)]
+    for label in labels:
+        cells = []
+        for m in METRICS:
+            row = by[(label, m)]
+            cells.append(_interval(row, ("iqm", "ci_low", "ci_high"), m))
+            cells.append(_interval(row, ("score", "score_low", "score_high"), None))
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    notes = [
+        f"{label}: {by[(label, first)]['missing']} runs without a value, "
+        f"{by[(label, first)]['diverged']} diverged"
+        for label in labels
+        if by[(label, first)]["missing"] or by[(label, first)]["diverged"]
+    ]
+    if notes:
+        lines += ["", "Runs that could not be scored or diverged: " + "; ".join(notes) + "."]
+    return "\n".join(lines)
+
+
+def scorecard_markdown(
+    suites: Sequence[Suite],
+    scores: Sequence[Mapping[str, Any]],
+    entries: Sequence[Entry],
+    resamples: int,
+    seed: int,
+    command: str = "",
+    wall_s: float | None = None,
+) -> str:
+    """The scorecard as markdown: how it was made, then one table per suite."""
+    lines = ["# Benchmark scorecard", ""]
+    if command:
+        lines += [f"Command: `{command}`" + (f" ({wall_s:.0f} s wall)" if wall_s else ""), ""]
+    lines += [
+        "Each cell: the interquartile mean (IQM, the mean of the middle 50 % of the runs) over "
+        "every scenario and seed, and its 95 % stratified-bootstrap confidence interval "
+        f"(percentile method, {resamples} resamples, bootstrap seed {seed}; each scenario's "
+        "seeds are resampled within it). Lower is better for every metric. The severity is "
+        "taken over the stick-slip-prone scenarios only. Score: (IQM of the reference "
+        "controller - IQM) / (IQM of the reference - IQM of the best entry): 0 is the "
+        "reference, 1 the best entry of the table; n/a when no entry beats the reference.",
+        "",
+    ]
+    agents = [e for e in entries if e.agent is not None]
+    if agents:
+        lines += [
+            "Learned agents ("
+            + ", ".join(e.name for e in agents)
+            + ") are one trained model each (one training seed): their intervals cover the "
+            "noise seeds of the runs, not the spread between training seeds.",
+            "",
+        ]
+    for suite in suites:
+        prone = sum(s.prone for s in suite.scenarios)
+        seeds = sorted({len(s.seeds) for s in suite.scenarios})
+        lines += [
+            f"## {suite.label}: {suite.env_id}, reference `{suite.reference}`",
+            "",
+            f"{suite.description} {len(suite.scenarios)} scenarios ({prone} prone) x "
+            f"{'/'.join(map(str, seeds))} seeds; suite file SHA-256 `{suite.sha256[:16]}...`.",
+            "",
+            suite_table(suite, scores),
+            "",
+        ]
+    return "\n".join(lines)
+
+
+def profiles_figure(suites: Sequence[Suite], rows: Sequence[Mapping[str, Any]]) -> Figure:
+    """Performance profiles: per suite (rows of panels) and metric (columns), the fraction of
+    an entry's runs whose value is at or below each x (the severity over the prone scenarios);
+    one curve per entry."""
+    from matplotlib.figure import Figure
+
+    n_rows, n_cols = len(suites), len(METRICS)
+    fig = Figure(figsize=(4.0 * n_cols + 2.6, 2.9 * n_rows), layout="constrained")
+    axes = fig.subplots(n_rows, n_cols, squeeze=False)
+    colors = [f"C{k}" for k in range(10)]
+    styles = ["-", "--", ":", "-."]
+    for i, suite in enumerate(suites):
+        mine = [r for r in rows if r["suite"] == suite.label]
+        prone_ids = {s.id for s in suite.scenarios if s.prone}
+        labels = list(dict.fromkeys(r["entry"] for r in mine))
+        for j, metric in enumerate(METRICS):
+            ax = axes[i][j]
+            for k, label in enumerate(labels):
+                values = np.sort(
+                    [
+                        float(r[metric])
+                        for r in mine
+                        if r["entry"] == label
+                        and r[metric] is not None
+                        and math.isfinite(float(r[metric]))
+                        and (metric not in PRONE_ONLY or r["scenario"] in prone_ids)
+                    ]
+                )
+                if values.size == 0:
+                    continue
+                fraction = np.arange(0, values.size + 1) / values.size
+                ax.step(
+                    np.concatenate([values[:1], values]), fraction, where="post", color=colors[k % 10],
+                    linestyle=styles[(k // 10) % 4], label=label, linewidth=1.2,
+                )  # fmt: skip
+            finite = [r[metric] for r in mine if r[metric] is not None]
+            spread = [float(v) for v in finite if math.isfinite(float(v))]
+            if spread and min(spread) > 0 and max(spread) > 20 * min(spread):
+                ax.set_xscale("log")  # values over more than a decade
+            ax.set_xlabel(metric_title(metric), fontsize=8)
+            ax.set_ylim(0.0, 1.02)
+            ax.tick_params(labelsize=7)
+            if j == 0:
+                ax.set_ylabel(f"{suite.label}\nfraction of runs <= x", fontsize=8)
+            if j == n_cols - 1:
+                ax.legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.02, 1.0), frameon=False)
+    fig.suptitle(
+        "Performance profiles: the share of each entry's runs at or below a value (further "
+        "left and higher is better)",
+        fontsize=9,
+    )
+    return fig
+
+
+# ----------------------------------------------------------------------------- command line
+DESCRIPTION: Final = """\
+Score controllers and agents on fixed, versioned scenario suites and write a scorecard: per
+suite and metric (IAE, stick-slip severity over the prone scenarios, RMS torque deviation,
+chattering), the interquartile mean over every scenario and seed with its 95 % stratified-
+bootstrap confidence interval, a score from 0 (the suite's reference controller) to 1 (the
+best entry), and performance profiles.
+
+Suites are JSON files (experiments/suites/NAME-vVERSION.json: the scenarios and their reset
+seeds); a shipped suite is never edited, a change is a new version. Shipped: heldout-v1 and
+corners-v1 (DrillString-v0), field-v1 and deep-v1 (DrillStringField-v0, the rig's surface
+signals). Writes scorecard.md, scorecard.csv, runs.csv and profiles.png to --out.
+
+examples:
+  drill-gym benchmark                                  # every shipped controller and agent
+  drill-gym benchmark proposed agents/models/residual_ppo --suites heldout corners
+  drill-gym benchmark examples/custom_controller.py:SpeedPI --suites heldout-v1
+"""
+
+
+def _parser() -> ArgumentParser:
+    parser = ArgumentParser(prog="drill-gym benchmark", description=DESCRIPTION)
+    parser.add_argument(
+        "policies",
+        nargs="*",
+        metavar="POLICY",
+        help="what to score: registered controller names, model folders (config.json, "
+        "policy.npz, obs_norm.npz) "
+        + CONTROLLERS_HELP
+        + ". Default: every registered controller and every model in agents/models/; each "
+        "suite's reference controller is always added",
+    )
+    parser.add_argument(
+        "--controllers",
+        nargs="+",
+        default=[],
+        metavar="NAME",
+        type=controller_type,
+        help="controllers to score too (as POLICY): registered names, MODULE:CLASS or "
+        "PATH.py:CLASS",
+    )
+    parser.add_argument(
+        "--suites",
+        nargs="+",
+        default=None,
+        metavar="SUITE",
+        help="suites by name (its latest version), by NAME-vVERSION, or suite files (.json); "
+        "default: the latest version of every shipped suite",
+    )
+    parser.add_argument(
+        "--out",
+        type=output_folder,
+        default="results/benchmark",
+        metavar="DIR",
+        help="output folder",
+    )
+    parser.add_argument(
+        "--resamples",
+        type=number_type(100, 100_000, integer=True),
+        default=DEFAULT_RESAMPLES,
+        metavar="N",
+        help="bootstrap resamples of each confidence interval",
+    )
+    seed_option(parser, "seed of the bootstrap resampling (the runs' seeds are the suites')")
+    parser.add_argument("--no-plots", action="store_true", help="write no figure")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``drill-gym benchmark``: run, score and write; returns the exit code (see ``--help``)."""
+    parser = _parser()
+    args = parser.parse_args(list(argv) if argv is not None else None)
+    if importlib.util.find_spec("scipy") is None:  # before minutes of runs, not after
+        parser.error(
+            "needs the package 'scipy' for the bootstrap, which is not installed (the bench "
+            "extra has it: pip install -e '.[bench]')"
+        )
+    start = time.perf_counter()
+    if args.suites is None:
+        args.suites = sorted({label.rsplit("-v", 1)[0] for label in shipped_suites()})
+    suites: list[Suite] = []
+    for text in dict.fromkeys(args.suites):
+        try:
+            suites.append(load_suite(text))
+        except ValueError as err:
+            parser.fail("--suites", str(err))
+    labels = [s.label for s in suites]
+    if len(set(labels)) != len(labels):
+        parser.fail("--suites", f"the same suite twice: {', '.join(labels)}")
+    entries: list[Entry] = []
+    for text in dict.fromkeys([*args.policies, *args.controllers] or _default_entries()):
+        try:
+            entries.append(make_entry(text))
+        except ValueError as err:
+            parser.fail("POLICY", str(err))
+    names = {e.name for e in entries}
+    for suite in suites:
+        if suite.reference not in names:
+            entries.insert(0, make_entry(suite.reference))
+            names.add(suite.reference)
+    taken = [e.name for e in entries]
+    twice = sorted({n for n in taken if taken.count(n) > 1})
+    if twice:
+        parser.fail("POLICY", f"two entries are named {', '.join(twice)}")
+    rows: list[dict[str, Any]] = []
+    scores: list[dict[str, Any]] = []
+    for suite in suites:
+        suite_rows = run_suite(suite, entries, progress=not args.no_progress)
+        rows += suite_rows
+        scores += score_suite(suite, suite_rows, args.resamples, args.seed)
+    wall = time.perf_counter() - start
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    command = "drill-gym benchmark " + " ".join(list(argv) if argv is not None else sys.argv[1:])
+    text = scorecard_markdown(
+        suites, scores, entries, args.resamples, args.seed, command.strip(), wall
+    )
+    (out / "scorecard.md").write_text(text + "\n", encoding="utf-8")
+    written = [
+        out / "scorecard.md",
+        write_csv(json_clean(scores), out / "scorecard.csv", SCORE_KEYS),
+        write_csv(rows, out / "runs.csv", RUN_KEYS),
+    ]
+    if not args.no_plots:
+        from experiments.plots import save_figure
+
+        written.append(save_figure(profiles_figure(suites, rows), out / "profiles.png"))
+    for suite in suites:
+        print(f"{suite.label} ({suite.env_id}, reference {suite.reference}):")
+        print(suite_table(suite, scores))
+        print()
+    print(
+        f"{len(rows)} runs on {len(suites)} suites in {wall:.1f} s; wrote "
+        f"{', '.join(p.name for p in written)} to {out}/"
+    )
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

@@ -1,0 +1,460 @@
+"""``drill-gym calibrate LOG --window A:B --out DIR`` and ``drill-gym replay PLANT LOG --window
+C:D --out DIR``: from a rig's measured log to a calibrated plant, and back to the log
+(docs/calibration.md).
+
+``calibrate`` reads and checks the log, reports its defects, fits every friction family of
+:mod:`drill_env.bit_model` on the window, keeps the one of lowest BIC, and writes
+``DIR/plant.json`` (:mod:`drill_env.calibrated_plant`), ``DIR/report.md`` and the figures
+``fit.png`` (measured against simulated speed and torque, residuals), ``loop.png`` (the
+torque-speed loop) and ``uncertainty.png`` (relative standard deviations). ``replay`` drives a
+plant with the log's measured top-drive speed on a window and writes ``DIR/replay.csv``,
+``DIR/features.csv``, ``DIR/replay.md`` and ``DIR/replay.png``.
+
+Only files of these names are written, only inside ``--out``; an existing ``--out`` that is
+not a directory is refused before any work.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from drill_env.bit_model import FAMILIES
+from drill_env.calibrated_plant import MODEL_PARAMETERS, PLANT_FORMAT, load_plant
+from drill_env.measured_log import MeasuredLog, find_defects, read_log
+from experiments.arguments import ArgumentParser
+from experiments.calibration_fit import (
+    FEATURE_KEYS,
+    FitResult,
+    calibrate,
+    feature_errors,
+    features,
+    simulate_plant,
+    stuck_threshold,
+)
+
+__all__ = ["main", "replay_main", "replay_parser", "window_type"]
+
+CALIBRATE_FILES = ("plant.json", "report.md", "fit.png", "loop.png", "uncertainty.png")
+"""The files ``calibrate`` writes into ``--out``."""
+REPLAY_FILES = ("replay.csv", "features.csv", "replay.md", "replay.png")
+"""The files ``replay`` writes into ``--out``."""
+
+
+def window_type(text: str) -> tuple[float, float]:
+    """Parse ``A:B`` (seconds, ``A < B``) for ``--window``."""
+    parts = text.split(":")
+    if len(parts) != 2:
+        raise argparse.ArgumentTypeError(f"{text!r} is not A:B (start:end in s)")
+    try:
+        a, b = float(parts[0]), float(parts[1])
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not A:B with numbers (s)") from None
+    if not (math.isfinite(a) and math.isfinite(b) and a < b):
+        raise argparse.ArgumentTypeError(f"{text!r}: allowed finite A < B (s)")
+    return a, b
+
+
+def fix_type(text: str) -> tuple[str, float]:
+    """Parse ``NAME=VALUE`` for ``--fix``."""
+    name, _, value = text.partition("=")
+    if name not in MODEL_PARAMETERS:
+        raise argparse.ArgumentTypeError(
+            f"unknown parameter {name!r}: allowed {', '.join(MODEL_PARAMETERS)}"
+        )
+    try:
+        number = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not NAME=VALUE with a number") from None
+    if not (math.isfinite(number) and number >= 0):
+        raise argparse.ArgumentTypeError(f"{text!r}: allowed a finite value >= 0")
+    return name, number
+
+
+def _head(path: Path) -> str:
+    try:
+        with path.open(encoding="utf-8") as f:
+            return f.read(300)
+    except (OSError, UnicodeDecodeError):
+        return ""
+
+
+def prepare_out(out: Path, names: Sequence[str], signature: tuple[str, str]) -> None:
+    """Make ``out``, refusing an existing non-directory; files of ``names`` already there are
+    replaced only when they are a previous run's: regular files, and the run's main file
+    ``signature[0]`` holds ``signature[1]`` in its first 300 characters (otherwise they are
+    someone else's)."""
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {str(out)!r} exists and is not a directory")
+    present = [out / n for n in names if (out / n).exists() or (out / n).is_symlink()]
+    for target in present:
+        if target.is_symlink() or not target.is_file():
+            raise ValueError(f"--out: {str(target)!r} exists and is not a regular file")
+    main_file, start = signature
+    if present and start not in _head(out / main_file):
+        raise ValueError(
+            f"--out: {str(present[0])!r} exists and is not from a previous run of this command "
+            "(not overwritten): choose another directory"
+        )
+    out.mkdir(parents=True, exist_ok=True)
+
+
+def _format(value: float | None, digits: int = 4) -> str:
+    if value is None or not math.isfinite(value):
+        return "n/a"
+    return f"{value:.{digits}g}"
+
+
+def _fit_figure(
+    window: MeasuredLog, speed: npt.NDArray[np.float64], torque: npt.NDArray[np.float64], title: str
+) -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = window.time_s
+    bit = window.column("bit_speed_rad_s")
+    tq = window.column("bit_torque_nm")
+    fig, axes = plt.subplots(4, 1, figsize=(9, 9), sharex=True, layout="constrained")
+    axes[0].plot(t, bit, color="0.6", lw=0.8, label="measured")
+    axes[0].plot(t, speed, color="C0", lw=1.0, label="simulated")
+    axes[0].set_ylabel("bit speed (rad/s)")
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[1].plot(t, tq, color="0.6", lw=0.8, label="measured")
+    axes[1].plot(t, torque, color="C1", lw=1.0, label="simulated")
+    axes[1].set_ylabel("torque on bit (N m)")
+    axes[1].legend(loc="upper right", fontsize=8)
+    axes[2].plot(t, speed - bit, color="C0", lw=0.6)
+    axes[2].set_ylabel("speed residual (rad/s)")
+    axes[3].plot(t, torque - tq, color="C1", lw=0.6)
+    axes[3].set_ylabel("torque residual (N m)")
+    axes[3].set_xlabel("time (s)")
+    fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def _loop_figure(
+    window: MeasuredLog, speed: npt.NDArray[np.float64], torque: npt.NDArray[np.float64], title: str
+) -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4.5), layout="constrained")
+    ax.plot(window.column("bit_speed_rad_s"), window.column("bit_torque_nm"), color="0.6",
+            lw=0.5, label="measured")  # fmt: skip
+    ax.plot(speed, torque, color="C3", lw=1.0, label="simulated")
+    ax.set_xlabel("bit speed (rad/s)")
+    ax.set_ylabel("torque on bit (N m)")
+    ax.legend(loc="lower right", fontsize=8)
+    ax.set_title(title, fontsize=10)
+    return fig
+
+
+def _uncertainty_figure(result: FitResult) -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    plant = result.plant
+    names = list(plant.parameters)
+    values = [plant.parameters[n].relative_std for n in names]
+    fig, ax = plt.subplots(figsize=(7, 3.8), layout="constrained")
+    for i, (name, rel) in enumerate(zip(names, values, strict=False)):
+        p = plant.parameters[name]
+        if p.identified and rel is not None and math.isfinite(rel):
+            ax.barh(i, max(rel * 100, 1e-4), color="C0")
+        else:
+            ax.barh(i, 100, color="0.85", hatch="//")
+            ax.text(1e-3, i, "not identified: fixed", va="center", fontsize=8)
+    ax.set_yticks(range(len(names)), names)
+    ax.set_xscale("log")
+    ax.set_xlim(1e-3, 200)
+    ax.axvline(25, color="C3", lw=0.8, ls="--")
+    ax.set_xlabel("relative standard deviation (%, Laplace); dashed: identifiability limit")
+    ax.set_title(f"parameter uncertainty, family {plant.family}", fontsize=10)
+    return fig
+
+
+def _save(fig: Any, path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _defect_lines(defects: Sequence[Any], start: float, end: float) -> list[str]:
+    lines = []
+    for d in defects:
+        inside = " (inside the window)" if d.overlaps(start, end) else ""
+        lines.append(
+            f"| {d.kind} | {d.column} | {d.start_s:.6g} to {d.end_s:.6g} | {d.rows[0]}-{d.rows[1]} "
+            f"| {d.detail}{inside} |"
+        )
+    return lines
+
+
+def _report(
+    result: FitResult, log: MeasuredLog, window_s: tuple[float, float], command: str
+) -> str:
+    plant = result.plant
+    lines = [
+        "# Calibration report",
+        "",
+        f"Command: `{command}`",
+        "",
+        f"Log: {log.source} ({log.time_s.size} samples, {log.time_s[0]:g} to {log.time_s[-1]:g} s, "
+        f"median sample period {log.sample_period_s:.4g} s). Window: {window_s[0]:g} to "
+        f"{window_s[1]:g} s. Wall time of the fit: {result.wall_s:.1f} s.",
+        "",
+        "## Defects of the log",
+        "",
+    ]
+    all_defects = find_defects(log)
+    if all_defects:
+        lines += ["| kind | column | time (s) | rows | seen |", "|---|---|---|---|---|"]
+        lines += _defect_lines(all_defects, *window_s)
+    else:
+        lines.append("None found.")
+    lines += [
+        "",
+        f"The data are not changed. {result.excluded_samples} residuals of the window (spikes and "
+        "flat lines of the bit speed and the torque on bit) are left out of the fit; a gap "
+        "inside the window is bridged by the linear interpolation of the top-drive speed.",
+        "",
+        "## Friction family",
+        "",
+        "| family | free parameters | normalised RMS residual | BIC |",
+        "|---|---|---|---|",
+    ]
+    for name, info in plant.fit["families"].items():
+        chosen = " (chosen)" if name == plant.family else ""
+        lines.append(
+            f"| {name}{chosen} | {info['free_parameters']} | {_format(info['normalised_rms'])} | "
+            f"{info['bic']:.1f} |"
+        )
+    n_eff = next(iter(plant.fit["families"].values()))["n_effective"]
+    lines += [
+        "",
+        f"BIC = n_eff ln(RSS/n) + k ln(n_eff), with n_eff = {n_eff:.0f} the effective number "
+        "of independent residuals (from their autocorrelation). Lowest wins.",
+        "",
+        "## Parameters",
+        "",
+        "| parameter | value | unit | relative std | status |",
+        "|---|---|---|---|---|",
+    ]
+    for name, p in plant.parameters.items():
+        if p.identified:
+            lines.append(
+                f"| {name} | {p.value:.6g} | {p.unit} | {_format(p.relative_std, 2)} | fitted |"
+            )
+        else:
+            lines.append(f"| {name} | (held at {p.value:.4g}) | {p.unit} | - | {p.note} |")
+    lines += [
+        "",
+        f"Initial twist of the window: {plant.initial_twist_rad:.6g} rad (fitted, a nuisance "
+        "parameter). Relative standard deviations come from the Laplace approximation (the "
+        "inverse Gauss-Newton Hessian at the optimum, scaled by the residual variance and "
+        "inflated by n / n_eff); a parameter above "
+        f"{plant.fit['max_relative_std']:.0%} is reported as not identifiable, held fixed, "
+        "and the rest refitted.",
+        "",
+        "![fit](fit.png)",
+        "",
+        "![loop](loop.png)",
+        "",
+        "![uncertainty](uncertainty.png)",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def _parser() -> ArgumentParser:
+    """The parser of ``drill-gym calibrate``."""
+    parser = ArgumentParser(
+        prog="drill-gym calibrate",
+        description=(
+            "Fit a lumped bit-side torsional plant to a measured log (CSV or Parquet, SI\n"
+            "columns time_s, top_speed_rad_s, bit_speed_rad_s, bit_torque_nm, optional wob_n):\n"
+            "the measured top-drive speed drives the model; every friction family is fitted\n"
+            "and the one of lowest BIC kept. Writes plant.json, report.md and figures."
+        ),
+    )
+    parser.add_argument("log", nargs="?", help="the measured log (.csv, or .parquet with pyarrow)")
+    parser.add_argument("--window", type=window_type, metavar="A:B",
+                        help="fitted window, start:end in s (required)")  # fmt: skip
+    parser.add_argument("--out", type=Path, metavar="DIR",
+                        help="output directory, made if missing (required)")  # fmt: skip
+    parser.add_argument("--family", choices=("auto", *FAMILIES), default="auto",
+                        help="friction family; auto fits all and keeps the lowest BIC")  # fmt: skip
+    parser.add_argument("--no-wob", action="store_true",
+                        help="friction in N m, not proportional to the log's wob_n")  # fmt: skip
+    parser.add_argument("--fix", type=fix_type, action="append", metavar="NAME=VALUE",
+                        help="hold a parameter at a value (SI unit; repeatable)")  # fmt: skip
+    return parser
+
+
+def _required(parser: ArgumentParser, args: argparse.Namespace, names: Sequence[str]) -> None:
+    """Report the required arguments ``names`` (dests) that are missing, as argparse would
+    (checked after the parse, so that an unknown option is reported first)."""
+    missing = [n for n in names if getattr(args, n) is None]
+    if missing:
+        shown = [n.upper() if n in ("log", "plant") else f"--{n}" for n in missing]
+        parser.error(f"the following arguments are required: {', '.join(shown)}")
+
+
+def calibrate_main(argv: Sequence[str]) -> int:
+    """``drill-gym calibrate``."""
+    parser = _parser()
+    args = parser.parse_args(list(argv))
+    _required(parser, args, ("log", "window", "out"))
+    out: Path = args.out
+    prepare_out(out, CALIBRATE_FILES, ("plant.json", PLANT_FORMAT))
+    log = read_log(args.log)
+    families = FAMILIES if args.family == "auto" else (args.family,)
+    result = calibrate(log, args.window, families, not args.no_wob, dict(args.fix or []))
+    window = log.window(*args.window)
+    speed, torque = simulate_plant(result.plant, window, result.plant.initial_twist_rad)
+    result.plant.save(out / "plant.json")
+    title = f"{result.plant.family} fit on {args.window[0]:g}-{args.window[1]:g} s"
+    _save(_fit_figure(window, speed, torque, title), out / "fit.png")
+    _save(_loop_figure(window, speed, torque, f"torque-speed loop, {title}"), out / "loop.png")
+    _save(_uncertainty_figure(result), out / "uncertainty.png")
+    command = "drill-gym calibrate " + " ".join(argv)
+    (out / "report.md").write_text(_report(result, log, args.window, command))
+    print(f"family {result.plant.family}; wrote {', '.join(CALIBRATE_FILES)} in {out}")
+    for name, p in result.plant.parameters.items():
+        shown = f"{p.value:.6g} {p.unit}" if p.identified else f"not identified ({p.note})"
+        print(f"  {name}: {shown}")
+    return 0
+
+
+def replay_rows(
+    window: MeasuredLog, speed: npt.NDArray[np.float64], torque: npt.NDArray[np.float64]
+) -> tuple[list[dict[str, Any]], dict[str, float], dict[str, float], dict[str, float]]:
+    """The feature rows of a replay: measured, simulated, their errors, and the normalised RMS
+    speed error."""
+    bit = window.column("bit_speed_rad_s")
+    measured_torque = window.column("bit_torque_nm")
+    threshold = stuck_threshold(bit)
+    measured = features(window.time_s, bit, measured_torque, threshold)
+    simulated = features(window.time_s, speed, torque, threshold)
+    errors = feature_errors(measured, simulated)
+    nrms = float(np.sqrt(np.mean((speed - bit) ** 2)) / (np.std(bit) or 1.0))
+    errors["normalised_rms_speed_error"] = nrms
+    rows = [
+        {
+            "feature": key,
+            "measured": measured[key],
+            "simulated": simulated[key],
+            "error": errors[key],
+        }
+        for key in FEATURE_KEYS
+    ]
+    rows.append({"feature": "normalised_rms_speed_error", "measured": 0.0, "simulated": nrms,
+                 "error": nrms})  # fmt: skip
+    return rows, measured, simulated, errors
+
+
+def replay_parser() -> ArgumentParser:
+    """The parser of ``drill-gym replay``."""
+    parser = ArgumentParser(
+        prog="drill-gym replay",
+        description=(
+            "Drive a calibrated plant (plant.json of drill-gym calibrate) with a log's measured\n"
+            "top-drive speed on a window; write the simulated bit speed and torque on bit beside\n"
+            "the measured ones (replay.csv) and the stick-slip features (features.csv)."
+        ),
+    )
+    parser.add_argument("plant", nargs="?", help="plant.json written by drill-gym calibrate")
+    parser.add_argument("log", nargs="?", help="the measured log (.csv, or .parquet with pyarrow)")
+    parser.add_argument("--window", type=window_type, metavar="C:D",
+                        help="replayed window, start:end in s (required)")  # fmt: skip
+    parser.add_argument("--out", type=Path, metavar="DIR",
+                        help="output directory, made if missing (required)")  # fmt: skip
+    return parser
+
+
+def replay_main(argv: Sequence[str]) -> int:
+    """``drill-gym replay``."""
+    parser = replay_parser()
+    args = parser.parse_args(list(argv))
+    _required(parser, args, ("plant", "log", "window", "out"))
+    out: Path = args.out
+    prepare_out(out, REPLAY_FILES, ("replay.csv", "time_s,bit_speed_rad_s,bit_torque_nm"))
+    plant = load_plant(args.plant)
+    log = read_log(args.log)
+    window = log.window(*args.window)
+    speed, torque = simulate_plant(plant, window)
+    columns = {"time_s": window.time_s, "bit_speed_rad_s": speed, "bit_torque_nm": torque}
+    for name in ("top_speed_rad_s", "bit_speed_rad_s", "bit_torque_nm", "wob_n"):
+        if window.has(name):
+            columns[f"measured_{name}"] = window.column(name)
+    table = np.column_stack(list(columns.values()))
+    np.savetxt(out / "replay.csv", table, delimiter=",", header=",".join(columns), comments="",
+               fmt="%.10g")  # fmt: skip
+    lines = [
+        "# Replay",
+        "",
+        f"Command: `drill-gym replay {' '.join(argv)}`",
+        "",
+        f"Plant: family {plant.family}, fitted on {plant.window_s[0]:g}-{plant.window_s[1]:g} s of "
+        f"{plant.log}. Window: {args.window[0]:g}-{args.window[1]:g} s.",
+        "",
+    ]
+    defects = [d for d in find_defects(log) if d.overlaps(*args.window)]
+    if defects:
+        lines += ["Defects inside the window:", ""]
+        lines += [
+            f"- {d.kind} in {d.column}, {d.start_s:.6g}-{d.end_s:.6g} s: {d.detail}"
+            for d in defects
+        ]
+        lines.append("")
+    if window.has("bit_speed_rad_s") and window.has("bit_torque_nm"):
+        rows, *_ = replay_rows(window, speed, torque)
+        with (out / "features.csv").open("w") as f:
+            f.write("feature,measured,simulated,error\n")
+            for r in rows:
+                f.write(
+                    f"{r['feature']},{r['measured']:.6g},{r['simulated']:.6g},{r['error']:.6g}\n"
+                )
+        lines += [
+            "| feature | measured | simulated | error |",
+            "|---|---|---|---|",
+        ]
+        for r in rows:
+            kind = (
+                "absolute"
+                if r["feature"] in ("stuck_fraction", "normalised_rms_speed_error")
+                else "relative"
+            )
+            lines.append(
+                f"| {r['feature']} | {_format(r['measured'])} | {_format(r['simulated'])} | "
+                f"{_format(r['error'], 3)} ({kind}) |"
+            )
+        lines += ["", "![replay](replay.png)", ""]
+        title = f"replay of {args.window[0]:g}-{args.window[1]:g} s"
+        _save(_fit_figure(window, speed, torque, title), out / "replay.png")
+    else:
+        lines.append("The log lacks bit_speed_rad_s or bit_torque_nm: no features compared.")
+    (out / "replay.md").write_text("\n".join(lines) + "\n")
+    print(f"wrote replay.csv and replay.md in {out}")
+    for line in lines:
+        if line.startswith("| ") and not line.startswith("| feature"):
+            print(line)
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``drill-gym calibrate``: see :func:`calibrate_main`."""
+    return calibrate_main(list(argv or []))

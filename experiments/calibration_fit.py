@@ -1,0 +1,831 @@
+"""Fitting the bit-side model of :mod:`drill_env.bit_model` to a measured log
+(docs/calibration.md section 2): direct first estimates, a Levenberg-Marquardt output-error
+fit of the simulated bit speed and torque on bit, identifiability from the Laplace
+covariance, the choice of the friction family by an information criterion, and the
+stick-slip features that compare a replay with the log.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Final
+
+import numpy as np
+import numpy.typing as npt
+
+from drill_env.bit_model import (
+    FAMILIES,
+    N_MODEL_PARAMS,
+    P_A0,
+    P_AA,
+    P_C,
+    P_CV,
+    P_J,
+    P_K,
+    P_TAU,
+    P_XI,
+    simulate_bit,
+    substeps_for,
+)
+from drill_env.calibrated_plant import (
+    FAMILY_PARAMETERS,
+    MODEL_PARAMETERS,
+    CalibratedPlant,
+    FittedParameter,
+    parameter_unit,
+)
+from drill_env.measured_log import Defect, MeasuredLog, find_defects, spike_mask
+
+__all__ = [
+    "FEATURE_KEYS",
+    "FitResult",
+    "calibrate",
+    "features",
+    "initial_estimates",
+    "simulate_plant",
+]
+
+MAX_RELATIVE_STD: Final = 0.25
+"""A parameter whose fitted relative standard deviation exceeds this is not identified."""
+MEMORY_TIMES_S: Final = (0.003, 0.01, 0.03, 0.1, 0.3)
+"""Starting memory times of the ``memory`` family's fit, s."""
+STARTS_REFINED: Final = 3
+"""The fit runs Levenberg-Marquardt from this many of its starting points (those of lowest
+initial cost) and keeps the best end."""
+FEATURE_KEYS: Final = (
+    "period_fft_s",
+    "period_cycles_s",
+    "bit_speed_p2p_rad_s",
+    "bit_torque_p2p_nm",
+    "bit_torque_mean_nm",
+    "stuck_fraction",
+)
+"""The stick-slip features of a window, units in the names."""
+
+
+def _speed0(speed: npt.NDArray[np.float64], threshold: float) -> float:
+    value = float(np.median(speed[:5]))
+    return 0.0 if abs(value) < threshold else value
+
+
+def stuck_threshold(bit_speed: npt.NDArray[np.float64]) -> float:
+    """Speed below which the bit counts as stuck, rad/s: 5 % of the measured speed's 1-99 %
+    range (so that noise around 0 counts as stuck)."""
+    return 0.05 * float(np.percentile(bit_speed, 99) - np.percentile(bit_speed, 1))
+
+
+def initial_estimates(log: MeasuredLog, uses_wob: bool) -> tuple[npt.NDArray[np.float64], float]:
+    """Direct estimates of the model parameters and the initial twist from the window.
+
+    The bit's momentum balance integrated once, ``J (w_b(t) - w_b(0)) = k int(twist) +
+    c (twist - twist0) - int(T_bit)`` with the twist integrated from the measured speeds,
+    is linear in ``J``, ``k``, ``k twist0`` and ``c`` (least squares); the friction follows
+    from the torque on bit while slipping (a grid over the Stribeck rate, least squares for
+    the rest) and the largest torque while stuck.
+
+    Returns:
+        ``(p, twist0_rad)``: the model vector (memory time 0.03 s) and the initial twist.
+    """
+    t = log.time_s - log.time_s[0]
+    top = log.column("top_speed_rad_s")
+    bit = log.column("bit_speed_rad_s")
+    torque = log.column("bit_torque_nm")
+    dt = np.diff(t)
+
+    def cumulative(y: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        return np.concatenate(([0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * dt)))
+
+    twist_rel = cumulative(top - bit)
+    a = np.column_stack([bit, -cumulative(twist_rel), -t, -twist_rel, -np.ones_like(t)])
+    coef, *_ = np.linalg.lstsq(a, -cumulative(torque), rcond=None)
+    j_est, k_est, kx0, c_est, _ = (float(v) for v in coef)
+    p = np.zeros(N_MODEL_PARAMS)
+    stick_k, stick_j = _stick_slip_estimates(t, top, bit, torque)
+    if not (j_est > 0 and k_est > 0) or (
+        stick_k > 0 and not 0.5 < k_est / stick_k < 2.0
+    ):  # the equation error failed (coarse sampling, a string with more inertias)
+        j_est, k_est, c_est = stick_j, stick_k, 0.0
+        kx0 = float(np.median(torque[:5]))
+    p[P_J] = j_est if j_est > 0 else 1.0
+    p[P_K] = k_est if k_est > 0 else 1.0
+    p[P_C] = max(c_est, 1e-3 * math.sqrt(p[P_K] * p[P_J]))
+    twist0 = kx0 / p[P_K]
+    scale = log.column("wob_n") if uses_wob else np.ones_like(t)
+    threshold = stuck_threshold(bit)
+    slip = np.abs(bit) > threshold
+    per = torque / scale
+    stuck_values = np.abs(per[~slip])
+    static_max = float(np.percentile(stuck_values, 99)) if stuck_values.size > 10 else 0.0
+    best = (math.inf, 0.0, 0.0, 0.0, 0.5)
+    if slip.sum() > 10:
+        speed = np.abs(bit[slip])
+        y = per[slip] * np.sign(bit[slip])
+        for xi in np.geomspace(1e-2 / max(speed.mean(), 1e-9), 10 / max(speed.mean(), 1e-9), 40):
+            viscous = speed / scale[slip]
+            for columns in (3, 2):
+                basis = np.column_stack([np.ones_like(speed), np.exp(-xi * speed), viscous])
+                basis = basis[:, :columns]
+                norms = np.linalg.norm(basis, axis=0)
+                sol, *_ = np.linalg.lstsq(basis / norms, y, rcond=None)
+                sol = sol / norms
+                cost = float(np.sum((basis @ sol - y) ** 2))
+                if cost < best[0] and np.all(sol >= 0) and sol[0] > 0:
+                    c_v = float(sol[2]) if columns == 3 else 0.0
+                    best = (cost, float(sol[0]), float(sol[1]), c_v, xi)
+    _, a_0, drop, c_v, xi = best
+    if a_0 <= 0:
+        a_0 = float(np.median(np.abs(per[slip]))) if slip.any() else float(np.median(np.abs(per)))
+    p[P_A0] = a_0
+    p[P_AA] = max(a_0 + drop, static_max, 1.01 * a_0)
+    p[P_XI] = xi
+    p[P_CV] = max(c_v, 1e-3 * p[P_C] + 1e-12)
+    p[P_TAU] = 0.03
+    return p, twist0
+
+
+SEGMENT_CYCLES: Final = 2
+"""Stick-slip cycles per segment of the multiple-shooting stage: with two, each segment
+predicts a whole stick phase (its length sets the period) from the state of the one before."""
+SEGMENT_MIN_STUCK_S: Final = 0.02
+"""Shortest measured stuck run that starts a segment of the multiple-shooting stage, s."""
+
+
+def stuck_segments(log: MeasuredLog) -> list[tuple[int, int, float]] | None:
+    """Segments ``(first, end, torque)`` of the multiple-shooting stage of the fit: each starts
+    in the middle of every :data:`SEGMENT_CYCLES`-th measured stuck run (``|bit speed|`` below :func:`stuck_threshold`
+    for :data:`SEGMENT_MIN_STUCK_S`) with the median measured torque of its first 5 samples,
+    and ends where the next starts; None with fewer than 2 stuck runs (no stick-slip)."""
+    bit = log.column("bit_speed_rad_s")
+    torque = log.column("bit_torque_nm")
+    stuck = np.abs(bit) < stuck_threshold(bit)
+    padded = np.concatenate(([0], stuck.astype(np.int8), [0]))
+    edges = np.flatnonzero(np.diff(padded))
+    starts = []
+    min_samples = max(5, int(SEGMENT_MIN_STUCK_S / log.sample_period_s))
+    for a, b in zip(edges[::2], edges[1::2], strict=False):
+        if b - a >= min_samples:
+            starts.append(int(a + b) // 2)
+    if len(starts) < 2:
+        return None
+    starts = starts[::SEGMENT_CYCLES]
+    ends = [*starts[1:], bit.size]
+    return [
+        (a, b, float(np.median(torque[a : a + 5])))
+        for a, b in zip(starts, ends, strict=False)
+        if b - a >= 3
+    ]
+
+
+def _stick_slip_estimates(
+    t: npt.NDArray[np.float64],
+    top: npt.NDArray[np.float64],
+    bit: npt.NDArray[np.float64],
+    torque: npt.NDArray[np.float64],
+) -> tuple[float, float]:
+    """``(k, J)`` from the stick-slip cycles: while the bit is stuck the torque on bit rises
+    with the twist the top drive winds (slope ``k``, least squares on every stuck run of 4 or
+    more samples); a slip lasts about half a natural period, ``J = k (t_slip / pi)^2``.
+    ``(0, 0)`` without stuck runs."""
+    stuck = np.abs(bit) < stuck_threshold(bit)
+    padded = np.concatenate(([0], stuck.astype(np.int8), [0]))
+    edges = np.flatnonzero(np.diff(padded))
+    xs, ys = [], []
+    for a, b in zip(edges[::2], edges[1::2], strict=False):
+        if b - a >= 4:
+            dt = np.diff(t[a:b])
+            twist = np.concatenate(([0.0], np.cumsum(0.5 * (top[a + 1 : b] + top[a : b - 1]) * dt)))
+            xs.append(twist - twist.mean())
+            ys.append(torque[a:b] - torque[a:b].mean())
+    if not xs:
+        return 0.0, 0.0
+    x, y = np.concatenate(xs), np.concatenate(ys)
+    k = float(x @ y / (x @ x)) if x @ x > 0 else 0.0
+    slips = [t[b] - t[a] for a, b in zip(edges[1::2][:-1], edges[2::2], strict=False) if b > a]
+    if k <= 0 or not slips:
+        return 0.0, 0.0
+    return k, k * (float(np.median(slips)) / math.pi) ** 2
+
+
+@dataclass
+class _Problem:
+    """The residuals of one window for one family."""
+
+    log: MeasuredLog
+    family: str
+    uses_wob: bool
+    free: list[str]
+    fixed_p: npt.NDArray[np.float64]
+    weights: npt.NDArray[np.float64]  # per residual, 0 where excluded
+    scales: tuple[float, float]
+    speed0: float
+    substeps: int
+    twist0_fixed: float = 0.0
+    segments: list[tuple[int, int, float]] | None = None
+
+    def unpack(self, theta: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], float]:
+        p = self.fixed_p.copy()
+        for i, name in enumerate(self.free):
+            if name == "initial_twist":
+                continue
+            if name == "sliding_friction":
+                continue
+            p[MODEL_PARAMETERS[name][0]] = math.exp(theta[i])
+        if "sliding_friction" in self.free:
+            i = self.free.index("sliding_friction")
+            p[P_A0] = p[P_AA] / (1.0 + math.exp(-theta[i]))
+        if "initial_twist" in self.free:
+            twist0 = theta[self.free.index("initial_twist")] * self.twist_scale(p)
+        else:
+            twist0 = self.twist0_fixed
+        return p, twist0
+
+    def twist_scale(self, p: npt.NDArray[np.float64]) -> float:
+        scale = float(np.mean(self.log.column("wob_n"))) if self.uses_wob else 1.0
+        return p[P_AA] * scale / p[P_K]
+
+    def pack(self, p: npt.NDArray[np.float64], twist0: float) -> npt.NDArray[np.float64]:
+        theta = np.zeros(len(self.free))
+        for i, name in enumerate(self.free):
+            if name == "initial_twist":
+                theta[i] = twist0 / self.twist_scale(p)
+            elif name == "sliding_friction":
+                ratio = min(max(p[P_A0] / p[P_AA], 1e-6), 1 - 1e-9)
+                theta[i] = math.log(ratio / (1 - ratio))
+            else:
+                theta[i] = math.log(max(p[MODEL_PARAMETERS[name][0]], 1e-300))
+        return theta
+
+    def simulate(
+        self, theta: npt.NDArray[np.float64]
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        p, twist0 = self.unpack(theta)
+        top = self.log.column("top_speed_rad_s")
+        wob = self.log.column("wob_n") if self.uses_wob else None
+        if self.segments is None:
+            speed, torque, _ = simulate_bit(
+                self.log.time_s, top, p, self.family, twist0, self.speed0, wob, self.substeps
+            )
+            return speed, torque
+        # Multiple shooting: every segment starts stuck, its twist from the measured torque.
+        speed = self.log.column("bit_speed_rad_s").copy()
+        torque = self.log.column("bit_torque_nm").copy()
+        for a, b, torque0 in self.segments:
+            s, q, _ = simulate_bit(
+                self.log.time_s[a:b], top[a:b], p, self.family, (torque0 - p[P_C] * top[a]) / p[P_K],
+                0.0, None if wob is None else wob[a:b], self.substeps,
+            )  # fmt: skip
+            speed[a:b] = s
+            torque[a:b] = q
+        return speed, torque
+
+    def residuals(self, theta: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        speed, torque = self.simulate(theta)
+        r = np.concatenate(
+            [
+                (speed - self.log.column("bit_speed_rad_s")) / self.scales[0],
+                (torque - self.log.column("bit_torque_nm")) / self.scales[1],
+            ]
+        )
+        r = np.where(np.isfinite(r), r, 1e3)
+        return np.asarray(r * self.weights)
+
+
+def _initial_twist_grid(problem: _Problem, p: npt.NDArray[np.float64]) -> float:
+    """The initial twist (rad) of lowest cost on a grid of 61 values spanning one static
+    torque around the torque balance, the other parameters held at ``p``."""
+    log = problem.log
+    torque0 = float(np.median(log.column("bit_torque_nm")[:5]))
+    balance = (torque0 - p[P_C] * (log.column("top_speed_rad_s")[0] - problem.speed0)) / p[P_K]
+    span = problem.twist_scale(p)
+    best = (math.inf, balance)
+    for x0 in balance + span * np.linspace(-1.0, 1.0, 61):
+        r = problem.residuals(problem.pack(p, float(x0)))
+        cost = float(r @ r)
+        if cost < best[0]:
+            best = (cost, float(x0))
+    return best[1]
+
+
+def _jacobian(
+    problem: _Problem, theta: npt.NDArray[np.float64], step: float = 1e-3
+) -> npt.NDArray[np.float64]:
+    columns = []
+    for i in range(theta.size):
+        hi = theta.copy()
+        lo = theta.copy()
+        hi[i] += step
+        lo[i] -= step
+        columns.append((problem.residuals(hi) - problem.residuals(lo)) / (2 * step))
+    return np.column_stack(columns)
+
+
+def _levenberg_marquardt(
+    problem: _Problem,
+    theta: npt.NDArray[np.float64],
+    max_iterations: int = 60,
+    max_log_step: float = 4.0,
+) -> tuple[npt.NDArray[np.float64], float, int]:
+    """Minimise the sum of squared residuals from ``theta``, each parameter kept within
+    ``max_log_step`` of its start (log space); returns (theta, cost, iterations)."""
+    r = problem.residuals(theta)
+    cost = float(r @ r)
+    low, high = theta - max_log_step, theta + max_log_step
+    damping = 1e-2
+    iteration = 0
+    while iteration < max_iterations:
+        iteration += 1
+        jac = _jacobian(problem, theta)
+        g = jac.T @ r
+        h = jac.T @ jac
+        improved = False
+        for _ in range(12):
+            step = np.linalg.solve(h + damping * np.diag(np.diag(h) + 1e-12), -g)
+            step = np.clip(step, -1.0, 1.0)
+            trial = np.clip(theta + step, low, high)
+            r_trial = problem.residuals(trial)
+            cost_trial = float(r_trial @ r_trial)
+            if cost_trial < cost:
+                improved = True
+                relative = (cost - cost_trial) / max(cost, 1e-300)
+                theta, r, cost = trial, r_trial, cost_trial
+                damping = max(damping / 3, 1e-9)
+                break
+            damping *= 4
+        if not improved or relative < 1e-7:
+            break
+    return theta, cost, iteration
+
+
+def _effective_fraction(r: npt.NDArray[np.float64]) -> float:
+    """``n_eff / n`` of a residual series from its autocorrelation (sum up to the first
+    negative lag), in (0, 1]."""
+    r = r - r.mean()
+    if not np.any(r):
+        return 1.0
+    n = r.size
+    spectrum = np.fft.rfft(r, 2 * n)
+    acf = np.fft.irfft(spectrum * np.conj(spectrum))[:n]
+    acf /= acf[0]
+    total = 0.0
+    for lag in range(1, min(n, 2000)):
+        if acf[lag] <= 0:
+            break
+        total += acf[lag]
+    return 1.0 / (1.0 + 2.0 * total)
+
+
+@dataclass
+class FamilyFit:
+    """The fit of one friction family on a window."""
+
+    family: str
+    p: npt.NDArray[np.float64]
+    twist0: float
+    cost: float
+    n: int
+    n_eff: float
+    free: list[str]
+    relative_std: dict[str, float]
+    correlations: dict[str, tuple[str, float]]
+    fixed: dict[str, str]
+    bic: float
+    iterations: int
+    singular_values: list[float] = field(default_factory=list)
+
+
+def _moderate(
+    p: npt.NDArray[np.float64], log: MeasuredLog, uses_wob: bool
+) -> npt.NDArray[np.float64]:
+    """``p`` with damping terms near 0 raised to moderate starting values (a 2 % damping
+    ratio; a viscous friction of 5 % of the sliding torque at the mean slip speed), so that
+    the fit can move them: a term started at 0 has no gradient in log space."""
+    q = p.copy()
+    q[P_C] = max(q[P_C], 0.04 * math.sqrt(q[P_K] * q[P_J]))
+    scale = float(np.mean(log.column("wob_n"))) if uses_wob else 1.0
+    speed = float(np.mean(np.abs(log.column("bit_speed_rad_s")))) or 1.0
+    q[P_CV] = max(q[P_CV], 0.05 * q[P_A0] * scale / speed)
+    return q
+
+
+def _fit_family(
+    log: MeasuredLog,
+    family: str,
+    uses_wob: bool,
+    weights: npt.NDArray[np.float64],
+    starts_p: list[tuple[npt.NDArray[np.float64], float]],
+    direct: npt.NDArray[np.float64],
+    user_fixed: dict[str, float],
+) -> FamilyFit:
+    bit = log.column("bit_speed_rad_s")
+    torque = log.column("bit_torque_nm")
+    scales = (float(np.std(bit)) or 1.0, float(np.std(torque)) or 1.0)
+    names = list(FAMILY_PARAMETERS[family]) + ["initial_twist"]
+    fixed: dict[str, str] = {}
+    held: dict[int, float] = {}
+    for name, value in user_fixed.items():
+        held[MODEL_PARAMETERS[name][0]] = value
+        fixed[name] = f"fixed at {value:.6g} by the user"
+    candidates = []
+    for p_start, twist_start in starts_p:
+        q = _moderate(p_start, log, uses_wob)
+        for index, value in held.items():
+            q[index] = value
+        candidates.append((q, twist_start))
+    p, start_twist0 = candidates[0]
+    problem = _Problem(
+        log, family, uses_wob, [n for n in names if n not in fixed], p.copy(),
+        weights, scales, _speed0(bit, stuck_threshold(bit)), 1, start_twist0,
+    )  # fmt: skip
+    iterations = 0
+    free_full = list(problem.free)
+    while True:
+        tried = []
+        free_shooting = [n for n in free_full if n != "initial_twist"]
+        shooting = stuck_segments(log)
+        problem.segments = shooting
+        if shooting is not None:
+            problem.free = free_shooting
+        for q, twist_q in candidates:
+            problem.fixed_p = q.copy()
+            theta0 = problem.pack(q, twist_q)
+            variants = [theta0]
+            if family == "memory" and "memory_time" in problem.free:
+                i = problem.free.index("memory_time")
+                for tau in MEMORY_TIMES_S:
+                    th = theta0.copy()
+                    th[i] = math.log(tau)
+                    variants.append(th)
+            for th in variants:
+                problem.substeps = substeps_for(problem.unpack(th)[0], log.sample_period_s)
+                r = problem.residuals(th)
+                tried.append((float(r @ r), q.copy(), th))
+        tried.sort(key=lambda item: item[0])
+        best_run = None
+        for _, q, th in tried[:STARTS_REFINED]:
+            problem.fixed_p = q
+            problem.segments = shooting
+            problem.free = free_shooting if shooting is not None else free_full
+            problem.substeps = substeps_for(problem.unpack(th)[0], log.sample_period_s)
+            theta_run, cost_run, it = _levenberg_marquardt(problem, th)
+            iterations += it
+            if best_run is None or cost_run < best_run[0]:
+                best_run = (cost_run, q, theta_run)
+        # The Laplace covariance and the BIC are those of the stage that fitted (multiple
+        # shooting when the window stick-slips); the initial twist of the whole window is
+        # then the best one on a grid, for the figures and the plant file.
+        assert best_run is not None
+        _, problem.fixed_p, theta = best_run
+        p, start_twist0 = problem.unpack(theta)
+        problem.substeps = substeps_for(p, log.sample_period_s)
+        theta = problem.pack(p, start_twist0)
+        r = problem.residuals(theta)
+        cost = float(r @ r)
+        jac = _jacobian(problem, theta)
+        used = weights > 0
+        n = int(used.sum())
+        fraction = _effective_fraction(r[used])
+        n_eff = max(n * fraction, len(problem.free) + 2.0)
+        s2 = cost / max(n - len(problem.free), 1)
+        info = jac.T @ jac
+        singular = np.linalg.svd(jac, compute_uv=False)
+        ridge = 1e-10 * max(float(np.trace(info)), 1e-300) / info.shape[0]
+        cov = np.linalg.inv(info + ridge * np.eye(info.shape[0])) * s2 / fraction
+        std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        rel = {}
+        corr = {}
+        for i, name in enumerate(problem.free):
+            if name == "initial_twist":
+                continue
+            if name == "sliding_friction":
+                ratio = p[P_A0] / p[P_AA]
+                rel[name] = float(std[i] * (1 - ratio))
+            else:
+                rel[name] = float(std[i])
+            row = cov[i] / np.maximum(std * std[i], 1e-300)
+            row[i] = 0.0
+            j = int(np.argmax(np.abs(row)))
+            corr[name] = (problem.free[j], float(row[j]))
+        worst = max(rel, key=lambda k: rel[k] if math.isfinite(rel[k]) else math.inf, default=None)
+        if worst is None or (math.isfinite(rel[worst]) and rel[worst] <= MAX_RELATIVE_STD):
+            break
+        if len(rel) == 1:
+            raise ValueError(
+                f"the window identifies no parameter of the {family} family (the last one, "
+                f"{worst}, has relative std {rel[worst]:.2g}): choose a window with stick-slip "
+                "cycles, or hold parameters with --fix"
+            )
+        # Not identified: fix it at its direct estimate (or 0 for a damping term) and refit.
+        index = MODEL_PARAMETERS[worst][0]
+        partner, rho = corr[worst]
+        if worst in ("damping", "viscous_friction"):
+            value = 0.0
+            how = "fixed at 0"
+        elif worst == "memory_time":
+            value = p[index]
+            how = f"fixed at {value:.3g} s (its fitted value; the data barely depend on it)"
+        else:
+            value = direct[index]
+            how = f"fixed at its direct estimate {value:.6g}"
+        fixed[worst] = (
+            f"not identifiable from this window (relative std {rel[worst]:.2g}, correlation "
+            f"{rho:+.2f} with {partner}): {how}"
+        )
+        p[index] = value
+        if worst == "static_friction" and p[P_A0] > value:
+            p[P_A0] = value
+        held[index] = value
+        free_full = [n for n in free_full if n != worst]
+        candidates = [(p.copy(), start_twist0)]
+    if problem.segments is not None:
+        # The parameters stay those of the multiple shooting (a last fit of one simulation
+        # of the whole window, even within 16 % of them, matched the fitted window better
+        # and the held-out windows no better); only the window's initial twist is set here.
+        problem.segments = None
+        problem.free = free_full
+        problem.fixed_p = p.copy()
+        problem.substeps = substeps_for(p, log.sample_period_s)
+        start_twist0 = _initial_twist_grid(problem, p)
+    k = len(problem.free)
+    bic = n_eff * math.log(cost / n) + k * math.log(n_eff)
+    return FamilyFit(
+        family, p, start_twist0, cost, n, n_eff, list(problem.free), rel, corr, fixed, bic,
+        iterations, [float(v) for v in singular],
+    )  # fmt: skip
+
+
+@dataclass
+class FitResult:
+    """A calibration: the chosen plant, every family's fit, the window's defects."""
+
+    plant: CalibratedPlant
+    fits: dict[str, FamilyFit]
+    defects: list[Defect]
+    excluded_samples: int
+    wall_s: float
+
+
+def fit_weights(window: MeasuredLog) -> tuple[npt.NDArray[np.float64], list[Defect]]:
+    """Residual weights of a window (1, or 0 for samples of a spike or a flat line of the
+    fitted columns: they are left out of the residual, the data are not changed) and the
+    window's defects."""
+    defects = find_defects(window)
+    n = window.time_s.size
+    weights = np.ones(2 * n)
+    for offset, name in ((0, "bit_speed_rad_s"), (n, "bit_torque_nm")):
+        mask = spike_mask(window.column(name))
+        for d in defects:
+            if d.column == name and d.kind == "flat_line":
+                mask[d.rows[0] - 1 : d.rows[1]] = True
+        weights[offset : offset + n][mask] = 0.0
+    return weights, defects
+
+
+def calibrate(
+    log: MeasuredLog,
+    window_s: tuple[float, float],
+    families: tuple[str, ...] = FAMILIES,
+    use_wob: bool = True,
+    fixed: dict[str, float] | None = None,
+) -> FitResult:
+    """Fit every family in ``families`` on the window and keep the one of lowest BIC.
+
+    Args:
+        log: The measured log; needs ``bit_speed_rad_s`` and ``bit_torque_nm``.
+        window_s: ``(start, end)`` of the fitted window, s.
+        families: Friction families to fit (:data:`drill_env.bit_model.FAMILIES`).
+        use_wob: Scale the friction with ``wob_n`` when the log has it.
+        fixed: Parameters held at given values (name -> value in its unit).
+    """
+    started = time.perf_counter()
+    for name in ("bit_speed_rad_s", "bit_torque_nm"):
+        if not log.has(name):
+            raise ValueError(
+                f"the log has no column {name!r}: calibrate fits the bit speed and the torque "
+                "on bit, and needs both"
+            )
+    user_fixed = dict(fixed or {})
+    for name in user_fixed:
+        if name not in MODEL_PARAMETERS:
+            raise ValueError(f"unknown parameter {name!r}: allowed {', '.join(MODEL_PARAMETERS)}")
+    window = log.window(*window_s)
+    uses_wob = use_wob and window.has("wob_n")
+    if uses_wob and not np.all(window.column("wob_n") > 0):
+        raise ValueError("column 'wob_n' has values <= 0 in the window: allowed > 0 N")
+    weights, defects = fit_weights(window)
+    direct, twist0 = initial_estimates(window, uses_wob)
+    fits: dict[str, FamilyFit] = {}
+    previous: tuple[npt.NDArray[np.float64], float] | None = None
+    for family in FAMILIES:
+        if family not in families:
+            continue
+        fam_fixed = {k: v for k, v in user_fixed.items() if k in FAMILY_PARAMETERS[family]}
+        starts = [(direct.copy(), twist0)]
+        if previous is not None:
+            starts.append(previous)
+        fit = _fit_family(window, family, uses_wob, weights, starts, direct, fam_fixed)
+        fits[family] = fit
+        previous = (fit.p.copy(), fit.twist0)
+    # One effective sample size for every family (the simplest family's), so that the BIC
+    # compares costs on one footing.
+    n_eff = next(iter(fits.values())).n_eff
+    for f in fits.values():
+        f.n_eff = n_eff
+        f.bic = n_eff * math.log(f.cost / f.n) + len(f.free) * math.log(n_eff)
+    chosen = min(fits.values(), key=lambda f: f.bic)
+    plant = _plant_of(chosen, window, uses_wob, window_s, log.source, fits, defects, weights)
+    return FitResult(plant, fits, defects, int((weights == 0).sum()), time.perf_counter() - started)
+
+
+def _plant_of(
+    fit: FamilyFit,
+    window: MeasuredLog,
+    uses_wob: bool,
+    window_s: tuple[float, float],
+    source: str,
+    fits: dict[str, FamilyFit],
+    defects: list[Defect],
+    weights: npt.NDArray[np.float64],
+) -> CalibratedPlant:
+    parameters = {}
+    for name in FAMILY_PARAMETERS[fit.family]:
+        value = float(fit.p[MODEL_PARAMETERS[name][0]])
+        if name in fit.fixed:
+            parameters[name] = FittedParameter(
+                value, parameter_unit(name, uses_wob), False, None, fit.fixed[name]
+            )
+        else:
+            parameters[name] = FittedParameter(
+                value, parameter_unit(name, uses_wob), True, fit.relative_std.get(name),
+                "fitted (output error on bit speed and torque on bit)",
+            )  # fmt: skip
+    bit = window.column("bit_speed_rad_s")
+    # The noise of the bit-speed sensor: the robust spread of the second differences (white
+    # noise of std s gives std s sqrt(6); a smooth signal's trend cancels).
+    second = np.diff(bit, 2)
+    noise = 1.4826 * float(np.median(np.abs(second - np.median(second)))) / math.sqrt(6)
+    operating = {
+        "mean_top_speed_rad_s": float(np.mean(window.column("top_speed_rad_s"))),
+        "mean_bit_speed_rad_s": float(np.mean(bit)),
+        "bit_speed_noise_rad_s": noise,
+        "mean_bit_torque_nm": float(np.mean(window.column("bit_torque_nm"))),
+    }
+    if uses_wob:
+        operating["mean_wob_n"] = float(np.mean(window.column("wob_n")))
+    return CalibratedPlant(
+        family=fit.family,
+        uses_wob=uses_wob,
+        parameters=parameters,
+        initial_twist_rad=float(fit.twist0),
+        window_s=(float(window_s[0]), float(window_s[1])),
+        log=source,
+        fit={
+            "method": "Levenberg-Marquardt output error, residuals of bit speed and torque on "
+            "bit each divided by its standard deviation in the window",
+            "selection": "lowest BIC with the effective sample size of the residuals",
+            "families": {
+                name: {
+                    "bic": f.bic,
+                    "normalised_rms": math.sqrt(f.cost / f.n),
+                    "free_parameters": len(f.free),
+                    "n_effective": f.n_eff,
+                }
+                for name, f in fits.items()
+            },
+            "samples": int(window.time_s.size),
+            "excluded_residuals": int((weights == 0).sum()),
+            "defects_in_window": len(defects),
+            "max_relative_std": MAX_RELATIVE_STD,
+        },
+        operating_point=operating,
+    )
+
+
+def simulate_plant(
+    plant: CalibratedPlant, log: MeasuredLog, twist0: float | None = None
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Drive ``plant`` with the log's top-drive speed; returns the bit speed (rad/s) and the
+    torque on bit (N m) on the log's clock.
+
+    The initial state: the measured bit speed (0 below the stuck threshold) and, unless given,
+    the twist that balances the measured torque on bit (or the plant's fitted twist when the
+    log has no torque on bit).
+    """
+    p = plant.model_vector()
+    uses_wob = plant.uses_wob
+    if uses_wob and not log.has("wob_n"):
+        raise ValueError("the plant's friction scales with WOB but the log has no column 'wob_n'")
+    speed0 = 0.0
+    if log.has("bit_speed_rad_s"):
+        bit = log.column("bit_speed_rad_s")
+        speed0 = _speed0(bit, stuck_threshold(bit))
+    wob = log.column("wob_n") if uses_wob else None
+    if twist0 is None:
+        twist0 = initial_twist(plant, log, speed0)
+    speed, torque, _ = simulate_bit(
+        log.time_s, log.column("top_speed_rad_s"), p, plant.family, twist0, speed0, wob
+    )
+    return speed, torque
+
+
+INITIAL_STATE_FRACTION: Final = 0.25
+"""Share of a replayed window, from its start, on which its initial twist is estimated."""
+
+
+def initial_twist(plant: CalibratedPlant, log: MeasuredLog, speed0: float) -> float:
+    """The string's twist at the start of a replayed log, rad: the value that best matches
+    the measured bit speed and torque on bit over the first :data:`INITIAL_STATE_FRACTION` of
+    the log (a grid of 61 values within one static torque of the torque balance), or the
+    torque balance alone when the log lacks either column. Only this initial state is
+    estimated from a replayed window; the plant's parameters are not touched.
+    """
+    p = plant.model_vector()
+    top0 = float(log.column("top_speed_rad_s")[0])
+    if not log.has("bit_torque_nm"):
+        return plant.initial_twist_rad
+    torque0 = float(np.median(log.column("bit_torque_nm")[:5]))
+    balance = (torque0 - p[P_C] * (top0 - speed0)) / p[P_K]
+    if not log.has("bit_speed_rad_s"):
+        return balance
+    n = max(3, int(INITIAL_STATE_FRACTION * log.time_s.size))
+    head = log.time_s[:n]
+    top = log.column("top_speed_rad_s")[:n]
+    bit = log.column("bit_speed_rad_s")[:n]
+    torque = log.column("bit_torque_nm")[:n]
+    wob = log.column("wob_n")[:n] if plant.uses_wob else None
+    span = p[P_AA] * (float(np.mean(wob)) if wob is not None else 1.0) / p[P_K]
+    scales = (float(np.std(bit)) or 1.0, float(np.std(torque)) or 1.0)
+    best = (math.inf, balance)
+    for x0 in balance + span * np.linspace(-1.0, 1.0, 61):
+        s, q, _ = simulate_bit(head, top, p, plant.family, float(x0), speed0, wob)
+        cost = float(np.mean(((s - bit) / scales[0]) ** 2 + ((q - torque) / scales[1]) ** 2))
+        if cost < best[0]:
+            best = (cost, float(x0))
+    return best[1]
+
+
+def _cycle_starts(speed: npt.NDArray[np.float64], low: float, high: float) -> npt.NDArray[np.intp]:
+    """Indices where the speed rises through ``high`` after having been below ``low``."""
+    starts = []
+    armed = False
+    for i, v in enumerate(speed):
+        if v < low:
+            armed = True
+        elif armed and v > high:
+            starts.append(i)
+            armed = False
+    return np.asarray(starts, dtype=np.intp)
+
+
+def features(
+    time_s: npt.NDArray[np.float64],
+    bit_speed: npt.NDArray[np.float64],
+    bit_torque: npt.NDArray[np.float64],
+    threshold: float,
+) -> dict[str, float]:
+    """Stick-slip features of one window (NaN when there are fewer than two cycles).
+
+    * ``period_fft_s``: 1 / the dominant frequency of the bit speed (parabolic peak of the
+      spectrum of the mean-removed speed, zero-padded 8 times).
+    * ``period_cycles_s``: mean time between cycle starts (the speed rising through
+      ``2 threshold`` after being below ``threshold``, rad/s).
+    * ``bit_speed_p2p_rad_s``, ``bit_torque_p2p_nm``: mean over cycles of max - min.
+    * ``bit_torque_mean_nm``: mean torque on bit.
+    * ``stuck_fraction``: fraction of samples with ``|bit speed| < threshold``.
+    """
+    out: dict[str, float] = dict.fromkeys(FEATURE_KEYS, math.nan)
+    out["bit_torque_mean_nm"] = float(np.mean(bit_torque))
+    out["stuck_fraction"] = float(np.mean(np.abs(bit_speed) < threshold))
+    dt = float(np.median(np.diff(time_s)))
+    x = bit_speed - bit_speed.mean()
+    spectrum = np.abs(np.fft.rfft(x * np.hanning(x.size), 8 * x.size))
+    freqs = np.fft.rfftfreq(8 * x.size, dt)
+    band = freqs > 1.5 / (time_s[-1] - time_s[0])
+    if band.any() and np.any(x):
+        i = int(np.flatnonzero(band)[np.argmax(spectrum[band])])
+        if 0 < i < spectrum.size - 1:
+            a, b, c = spectrum[i - 1], spectrum[i], spectrum[i + 1]
+            shift = 0.5 * (a - c) / (a - 2 * b + c) if (a - 2 * b + c) != 0 else 0.0
+            f = freqs[i] + shift * (freqs[1] - freqs[0])
+            out["period_fft_s"] = 1.0 / f if f > 0 else math.nan
+    starts = _cycle_starts(bit_speed, threshold, 2 * threshold)
+    if starts.size >= 2:
+        out["period_cycles_s"] = float(np.mean(np.diff(time_s[starts])))
+        speeds = [np.ptp(bit_speed[a:b]) for a, b in zip(starts[:-1], starts[1:], strict=False)]
+        torques = [np.ptp(bit_torque[a:b]) for a, b in zip(starts[:-1], starts[1:], strict=False)]
+        out["bit_speed_p2p_rad_s"] = float(np.mean(speeds))
+        out["bit_torque_p2p_nm"] = float(np.mean(torques))
+    return out
+
+
+def feature_errors(measured: dict[str, float], simulated: dict[str, float]) -> dict[str, float]:
+    """Relative errors of the simulated features (absolute for the stuck fraction)."""
+    out: dict[str, float] = {}
+    for key in FEATURE_KEYS:
+        m, s = measured[key], simulated[key]
+        if key == "stuck_fraction":
+            out[key] = s - m
+        else:
+            out[key] = (s - m) / abs(m) if m else math.nan
+    return out
