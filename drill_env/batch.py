@@ -18,7 +18,7 @@ from typing import Final
 import numpy as np
 import numpy.typing as npt
 
-from drill_env import kernel
+from drill_env import coupled_chain, kernel
 from drill_env.actuator import lag_factor
 from drill_env.chain import CHAIN_WORK_ROWS, chain_parameter_length, chain_parameter_vector
 from drill_env.control import (
@@ -75,6 +75,7 @@ from drill_env.layout import (
     REP_VARIATION,
     STATE_NAMES,
     STATUS_OK,
+    ObservationField,
     chain_state_fields,
     observation_fields,
     observation_scales,
@@ -201,6 +202,17 @@ class StringBatch:
             config.telemetry,
             *((state_fields,) if state_fields is not None else ()),
         )
+        # bit="rgd": a string with axial elements and the RGD bit (drill_env.coupled_chain);
+        # its weight on bit and rate of penetration close the observation.
+        bit = config.bit_parameters() if self.chain else None  # type: ignore[attr-defined]
+        self.coupled = bit is not None
+        self._bit = bit
+        extra = N_FIXED_SOURCES + state_size
+        if self.coupled:
+            self.fields += (
+                ObservationField("weight_on_bit_n", extra, "force"),
+                ObservationField("rate_of_penetration_m_s", extra + 1, "rop"),
+            )
         self.obs_size = len(self.fields)
         controller = resolve_controller(config.base_controller)
         self.controllers: list[Controller] = []
@@ -255,7 +267,7 @@ class StringBatch:
             telemetry_buffer=np.zeros((n, telemetry_buffer_size(period, delay), 2)),
             records=np.zeros((n, s, N_RECORD)),
             report=np.zeros((n, N_REPORT)),
-            sources=np.zeros((n, N_FIXED_SOURCES + state_size)),
+            sources=np.zeros((n, extra + (2 if self.coupled else 0))),
             obs=np.zeros((n, self.obs_size), dtype=np.float32),
         )
         rate = config.torque_rate_limit_nm_per_s
@@ -287,6 +299,27 @@ class StringBatch:
         span = config.max_torque_nm - config.min_torque_nm
         self._action_gain = config.residual_scale_nm if self.residual else 0.5 * span
         self._action_offset = 0.0 if self.residual else config.min_torque_nm + 0.5 * span
+        self.coupled_arrays = (
+            coupled_chain.coupled_arrays(n, self.max_nodes, (extra, extra + 1))
+            if self.coupled
+            else None
+        )
+        if self.coupled_arrays is not None:
+            coupled_dispatcher = (
+                coupled_chain.advance_coupled_batch_parallel
+                if n >= PARALLEL_THRESHOLD
+                else coupled_chain.advance_coupled_batch
+            )
+            entry = kernel.fast_entry(
+                coupled_dispatcher, self.arrays, self.settings, self.coupled_arrays
+            )
+            coupled = self.coupled_arrays
+
+            def advance(arrays: kernel.BatchArrays, settings: kernel.LoopSettings) -> None:
+                entry(arrays, settings, coupled)
+
+            self._advance = advance
+            return
         if self.chain:
             serial, parallel = kernel.advance_chain_batch, kernel.advance_chain_batch_parallel
         else:
@@ -443,6 +476,20 @@ class StringBatch:
                 a.law_params[i] = law.params
                 a.law_state[i] = law.initial_state
         a.report[i] = 0.0
+        if self.coupled_arrays is not None:
+            assert self._bit is not None
+            torsion = coupled_chain.reset_coupled_string(
+                self.coupled_arrays, i, scenario.plant,  # type: ignore[arg-type]
+                self._bit, axial_top=config.axial_top,  # type: ignore[attr-defined]
+                hook_speed_m_s=config.hook_speed_m_s,  # type: ignore[attr-defined]
+                hook_stiffness_n_m=config.hook_stiffness_n_m,  # type: ignore[attr-defined]
+                applied_force_n=float(prof[PROF_WOB_V, 0]),
+                reference_speed_rad_s=float(prof[PROF_REF_V, 0]),
+            )  # fmt: skip
+            a.x[i, : torsion.shape[0]] = torsion
+            out = self.coupled_arrays.out[i]
+            a.sources[i, -2] = out[coupled_chain.OUT_WOB]
+            a.sources[i, -1] = out[coupled_chain.OUT_ROP]
         kernel.observe(a, self.settings, i)
 
     def law_info(self) -> dict[str, npt.NDArray[np.float64]]:
@@ -472,6 +519,17 @@ class StringBatch:
             info[estimated] = state[slot]
             info[error] = state[slot] - last[column]
         return info
+
+    def coupled_info(self) -> dict[str, npt.NDArray[np.float64] | npt.NDArray[np.bool_]]:
+        """With ``bit="rgd"``: the bit's ``info`` entries, (num,) each
+        (:func:`drill_env.coupled_chain.coupled_info`); else nothing."""
+        if self.coupled_arrays is None:
+            return {}
+        return coupled_chain.coupled_info(self.coupled_arrays)
+
+    def coupled_info_of(self, i: int) -> dict[str, float | bool]:
+        """:meth:`coupled_info` of string ``i`` as Python scalars."""
+        return {key: value[i].item() for key, value in self.coupled_info().items()}
 
     def measurement(self, i: int) -> npt.NDArray[np.float64]:
         """The measurement vector of string ``i`` now (``drill_env.layout.M_*``: the measured
@@ -537,6 +595,10 @@ class StringBatch:
         one_step = self.settings._replace(n_sub=1)
         step_arrays = a._replace(records=np.zeros((n, 1, N_RECORD)))
         sums = np.zeros((n, _SUMS.stop))
+        coupled = self.coupled_arrays
+        if coupled is not None:  # the bit's outputs over the whole decision, not its last step
+            depth_start = coupled.out[:, coupled_chain.OUT_DEPTH].copy()
+            wob_sum = np.zeros(n)
         for j in range(self.substeps):
             for i in range(n):
                 t = a.ints[i, I_STEP] * PLANT_DT_S
@@ -549,7 +611,11 @@ class StringBatch:
             self._advance(step_arrays, one_step)
             a.records[:, j] = step_arrays.records[:, 0]
             sums += a.report[:, _SUMS]
+            if coupled is not None:
+                wob_sum += coupled.out[:, coupled_chain.OUT_WOB_MEAN] * a.report[:, REP_STEPS]
         a.report[:, _SUMS] = sums
+        if coupled is not None:
+            self._coupled_decision_outputs(coupled, depth_start, wob_sum, sums[:, REP_STEPS])
         a.report[:, REP_LAW_ERROR] = 0.0  # a Python controller's state is its own
         a.report[:, REP_LAW_GAIN] = 0.0
 
@@ -575,6 +641,30 @@ class StringBatch:
         """Why string ``i``'s episode ended: the base controller's failure, else
         ``"diverged"``."""
         return self.end_reasons[i] or "diverged"
+
+    def _coupled_decision_outputs(
+        self,
+        coupled: coupled_chain.CoupledArrays,
+        depth_start: npt.NDArray[np.float64],
+        wob_sum: npt.NDArray[np.float64],
+        steps: npt.NDArray[np.float64],
+    ) -> None:
+        """The slow path's rate of penetration and mean weight on bit over the decision
+        (the kernel, called one plant step at a time, gave those of the last step), and the
+        observation entries that show them."""
+        a = self.arrays
+        out = coupled.out
+        for i in np.flatnonzero(steps > 0).tolist():
+            span = steps[i] * PLANT_DT_S
+            out[i, coupled_chain.OUT_ROP] = (
+                out[i, coupled_chain.OUT_DEPTH] - depth_start[i]
+            ) / span
+            out[i, coupled_chain.OUT_WOB_MEAN] = wob_sum[i] / steps[i]
+            a.sources[i, -2] = out[i, coupled_chain.OUT_WOB]
+            a.sources[i, -1] = out[i, coupled_chain.OUT_ROP]
+            kernel.write_observation(
+                a.obs[i], a.sources[i], self.settings.obs_source, self.settings.obs_scale
+            )
 
     # ---------------------------------------------------------------- outputs
     def observations(self) -> npt.NDArray[np.float32]:

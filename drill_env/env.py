@@ -450,6 +450,8 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
             info["residual_torque_nm"] = float(b.command[0])
         if b.reports_law_slots:
             info.update(b.law_info_of(0))
+        if b.coupled:
+            info.update(b.coupled_info_of(0))
         return info
 
 
@@ -519,6 +521,17 @@ class DrillStringFieldEnv(DrillStringEnv):
     | ``torque_rate_limit_nm_per_s`` | torque rate limit, N m/s (``None``: none) | 100,000 |
     | ``max_torque_nm`` | top-drive torque limit, N m | 50,800 |
     | ``randomization`` | ``FieldRandomization`` ranges | see Starting State |
+    | ``bit`` | ``"karnopp"`` or ``"rgd"`` (axial elements and the regenerative bit) | ``"karnopp"`` |
+    | ``rgd_parameters`` | the RGD bit (``drill_env.coupled.RGD_PRESETS`` name or parameters) | ``"rgd_a"`` |
+    | ``axial_top`` | ``"force"`` (``wob_n`` is the applied force at the top) or ``"hook"`` | ``"force"`` |
+    | ``hook_speed_m_s`` | hook speed with ``axial_top="hook"``, m/s | ``None`` |
+    | ``hook_stiffness_n_m`` | derrick/hook stiffness, N/m (``inf``: rigid) | ``inf`` |
+
+    With ``bit="rgd"`` (docs/field-coupled.md) the string starts at rest on the bottom under the
+    applied force, the observation ends with the weight on bit (1e5 N) and the rate of
+    penetration (0.01 m/s), and ``info`` adds ``weight_on_bit_n``, ``torque_on_bit_nm``,
+    ``mean_weight_on_bit_n``, ``rate_of_penetration_m_s``, ``bit_depth_m`` and
+    ``bit_off_bottom``.
 
     ## Info
     That of ``DrillString-v0``; ``bit_speed_rad_s`` and ``top_drive_speed_rad_s`` are the true

@@ -179,6 +179,10 @@ TIME_SCALE_S: Final = 10.0
 """Ages (of the telemetry) are divided by this, s."""
 ELEMENT_TWIST_SCALE_RAD: Final = 1.0
 """Element twists of a distributed string are divided by this, rad."""
+FORCE_SCALE_N: Final = 1e5
+"""Forces (the weight on bit of the RGD bit) are divided by this, N."""
+ROP_SCALE_M_S: Final = 0.01
+"""Rates of penetration are divided by this, m/s."""
 
 # Sources an observation entry can show, in the source vector the kernel fills at the end of
 # every call: fixed entries, then the measured state of the string (variable length).
@@ -207,7 +211,8 @@ class ObservationField(NamedTuple):
         source: Its entry in the kernel's source vector (``SRC_*``).
         scale: ``"speed"`` (divided by ``SPEED_SCALE_RAD_S``), ``"twist"``
             (``TWIST_SCALE_RAD``), ``"element_twist"`` (``ELEMENT_TWIST_SCALE_RAD``), ``"time"``
-            (``TIME_SCALE_S``) or ``"torque"`` (the env's torque scale).
+            (``TIME_SCALE_S``), ``"torque"`` (the env's torque scale), ``"force"``
+            (``FORCE_SCALE_N``) or ``"rop"`` (``ROP_SCALE_M_S``).
     """
 
     name: str
@@ -305,6 +310,8 @@ def observation_scales(
         "element_twist": 1.0 / ELEMENT_TWIST_SCALE_RAD,
         "time": 1.0 / TIME_SCALE_S,
         "torque": 1.0 / torque_scale_nm,
+        "force": 1.0 / FORCE_SCALE_N,
+        "rop": 1.0 / ROP_SCALE_M_S,
     }
     return np.array([per_kind[f.scale] for f in fields])
 

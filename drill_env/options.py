@@ -16,6 +16,8 @@ from typing import Any, ClassVar, Final
 import numpy as np
 
 from drill_env.control import Controller
+from drill_env.coupled import RgdParameters
+from drill_env.coupled_chain import check_bit_keywords
 from drill_env.distributed import (
     DISTRIBUTED_PRESETS,
     DistributedStringParameters,
@@ -442,6 +444,11 @@ class FieldEnvConfig(EnvConfig):
     episode_s: float = 100.0
     control_dt_s: float = 0.2  # the shipped field agent's (agents/models/field_agent)
     residual_scale_nm: float = 10_000.0  # the shipped field agent's
+    bit: str = "karnopp"
+    rgd_parameters: str | RgdParameters = "rgd_a"
+    axial_top: str = "force"
+    hook_speed_m_s: float | None = None
+    hook_stiffness_n_m: float = math.inf
 
     is_field: ClassVar[bool] = True
 
@@ -453,6 +460,17 @@ class FieldEnvConfig(EnvConfig):
             )
         super().__post_init__()
         check_step_bound(self.string(), PLANT_DT_S)
+        check_bit_keywords(
+            self.bit, self.rgd_parameters, self.axial_top, self.hook_speed_m_s,
+            self.hook_stiffness_n_m,
+        )  # fmt: skip
+
+    def bit_parameters(self) -> RgdParameters | None:
+        """The RGD bit's parameters with ``bit="rgd"``, else ``None``."""
+        return check_bit_keywords(
+            self.bit, self.rgd_parameters, self.axial_top, self.hook_speed_m_s,
+            self.hook_stiffness_n_m,
+        )  # fmt: skip
 
 
 def realism_keywords(level: str) -> dict[str, Any]:

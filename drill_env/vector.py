@@ -190,6 +190,7 @@ class DrillStringVectorEnv(VectorEnv):
         if b.residual:
             values["residual_torque_nm"] = b.command.copy()
         values.update(b.law_info())
+        values.update(b.coupled_info())
         infos: dict[str, Any] = {}
         for key, value in values.items():
             infos[key] = value
