@@ -1137,7 +1137,8 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
     def episode_metrics(self) -> dict[str, float]:
         """Since the reset: ``rop_m_s`` (depth over time), ``mse_pa`` (bit work over the rock
         volume cut; 0 before any cut), ``stuck_fraction``, ``bounce_fraction``,
-        ``top_drive_energy_j`` and ``time_s``."""
+        ``top_drive_energy_j``, ``bit_work_j`` (work done on the rock), ``rock_volume_m3`` (the
+        volume cut: bit area times depth) and ``time_s``."""
         bit_work, td_work, stuck_s, off_s = self._totals
         t = max(self._t, 1e-12)
         depth = float(self._y[_Y_U])
@@ -1149,6 +1150,8 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
             "stuck_fraction": stuck_s / t,
             "bounce_fraction": off_s / t,
             "top_drive_energy_j": float(td_work),
+            "bit_work_j": float(bit_work),
+            "rock_volume_m3": area * depth,
         }
 
 
@@ -1210,9 +1213,23 @@ class DrillStringCoupledVectorEnv(VectorEnv):
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[npt.NDArray[np.float32], dict[str, Any]]:
-        """Reset every string; ``s`` gives string ``i`` the seed ``s + i``, a list one each."""
+        """Reset every string, or only those of ``options["reset_mask"]`` (a bool array of
+        ``num_envs``, Gymnasium's partial reset); ``s`` gives string ``i`` the seed ``s + i``,
+        a list one each."""
+        mask = np.ones(self.num_envs, dtype=bool)
+        if options and "reset_mask" in options:
+            options = dict(options)
+            mask = np.asarray(options.pop("reset_mask"))
+            if mask.shape != (self.num_envs,) or mask.dtype != np.bool_:
+                raise ValueError(
+                    f"reset_mask must be a bool array of shape ({self.num_envs},), got {mask!r}"
+                )
+            if not self._started and not mask.all():
+                raise ValueError("the first reset must reset every string (reset_mask all True)")
         if options:
-            raise ValueError(f"options = {options!r} is not supported: allowed None or {{}}")
+            raise ValueError(
+                f"options = {options!r} is not supported: allowed None, {{}} or a reset_mask"
+            )
         if seed is None or isinstance(seed, int):
             seeds: list[int | None] = [
                 None if seed is None else seed + i for i in range(self.num_envs)
@@ -1221,9 +1238,14 @@ class DrillStringCoupledVectorEnv(VectorEnv):
             seeds = list(seed)
             if len(seeds) != self.num_envs:
                 raise ValueError(f"seed list must have {self.num_envs} entries, got {len(seeds)}")
-        results = [env.reset(seed=s) for env, s in zip(self.envs, seeds, strict=True)]
-        self._needs_reset[:] = False
-        self._steps[:] = 0
+        results = []
+        for i, (env, s) in enumerate(zip(self.envs, seeds, strict=True)):
+            if mask[i]:
+                results.append(env.reset(seed=s))
+                self._needs_reset[i] = False
+                self._steps[i] = 0
+            else:
+                results.append((env._observation(), {}))
         self._started = True
         return np.stack([r[0] for r in results]), self._batch_infos([r[1] for r in results])
 

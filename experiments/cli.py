@@ -60,6 +60,10 @@ SUBCOMMANDS = {
         "experiments.coupled",
         "the coupled axial-torsional string with the regenerative bit: standard run, stability map",
     ),
+    "coupled-controllers": (
+        "experiments.coupled_controllers",
+        "which top-drive and axial loops hold where on the coupled string's stability map",
+    ),
 }
 """Subcommand name -> (module with ``main(argv)``, one line of help)."""
 
