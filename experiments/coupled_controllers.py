@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 import sys
+import textwrap
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -151,6 +152,75 @@ def run_point(
     }
 
 
+AGENT_SEED: Final = 30_000
+"""Agent evaluation episodes are reset with seeds ``AGENT_SEED + k`` (training uses the
+seed of the run and its successors, validation ``agents.train.VALIDATION_SEED + k``)."""
+AGENT_COLUMNS: Final = (
+    Column("controller", "controller", align="left"),
+    Column("reward", "reward/decision", "{:.4f}"),
+    Column("rop", "rop term", "{:.4f}"),
+    Column("speed_error", "speed term", "{:.4f}"),
+    Column("stuck", "stuck term", "{:.4f}"),
+    Column("bounce", "bounce term", "{:.4f}"),
+    Column("energy", "energy term", "{:.4f}"),
+    Column("rop_mm_s", "ROP (mm/s)", "{:.2f}"),
+    Column("stuck_fraction", "stuck", "{:.4f}"),
+    Column("bounce_fraction", "bounce", "{:.4f}"),
+    Column("mse_mpa", "MSE (MPa)", "{:.1f}"),
+    Column("applied_force_kn", "mean W0 (kN)", "{:.1f}"),
+    Column("torque_knm", "mean torque (kN m)", "{:.2f}"),
+)
+
+
+def evaluate_agent(model: Path, episodes: int) -> list[dict[str, Any]]:
+    """A trained ``DrillStringCoupled-v0`` agent and its base loops alone (zero action) on the
+    same randomised episodes (reset seeds ``AGENT_SEED + k``): the mean of each reward term
+    per decision and the episode metrics, averaged over the episodes."""
+    from agents import load_policy
+
+    policy = load_policy(model)
+    if policy.env_id != drill_env.COUPLED_ENV_ID:
+        raise ValueError(f"{str(model)!r} is a model for {policy.env_id}, not the coupled env")
+    rows = []
+    for label, agent in (("base loops", None), (f"agent {policy.name}", policy)):
+        env = gym.make(drill_env.COUPLED_ENV_ID, **policy.env_kwargs).unwrapped
+        assert isinstance(env, DrillStringCoupledEnv)
+        sums: dict[str, float] = {}
+        decisions = 0
+        metrics: list[dict[str, float]] = []
+        for k in range(episodes):
+            obs, _ = env.reset(seed=AGENT_SEED + k)
+            done = False
+            while not done:
+                if agent is None:
+                    action = np.zeros(2 if env.config.action_mode == "both" else 1, np.float32)
+                else:
+                    action, _ = agent.predict(obs, deterministic=True)
+                obs, reward, terminated, truncated, info = env.step(action)
+                done = terminated or truncated
+                decisions += 1
+                for key, value in {
+                    "reward": float(reward),
+                    **info["reward_terms"],
+                    "applied_force_n": info["applied_force_n"],
+                    "torque_nm": info["top_drive_torque_nm"],
+                }.items():
+                    sums[key] = sums.get(key, 0.0) + value
+            metrics.append(env.episode_metrics())
+        row: dict[str, Any] = {key: value / decisions for key, value in sums.items()}
+        row.update(
+            controller=label,
+            rop_mm_s=1e3 * float(np.mean([m["rop_m_s"] for m in metrics])),
+            stuck_fraction=float(np.mean([m["stuck_fraction"] for m in metrics])),
+            bounce_fraction=float(np.mean([m["bounce_fraction"] for m in metrics])),
+            mse_mpa=float(np.mean([m["mse_pa"] for m in metrics])) / 1e6,
+            applied_force_kn=row.pop("applied_force_n") / 1e3,
+            torque_knm=row.pop("torque_nm") / 1e3,
+        )
+        rows.append(row)
+    return rows
+
+
 def holds(row: dict[str, Any]) -> bool:
     """Whether a run holds its point: no divergence, stuck and bounce below the thresholds."""
     return (
@@ -237,11 +307,11 @@ def map_figure(
                 ax.set_ylabel("W0 (kN)")
     assert mesh is not None
     fig.colorbar(mesh, ax=axes, label="stuck fraction", shrink=0.8)
-    fig.suptitle(
+    title = (
         "DrillStringCoupled-v0: stuck fraction (colour), bounce (red x), diverged (black), "
-        "ROP mm/s (number)",
-        fontsize=10,
+        "ROP mm/s (number)"
     )
+    fig.suptitle(textwrap.fill(title, int(10 * fig.get_figwidth())), fontsize=10)
     return fig
 
 
@@ -271,6 +341,15 @@ def _parser() -> ArgumentParser:
         "--out", type=output_folder, default=output_folder("results/coupled-controllers"),
         metavar="DIR", help="output folder",
     )  # fmt: skip
+    p.add_argument(
+        "--agent", type=Path, metavar="MODEL",
+        help="also score this DrillStringCoupled-v0 model against its base loops",
+    )  # fmt: skip
+    p.add_argument(
+        "--agent-episodes", type=number_type(1, 1000, integer=True), default=8, metavar="N",
+        help="randomised episodes of the agent's evaluation",
+    )  # fmt: skip
+    p.add_argument("--no-grid", action="store_true", help="skip the controllers' grid")
     p.add_argument("--no-plots", action="store_true", help="write no figure")
     p.add_argument("--no-progress", action="store_true", help="no progress lines")
     return p
@@ -284,6 +363,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     for loop in args.torque_loops:
         if loop not in names:
             parser.fail("--torque-loops", f"{loop!r} is not a known loop: allowed {names}")
+    if args.agent is not None and not args.agent.exists():
+        parser.fail("--agent", f"{str(args.agent)!r} does not exist")
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    if args.agent is not None:
+        try:
+            agent_rows = evaluate_agent(args.agent, int(args.agent_episodes))
+        except ValueError as err:
+            parser.fail("--agent", str(err))
+        print(f"Agent against its base loops ({int(args.agent_episodes)} randomised episodes, "
+              f"reset seeds {AGENT_SEED}+k; reward terms are means per decision):\n")  # fmt: skip
+        print(markdown_table(agent_rows, AGENT_COLUMNS))
+        print()
+        write_json({"model": str(args.agent), "rows": agent_rows}, out / "coupled_agent.json")
+    if args.no_grid:
+        return 0
     started = time.perf_counter()
     rows = []
     for axial in args.axial_loops:
@@ -301,8 +396,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(markdown_table(table, SUMMARY_COLUMNS))
     print("\nEvery run:\n")
     print(markdown_table(rows, ROW_COLUMNS))
-    out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
     result = {
         "episode_s": args.episode,
         "forces_kn": list(args.forces),
