@@ -67,11 +67,12 @@ SUMMARY_COLUMNS: Final = (
     Column("torque_loop", "top drive", align="left"),
     Column("axial_loop", "axial", align="left"),
     Column("held", "points held", align="left"),
+    Column("stalled", "stalled", "{:d}"),
     Column("diverged", "diverged", "{:d}"),
     Column("stuck_mean", "mean stuck", "{:.3f}"),
     Column("bounce_mean", "mean bounce", "{:.3f}"),
     Column("rop_mean_mm_s", "mean ROP (mm/s)", "{:.2f}"),
-    Column("mse_mean_mpa", "mean MSE (MPa)", "{:.1f}"),
+    Column("mse_mean_mpa", "mean MSE (MPa, drilling runs)", "{:.1f}"),
     Column("reward_mean", "mean reward", "{:.3f}"),
 )
 
@@ -168,6 +169,7 @@ AGENT_COLUMNS: Final = (
     Column("bounce_fraction", "bounce", "{:.4f}"),
     Column("mse_mpa", "MSE (MPa)", "{:.1f}"),
     Column("applied_force_kn", "mean W0 (kN)", "{:.1f}"),
+    Column("applied_force_std_kn", "std W0 (kN)", "{:.2f}"),
     Column("torque_knm", "mean torque (kN m)", "{:.2f}"),
 )
 
@@ -203,6 +205,7 @@ def evaluate_agent(model: Path, episodes: int) -> list[dict[str, Any]]:
                     "reward": float(reward),
                     **info["reward_terms"],
                     "applied_force_n": info["applied_force_n"],
+                    "applied_force_sq": info["applied_force_n"] ** 2,
                     "torque_nm": info["top_drive_torque_nm"],
                 }.items():
                     sums[key] = sums.get(key, 0.0) + value
@@ -214,7 +217,11 @@ def evaluate_agent(model: Path, episodes: int) -> list[dict[str, Any]]:
             stuck_fraction=float(np.mean([m["stuck_fraction"] for m in metrics])),
             bounce_fraction=float(np.mean([m["bounce_fraction"] for m in metrics])),
             mse_mpa=float(np.mean([m["mse_pa"] for m in metrics])) / 1e6,
-            applied_force_kn=row.pop("applied_force_n") / 1e3,
+            applied_force_kn=row["applied_force_n"] / 1e3,
+            applied_force_std_kn=math.sqrt(
+                max(row.pop("applied_force_sq") - row.pop("applied_force_n") ** 2, 0.0)
+            )
+            / 1e3,
             torque_knm=row.pop("torque_nm") / 1e3,
         )
         rows.append(row)
@@ -231,7 +238,9 @@ def holds(row: dict[str, Any]) -> bool:
 
 
 def summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
-    """One row per (top-drive loop, axial loop): points held, means over the grid."""
+    """One row per (top-drive loop, axial loop): points held, runs stalled (the bit stuck
+    through the whole window: no depth drilled), means over the grid (the MSE over the runs
+    that drilled)."""
     out = []
     pairs = dict.fromkeys((r["torque_loop"], r["axial_loop"]) for r in rows)
     for torque_loop, axial_loop in pairs:
@@ -239,13 +248,15 @@ def summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
         ok = [r for r in mine if not r["diverged"]]
 
         def mean(key: str, runs: list[dict[str, Any]] = ok) -> float:
-            return float(np.mean([r[key] for r in runs])) if runs else math.nan
+            values = [r[key] for r in runs if not math.isnan(r[key])]
+            return float(np.mean(values)) if values else math.nan
 
         out.append(
             {
                 "torque_loop": torque_loop,
                 "axial_loop": axial_loop,
                 "held": f"{sum(holds(r) for r in mine)}/{len(mine)}",
+                "stalled": sum(r["rop_mm_s"] == 0.0 for r in ok),
                 "diverged": len(mine) - len(ok),
                 "stuck_mean": mean("stuck_fraction"),
                 "bounce_mean": mean("bounce_fraction"),

@@ -110,7 +110,8 @@ def test_an_unknown_command_is_one_line(
     assert code == 2 and err.count("\n") == 1
     assert re.match(
         r"drill-gym: error: unknown (command|option) '.*': allowed commands compare, map, "
-        r"probability-map, train, sweep-train, evaluate, convert, waves, realism, tune, coupled \(see "
+        r"probability-map, train, sweep-train, evaluate, convert, waves, realism, tune, coupled, "
+        r"coupled-controllers \(see "
         r"drill-gym --help\)\n$",
         err,
     )

@@ -81,3 +81,26 @@ def test_model_files_round_trip_and_are_checked(tmp_path: Path) -> None:
     (tmp_path / "m" / "config.json").write_text(json.dumps(bad))
     with pytest.raises(ValueError, match="env_kwargs.torque_loop = 'warp' is not a known"):
         load_policy(tmp_path / "m")
+
+
+def test_the_shipped_coupled_agent_loads_for_its_env() -> None:
+    from agents import DEFAULT_MODEL_DIR
+
+    policy = load_policy(DEFAULT_MODEL_DIR / "coupled_agent")
+    assert policy.env_id == COUPLED_ENV_ID and policy.env_kwargs == KWARGS
+    env = DrillStringCoupledEnv(**policy.env_kwargs, episode_s=0.5)
+    obs, _ = env.reset(seed=0)
+    action, _ = policy.predict(obs, deterministic=True)
+    assert action.shape == (2,) and np.all(np.abs(action) <= 1)
+
+
+@pytest.mark.slow
+def test_the_shipped_coupled_agent_beats_its_base_loops_on_the_reward() -> None:
+    """The shipping rule of docs/reports/coupled.md: more reward per decision than its base
+    loops alone on randomised episodes it was neither trained nor validated on."""
+    from agents import DEFAULT_MODEL_DIR
+
+    policy = load_policy(DEFAULT_MODEL_DIR / "coupled_agent")
+    env = DrillStringCoupledEnv(**policy.env_kwargs)
+    seeds = [30_000 + k for k in range(24)]  # the report's 24 held-out episodes
+    assert coupled_mean_reward(env, policy, seeds) > coupled_mean_reward(env, None, seeds)
