@@ -768,7 +768,8 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
 
     **Info** (units in the keys): ``time_s``, ``bit_speed_rad_s``, ``top_drive_speed_rad_s``,
     ``top_drive_torque_nm``, ``base_torque_nm``, ``applied_force_n``, ``wob_n`` and
-    ``tob_nm`` (means over the decision), ``rop_m_s``, ``depth_m``, ``mse_pa`` (mechanical
+    ``tob_nm`` (means over the decision), ``rop_m_s``, ``depth_m``, ``depth_of_cut_m`` (the
+    depth of cut per blade ``d_n`` now: negative off the rock), ``mse_pa`` (mechanical
     specific energy so far: bit work over the rock volume cut, 0 before any cut),
     ``stuck_fraction``, ``bounce_fraction``, ``hold_fraction``, ``bit_stuck``, ``off_bottom``,
     ``top_drive_power_w``, ``reward_terms``.
@@ -1113,8 +1114,13 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
         depth = float(y[_Y_U])
         area = math.pi * self._bit.bit_radius_m**2
         regime = int(self._regime[0])
+        cursor = int(self._ring[2])  # the lookup moves the ring's cursor: put it back
+        surface = _surface(y[_Y_PHI] - self._p[_P_BLADE], self._ring_phi, self._ring_r, self._ring)
+        self._ring[2] = cursor
+        depth_of_cut = float(y[_Y_U] - surface)
         return {
             "time_s": self._t,
+            "depth_of_cut_m": depth_of_cut,
             "bit_speed_rad_s": float(y[_Y_OM]),
             "top_drive_speed_rad_s": float(y[_Y_OM_DT]),
             "top_drive_torque_nm": self._u,

@@ -62,6 +62,7 @@ ROW_COLUMNS: Final = (
     Column("wob_mean_kn", "WOB (kN)", "{:.1f}"),
     Column("speed_error_rel", "|w-ref|/ref", "{:.3f}"),
     Column("reward", "reward/decision", "{:.3f}"),
+    Column("depth_of_cut_end_mm", "d_n at end (mm)", "{:.2f}"),
 )
 SUMMARY_COLUMNS: Final = (
     Column("torque_loop", "top drive", align="left"),
@@ -150,6 +151,7 @@ def run_point(
         "wob_mean_kn": sums["wob"] / counted / 1e3,
         "speed_error_rel": sums["error"] / counted / weight,
         "reward": sums["reward"] / counted,
+        "depth_of_cut_end_mm": 1e3 * info["depth_of_cut_m"],
     }
 
 

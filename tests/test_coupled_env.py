@@ -315,3 +315,13 @@ def test_bad_loop_names() -> None:
         DrillStringCoupledEnv(hook_stiffness_n_m=-1.0)
     with pytest.raises(TypeError, match="torque_loop must be"):
         DrillStringCoupledEnv(torque_loop=3)
+
+
+def test_depth_of_cut_in_info_is_steady_drilling_at_the_start() -> None:
+    """At reset the bit sits on the steady-drilling surface: ``d_n = d_0`` of section 6."""
+    from drill_env.coupled import steady_state
+
+    env = DrillStringCoupledEnv(randomize=False)
+    _, info = env.reset(seed=0)
+    d0 = steady_state(RGD_PRESETS["rgd_a"], 12.0, 90e3).depth_of_cut_m
+    assert info["depth_of_cut_m"] == pytest.approx(d0, rel=1e-9)
