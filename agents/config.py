@@ -28,6 +28,7 @@ from drill_env.validation import shown
 __all__ = [
     "ENV_DEFAULTS",
     "ENV_IDS",
+    "COUPLED_ENV_ID",
     "FIELD_ENV_ID",
     "MAX_FRAME_STACK",
     "PAPER_ENV_ID",
@@ -44,7 +45,9 @@ PAPER_ENV_ID: Final = "DrillString-v0"
 """The paper's 4-DOF string: the env of the dataclass defaults."""
 FIELD_ENV_ID: Final = "DrillStringField-v0"
 """The distributed field string with surface sensors, telemetry and a rig's top drive."""
-ENV_IDS: Final = (PAPER_ENV_ID, FIELD_ENV_ID)
+COUPLED_ENV_ID: Final = "DrillStringCoupled-v0"
+"""The 4-DOF string on the regenerative bit: two actions (top-drive torque and applied force)."""
+ENV_IDS: Final = (PAPER_ENV_ID, FIELD_ENV_ID, COUPLED_ENV_ID)
 """The envs ``drill-gym train`` trains on (``--env-id``)."""
 MAX_FRAME_STACK: Final = 256
 """Most past observations a policy may stack (``--frame-stack``)."""
@@ -67,11 +70,31 @@ ENV_DEFAULTS: Final[dict[str, dict[str, Any]]] = {
         "validation_episodes": 32,
         "checkpoint_every": 100_000,
     },
+    COUPLED_ENV_ID: {
+        "exp_name": "coupled_agent",
+        "base_controller": "stiff_pi",
+        "control_dt_s": 0.1,
+        "residual_scale_nm": 5_000.0,
+        "episode_s": 30.0,
+        "noise_std_rad_s": 0.0,
+        "num_envs": 8,
+        "n_steps": 300,
+        "batch_size": 600,
+        "gamma": 0.99,
+        "total_timesteps": 200_000,
+        "validate_every": 50_000,
+        "validation_episodes": 8,
+        "checkpoint_every": 50_000,
+    },
 }
 """Per-env training defaults: for each env id, the fields whose default differs from the
 dataclass's (``DrillString-v0``'s), and ``frame_stack`` named for the field string (1: frame
 stacking of 16 or 48 observations did not train better, docs/reports/field-agent.md). Applied by :meth:`TrainConfig.for_env` and the command line
-to the fields the caller did not set."""
+to the fields the caller did not set. On ``DrillStringCoupled-v0`` the base controller is the
+env's ``torque_loop`` (a registered compiled law), ``residual_scale_nm`` its
+``residual_torque_nm``; the second action is a residual on the fixed applied force (the env's
+``residual_force_n``); the reward is the env's own (``CoupledRewardWeights``: the
+``reward_*`` settings do not apply) and there is no measurement noise."""
 
 
 @dataclass

@@ -46,7 +46,7 @@ from agents.inference import (
     stack_frames,
 )
 from agents.legacy_format import LEGACY_NORM_FILE, LEGACY_WEIGHTS_FILE, PREVIOUS_FORMAT, read_npz
-from drill_env import ENV_ID, FIELD_ENV_ID
+from drill_env import COUPLED_ENV_ID, ENV_ID, FIELD_ENV_ID
 from drill_env.layout import OBSERVATION_MODES
 from drill_env.options import EnvConfig, FieldEnvConfig
 
@@ -91,7 +91,9 @@ WEIGHTS_FILE: Final = "policy.safetensors"
 NORM_FILE: Final = "obs_norm.safetensors"
 
 ENV_IDS: Final = (ENV_ID, FIELD_ENV_ID)
-"""The envs a model can be for (``env_kwargs.env_id`` in config.json)."""
+"""The envs a model of the torque-residual keywords can be for (``env_kwargs.env_id`` in
+config.json); a model for ``DrillStringCoupled-v0`` has the coupled env's keywords
+(``_CoupledEnvKwargsSchema``)."""
 DEFAULT_ENV_ID: Final = ENV_ID
 """The env of a model whose ``env_kwargs`` name none."""
 
@@ -262,6 +264,18 @@ class _EnvKwargsSchema(BaseModel):
     observation: Literal[OBSERVATION_MODES] | None = None  # type: ignore[valid-type]
 
 
+class _CoupledEnvKwargsSchema(BaseModel):
+    """The ``env_kwargs`` of a ``DrillStringCoupled-v0`` model: their types here, their ranges
+    in the env's ``CoupledEnvConfig``."""
+
+    model_config = STRICT
+    env_id: Literal[COUPLED_ENV_ID]  # type: ignore[valid-type]
+    torque_loop: Name
+    control_dt_s: float
+    residual_torque_nm: float
+    max_torque_nm: float
+
+
 class _ConfigSchema(BaseModel):
     """config.json: the model and its training record (never interpreted)."""
 
@@ -281,6 +295,17 @@ class _ConfigSchema(BaseModel):
     cpu_count: Threads | None = None
     torch_threads: Threads | None = None
     source: Text | None = None
+
+
+class _CoupledConfigSchema(_ConfigSchema):
+    """config.json of a ``DrillStringCoupled-v0`` model."""
+
+    env_kwargs: _CoupledEnvKwargsSchema  # type: ignore[assignment]
+
+
+def _is_coupled(data: Any) -> bool:
+    kwargs = data.get("env_kwargs") if isinstance(data, dict) else None
+    return isinstance(kwargs, dict) and kwargs.get("env_id") == COUPLED_ENV_ID
 
 
 RECORD_FIELDS: Final = tuple(_ConfigSchema.model_fields)[5:]
@@ -380,6 +405,8 @@ def validate_env_kwargs(data: Any, where: str) -> dict[str, Any]:
     Raises:
         ValueError: One line naming ``where`` and the field.
     """
+    if isinstance(data, dict) and data.get("env_id") == COUPLED_ENV_ID:
+        return _coupled_env_kwargs(data, where)
     try:
         schema = _EnvKwargsSchema.model_validate(data)
     except ValidationError as err:
@@ -394,6 +421,22 @@ def validate_env_kwargs(data: Any, where: str) -> dict[str, Any]:
     config = FieldEnvConfig if env_id == FIELD_ENV_ID else EnvConfig
     try:
         config.from_kwargs(env_keywords)
+    except (ValueError, TypeError) as err:
+        raise ValueError(f"{where!r}: field env_kwargs.{_one_line(str(err))}") from None
+    return keywords
+
+
+def _coupled_env_kwargs(data: dict[str, Any], where: str) -> dict[str, Any]:
+    """:func:`validate_env_kwargs` of a ``DrillStringCoupled-v0`` model."""
+    from drill_env.coupled_env import CoupledEnvConfig
+
+    try:
+        schema = _CoupledEnvKwargsSchema.model_validate(data)
+    except ValidationError as err:
+        raise _schema_error(where, err, _CoupledEnvKwargsSchema, "env_kwargs.") from None
+    keywords = schema.model_dump()
+    try:
+        CoupledEnvConfig(**{k: v for k, v in keywords.items() if k != "env_id"})
     except (ValueError, TypeError) as err:
         raise ValueError(f"{where!r}: field env_kwargs.{_one_line(str(err))}") from None
     return keywords
@@ -417,7 +460,9 @@ def validate_config(data: Any, where: str) -> ModelConfig:
             "pickle); load the model.zip itself with trust_pickle=True or convert it with "
             "'drill-gym convert' (agents.convert)"
         )
-    schema = validate_json(_ConfigSchema, data, where)
+    schema = validate_json(
+        _CoupledConfigSchema if _is_coupled(data) else _ConfigSchema, data, where
+    )
     env_id, env_kwargs = split_env_id(validate_env_kwargs(data["env_kwargs"], where))
     policy = schema.policy
     for key in ("action_low", "action_high"):

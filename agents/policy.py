@@ -47,6 +47,7 @@ from agents.model_format import (
     validate_env_kwargs,
     write_model_files,
 )
+from drill_env import COUPLED_ENV_ID
 from drill_env.layout import observation_size
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -414,6 +415,9 @@ def _check_environment(config: ModelConfig, where: str, path: Path, base_control
     action sizes."""
     from baselines import controller_names
 
+    if config.env_id == COUPLED_ENV_ID:
+        _check_coupled(config, where)
+        return
     found = config.env_kwargs.get("base_controller")
     if found is not None and found not in controller_names():
         raise ValueError(
@@ -442,6 +446,25 @@ def _check_environment(config: ModelConfig, where: str, path: Path, base_control
         raise ValueError(
             f"{where!r}: field policy.action_size = {config.spec.action_size}: "
             f"{config.env_id} takes one action"
+        )
+
+
+def _check_coupled(config: ModelConfig, where: str) -> None:
+    """A ``DrillStringCoupled-v0`` model: its observation and action sizes those of the env
+    made with its keywords (which checks its torque loop too)."""
+    import gymnasium as gym
+
+    try:
+        env = gym.make(config.env_id, **config.env_kwargs)
+    except (ValueError, TypeError) as err:
+        raise ValueError(f"{where!r}: field env_kwargs: {err}") from None
+    sizes = (env.observation_space.shape[0], env.action_space.shape[0])  # type: ignore[index]
+    env.close()
+    found = (config.spec.observation_size, config.spec.action_size)
+    if found != sizes:
+        raise ValueError(
+            f"{where!r}: fields observation_size, policy.action_size = {found}: expected "
+            f"{sizes} ({config.env_id} with {config.env_kwargs})"
         )
 
 

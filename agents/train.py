@@ -44,7 +44,7 @@ import numpy as np
 
 import drill_env  # noqa: F401  (registers DrillString-v0)
 from agents.checkpoints import CHECKPOINT_DIR, PREFIX, Checkpoint, find_last_checkpoint
-from agents.config import FIELD_ENV_ID, PAPER_ENV_ID, TrainConfig
+from agents.config import COUPLED_ENV_ID, FIELD_ENV_ID, PAPER_ENV_ID, TrainConfig
 from agents.policy import ResidualPolicy, is_model_folder, load_policy, policy_from_sb3
 from drill_env import RewardWeights
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout
@@ -75,7 +75,11 @@ RMSD_TARGET = 0.99
 over this (a 1 % margin below the base controller's RMSD)."""
 
 
-REFERENCE_CONTROLLER: Final = {PAPER_ENV_ID: "proposed", FIELD_ENV_ID: "soft_speed"}
+REFERENCE_CONTROLLER: Final = {
+    PAPER_ENV_ID: "proposed",
+    FIELD_ENV_ID: "soft_speed",
+    COUPLED_ENV_ID: "stiff_pi",
+}
 """The controller a from-scratch agent (``--base-controller none``) is validated against, per
 env (a residual agent is validated against its own base controller)."""
 
@@ -88,8 +92,9 @@ def validation_scenarios(config: TrainConfig) -> tuple[dict[str, Any], list[int]
         **policy_env_kwargs(config),
         "randomize": True,
         "episode_s": config.episode_s,
-        "noise_std_rad_s": config.noise_std_rad_s,
     }
+    if config.env_id != COUPLED_ENV_ID:
+        kwargs["noise_std_rad_s"] = config.noise_std_rad_s
     return kwargs, [VALIDATION_SEED + k for k in range(config.validation_episodes)]
 
 
@@ -112,6 +117,13 @@ def policy_env_kwargs(config: TrainConfig) -> dict[str, Any]:
     controller, decision period, residual scale, the env's torque limits and, on
     ``DrillStringField-v0``, the observation mode (``env_id`` itself is kept apart)."""
     base = None if config.base_controller.lower() == "none" else config.base_controller
+    if config.env_id == COUPLED_ENV_ID:
+        return {
+            "torque_loop": base or "none",
+            "control_dt_s": config.control_dt_s,
+            "residual_torque_nm": config.residual_scale_nm,
+            "max_torque_nm": DEFAULT_TORQUE_LIMITS.max_nm,
+        }
     field = config.env_id == FIELD_ENV_ID
     kwargs: dict[str, Any] = {
         "base_controller": base,
@@ -132,6 +144,8 @@ def env_kwargs(config: TrainConfig) -> dict[str, Any]:
     weights of the configuration (the torque and residual penalties are terms of the env's
     reward, :mod:`drill_env.rewards`)."""
     kwargs = policy_env_kwargs(config)
+    if config.env_id == COUPLED_ENV_ID:  # the env's own reward (CoupledRewardWeights)
+        return {**kwargs, "randomize": True, "episode_s": config.episode_s}
     residual = kwargs["base_controller"] is not None
     return {
         **kwargs,
@@ -543,6 +557,25 @@ def _run_callback(
     return _RunCallback()
 
 
+def coupled_mean_reward(env: Any, policy: Any, seeds: Sequence[int]) -> float:
+    """Mean reward per decision of ``policy`` (deterministic; None: zero action, the base
+    loops alone) on ``DrillStringCoupled-v0`` episodes reset with ``seeds``."""
+    total, count = 0.0, 0
+    for seed in seeds:
+        obs, _ = env.reset(seed=seed)
+        done = False
+        while not done:
+            if policy is None:
+                action = np.zeros(env.action_space.shape, dtype=np.float32)
+            else:
+                action, _ = policy.predict(obs, deterministic=True)
+            obs, reward, terminated, truncated, _ = env.step(action)
+            total += float(reward)
+            count += 1
+            done = terminated or truncated
+    return total / max(count, 1)
+
+
 class _Validation:
     """Every ``validate_every`` decisions: roll out the validation scenarios with the current
     policy (deterministic), compare with the base controller on the same seeds, log the ratios
@@ -557,12 +590,18 @@ class _Validation:
         self.best_dir = run_dir / "best"
         self.csv = run_dir / "validation.csv"
         kwargs, self.seeds = validation_scenarios(config)
+        self.coupled = config.env_id == COUPLED_ENV_ID
         self.env = gym.make(config.env_id, max_episode_steps=-1, **kwargs)
-        base = kwargs["base_controller"] or REFERENCE_CONTROLLER[config.env_id]
-        base_env = gym.make(
-            config.env_id, max_episode_steps=-1, **{**kwargs, "base_controller": base}
-        )
-        self.reference = [episode_metrics(rollout(base_env, ZeroAction(), s)) for s in self.seeds]
+        if self.coupled:
+            self.reference_return = coupled_mean_reward(self.env, None, self.seeds)
+        else:
+            base = kwargs["base_controller"] or REFERENCE_CONTROLLER[config.env_id]
+            base_env = gym.make(
+                config.env_id, max_episode_steps=-1, **{**kwargs, "base_controller": base}
+            )
+            self.reference = [
+                episode_metrics(rollout(base_env, ZeroAction(), s)) for s in self.seeds
+            ]
         self.best = math.inf
         score_file = self.best_dir / "score.json"
         if score_file.is_file():
@@ -572,15 +611,22 @@ class _Validation:
             self.best = float(score)
         self.next_at = 0
         if not self.csv.exists():
-            self.csv.write_text("timesteps,iae_ratio,rmsd_ratio,severity_ratio,score\n")
+            header = (
+                "timesteps,mean_reward,base_mean_reward,score\n"
+                if self.coupled
+                else "timesteps,iae_ratio,rmsd_ratio,severity_ratio,score\n"
+            )
+            self.csv.write_text(header)
 
     def run(self, model: Any, venv: Any) -> float:
         from stable_baselines3.common.logger import TensorBoardOutputFormat
 
         policy = _snapshot(model, venv, self.config)
+        steps = int(model.num_timesteps)
+        if self.coupled:
+            return self._run_coupled(model, policy, steps)
         metrics = [episode_metrics(rollout(self.env, policy, s)) for s in self.seeds]
         iae, rmsd, sev, score = validation_score(metrics, self.reference)
-        steps = int(model.num_timesteps)
         values = {
             "validation/iae_ratio": float(iae),
             "validation/rmsd_ratio": float(rmsd),
@@ -610,4 +656,36 @@ class _Validation:
             + (" (best so far, saved to best/)" if best else ""),
             flush=True,
         )
+        return score
+
+    def _run_coupled(self, model: Any, policy: ResidualPolicy, steps: int) -> float:
+        """Validation on ``DrillStringCoupled-v0``: the mean reward per decision against the
+        base loops' on the same seeds; score ``base - agent`` (lower is better)."""
+        from stable_baselines3.common.logger import TensorBoardOutputFormat
+
+        mean = coupled_mean_reward(self.env, policy, self.seeds)
+        score = self.reference_return - mean
+        values = {"validation/mean_reward": mean, "validation/score": score}
+        for output in model.logger.output_formats:
+            if isinstance(output, TensorBoardOutputFormat):
+                output.write(values, {k: () for k in values}, step=steps)
+        with self.csv.open("a") as f:
+            f.write(f"{steps},{mean:.5f},{self.reference_return:.5f},{score:.5f}\n")
+        best = score < self.best
+        if best:
+            self.best = score
+            policy.metadata.update(
+                _record(self.config, {"validation_score": score, "timesteps": steps})
+            )
+            policy.save(self.best_dir)
+            (self.best_dir / "score.json").write_text(
+                json.dumps({"score": score, "timesteps": steps})
+            )
+        if self.progress:
+            print(
+                f"validation at {steps:,} decisions: mean reward {mean:.4f} (base loops "
+                f"{self.reference_return:.4f}), score {score:.4f}"
+                + (" (best so far, saved to best/)" if best else ""),
+                flush=True,
+            )
         return score

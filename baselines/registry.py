@@ -8,6 +8,7 @@ from __future__ import annotations
 from typing import Final
 
 from baselines.asmc import ASMC
+from baselines.autodriller import Autodriller
 from baselines.base import CompiledLawController
 from baselines.csmc import CSMC
 from baselines.msmc import MSMC
@@ -17,8 +18,9 @@ from baselines.stiff_pi import StiffPI
 from baselines.tuned import SoftSpeedTuned, StiffPITuned, ZTorqueTuned
 from baselines.z_torque import ZTorque
 from drill_env.control import register_controller
+from drill_env.coupled_env import AxialController, register_axial_controller
 
-__all__ = ["BUILT_IN", "COMPILED_LAWS"]
+__all__ = ["AXIAL_BUILT_IN", "BUILT_IN", "COMPILED_LAWS"]
 
 BUILT_IN: Final[dict[str, type[CompiledLawController]]] = {
     "csmc": CSMC,
@@ -42,3 +44,10 @@ COMPILED_LAWS: Final = {name: cls.law for name, cls in BUILT_IN.items()}
 
 for _name, _factory in BUILT_IN.items():
     register_controller(_name, _factory)
+
+AXIAL_BUILT_IN: Final[dict[str, type[AxialController]]] = {"autodriller": Autodriller}
+"""The built-in axial (driller's) loops by name: the ``force_loop`` of
+``DrillStringCoupled-v0`` (:func:`drill_env.coupled_env.register_axial_controller`)."""
+
+for _name, _axial in AXIAL_BUILT_IN.items():
+    register_axial_controller(_name, _axial)

@@ -80,4 +80,8 @@ for _id, _name in ((ENV_ID, "DrillString"), (FIELD_ENV_ID, "DrillStringField")):
         )
 
 if COUPLED_ENV_ID not in registry:
-    register(id=COUPLED_ENV_ID, entry_point="drill_env.coupled_env:DrillStringCoupledEnv")
+    register(
+        id=COUPLED_ENV_ID,
+        entry_point="drill_env.coupled_env:DrillStringCoupledEnv",
+        vector_entry_point="drill_env.coupled_env:DrillStringCoupledVectorEnv",
+    )

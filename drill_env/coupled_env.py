@@ -13,16 +13,30 @@ decision.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Final, SupportsFloat
+from importlib import metadata
+from typing import Any, Final, NamedTuple, Protocol, SupportsFloat, runtime_checkable
 
 import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
 from numba import njit
 
+from drill_env import render
+from drill_env.control import (
+    CompiledController,
+    CompiledLaw,
+    call_law,
+    compile_law,
+    controller_names,
+    resolve_controller,
+)
 from drill_env.coupled import (
     _AIR,
     _DOWN,
@@ -52,7 +66,16 @@ from drill_env.coupled import (
     switch_rule,
     switching_functions,
 )
-from drill_env.limits import MAX_SPEED_RAD_S
+from drill_env.layout import (
+    M_APPLIED_TORQUE,
+    M_STATE,
+    M_SURFACE_TORQUE,
+    M_TELEMETRY_AGE,
+    M_TELEMETRY_BIT_SPEED,
+    M_TOP_DRIVE_SPEED,
+    N_MEASUREMENT,
+)
+from drill_env.limits import MAX_SPEED_RAD_S, TorqueLimits
 from drill_env.parameters import PRESETS, DrillStringParameters
 from drill_env.validation import check_choice, check_finite_fields, check_range, require
 
@@ -61,7 +84,15 @@ __all__ = [
     "OBSERVATION_NAMES",
     "CoupledEnvConfig",
     "CoupledRewardWeights",
+    "AXIAL_INPUTS",
+    "AxialController",
+    "AxialMeasurement",
+    "AxialSetup",
     "DrillStringCoupledEnv",
+    "DrillStringCoupledVectorEnv",
+    "axial_controller_names",
+    "make_axial_controller",
+    "register_axial_controller",
 ]
 
 PLANT_STEP_S: Final = 1e-4
@@ -79,8 +110,8 @@ _N_Y = 10
 
 # Accumulators of one call of the kernel.
 _A_STUCK, _A_OFF, _A_HOLD, _A_TD_WORK, _A_BIT_WORK, _A_WOB, _A_TOB, _A_SPEED_ERR = range(8)
-_A_OM_MIN, _A_OM_MAX, _A_LOSS, _A_SWITCHES, _A_DONE = range(8, 13)
-_N_A = 13
+_A_OM_MIN, _A_OM_MAX, _A_LOSS, _A_SWITCHES, _A_DONE, _A_TORQUE = range(8, 14)
+_N_A = 14
 
 _MAX_SWITCHES: Final = 32
 
@@ -243,13 +274,37 @@ def _chain_initial_regime(
 
 
 @njit(cache=True)
+def _measure(y: np.ndarray, p: np.ndarray, meas: np.ndarray) -> None:
+    """Fill the measurement vector ``meas`` (``drill_env.layout.M_*``) from the state ``y``:
+    the 4-DOF state ``(w_dt, phi_dt - phi_pi, w_pi, phi_pi - phi_co, w_co, phi_co - phi_bi,
+    w_bi)`` measured exactly, the top-drive speed and the surface torque, no telemetry."""
+    meas[M_STATE] = y[_Y_OM_DT]
+    meas[M_STATE + 1] = y[_Y_PHI_DT] - y[_Y_PHI_PI]
+    meas[M_STATE + 2] = y[_Y_OM_PI]
+    meas[M_STATE + 3] = y[_Y_PHI_PI] - y[_Y_PHI_CO]
+    meas[M_STATE + 4] = y[_Y_OM_CO]
+    meas[M_STATE + 5] = y[_Y_PHI_CO] - y[_Y_PHI]
+    meas[M_STATE + 6] = y[_Y_OM]
+    meas[M_TOP_DRIVE_SPEED] = y[_Y_OM_DT]
+    meas[M_SURFACE_TORQUE] = p[_Q_K_PI] * (y[_Y_PHI_DT] - y[_Y_PHI_PI]) + p[_Q_C_PI] * (
+        y[_Y_OM_DT] - y[_Y_OM_PI]
+    )
+    meas[M_TELEMETRY_BIT_SPEED] = math.nan
+    meas[M_TELEMETRY_AGE] = math.nan
+
+
+@njit(cache=True)
 def _chain_advance(
     p: np.ndarray, y: np.ndarray, regime_box: np.ndarray, t0: float, n_steps: int, h: float,
     reference: float, ring_phi: np.ndarray, ring_r: np.ndarray, ring: np.ndarray,
-    acc: np.ndarray, work: np.ndarray,
+    acc: np.ndarray, work: np.ndarray, law_address: int, law_params: np.ndarray,
+    law_state: np.ndarray, meas: np.ndarray, residual_torque: float, max_torque: float,
 ) -> None:  # fmt: skip
     """Advance the state ``y`` (10,) in place by ``n_steps`` steps of ``h`` (s) from time
-    ``t0`` under the inputs in ``p``; ``regime_box[0]`` holds the regime. ``acc`` (13,) gets
+    ``t0`` under the inputs in ``p``; ``regime_box[0]`` holds the regime. With a compiled
+    torque law (``law_address`` not 0), the top-drive torque is the law's output on the
+    measurement ``meas`` (the 4-DOF state and the surface signals, ``drill_env.layout.M_*``)
+    plus ``residual_torque``, clipped to ``[0, max_torque]`` (N m), at every step. ``acc`` (13,) gets
     this call's sums (stuck, off-rock and held time, s; top-drive and bit work, J; time
     integrals of WOB, N s, TOB, N m s, and of ``|w_bi - reference|``, rad), the least and
     greatest bit speed, the energy removed at switches, the switches and the steps done (fewer
@@ -270,6 +325,14 @@ def _chain_advance(
         t_end = t0 + (k + 1) * h
         switches = 0
         om_dt_start = y[_Y_OM_DT]
+        if law_address != 0:
+            _measure(y, p, meas)
+            raw: float = call_law(  # type: ignore[call-arg]
+                law_address, law_params, law_state, meas, reference, h
+            )
+            torque = min(max(raw + residual_torque, 0.0), max_torque)
+            meas[M_APPLIED_TORQUE] = torque
+            p[_Q_TORQUE] = torque
         for i in range(_N_Y):
             saved[i] = y[i]
         while True:
@@ -346,6 +409,7 @@ def _chain_advance(
         if regime == _HOLD:
             acc[_A_HOLD] += h
         acc[_A_TD_WORK] += p[_Q_TORQUE] * 0.5 * (om_dt_start + y[_Y_OM_DT]) * h
+        acc[_A_TORQUE] += p[_Q_TORQUE] * h
         acc[_A_BIT_WORK] += (w * y[_Y_V] + tq * y[_Y_OM]) * h
         acc[_A_WOB] += w * h
         acc[_A_TOB] += tq * h
@@ -361,14 +425,119 @@ def _chain_advance(
 # ---------------------------------------------------------------------------------------------
 
 ACTION_MODES: Final = ("both", "torque", "force")
-"""What the agent commands: both inputs, the top-drive torque only (the force held at its set
-point), or the applied force only (the torque from the speed loop)."""
+"""What the agent commands: both inputs, the top-drive torque only (the axial input from its
+base loop), or the axial input only (the torque from its base loop)."""
 TORQUE_LOOPS: Final = ("pi", "none")
-"""Base loop of the top-drive torque: a PI speed loop on the top-drive speed (the action adds
-a residual) or none (the action is the torque itself)."""
+"""Built-in base loops of the top-drive torque: a PI speed loop on the top-drive speed (the
+action adds a residual) or none (the action is the torque itself). ``torque_loop`` also takes
+the name of a registered controller with a compiled law (``drill_env.controller_names()``,
+e.g. ``"stiff_pi"``, ``"soft_speed"``, ``"z_torque"``, ``"proposed"``) or such a controller:
+its law runs at every plant step on the exact 4-DOF state, the action adding a residual."""
 FORCE_LOOPS: Final = ("fixed", "none")
-"""Base loop of the applied force: the set point (the action adds a residual) or none (the
-action is the force itself)."""
+"""Built-in base loops of the axial input: the set point (the action adds a residual) or none
+(the action is the input itself). ``force_loop`` also takes the name of a registered axial
+controller (:func:`axial_controller_names`, e.g. ``"autodriller"``) or such a controller,
+called once per decision, the action adding a residual."""
+AXIAL_INPUTS: Final = ("force", "hook_speed")
+"""What drives the bit axially: the applied force ``W_0`` (RGD's constant hook load), or the
+hook speed ``V_top`` through the axial spring ``K`` of the string (docs/coupled-model.md
+section 3: ``F_ax = W_0 + K (x_hook - U)``, the hook position ``x_hook`` integrating the
+commanded hook speed from 0, ``W_0`` the force set point at the start)."""
+
+
+class AxialSetup(NamedTuple):
+    """What an axial controller is told at each reset.
+
+    Attributes:
+        axial_input: One of :data:`AXIAL_INPUTS`: the unit of the command (N or m/s).
+        force_set_point_n: The env's applied-force set point, N.
+        rop_reference_m_s: Steady rate of penetration at the set point and the reference
+            speed, m/s (also the hook speed that holds the set point in steady drilling).
+        min_command: Smallest command, N or m/s.
+        max_command: Largest command, N or m/s.
+        max_torque_nm: Largest top-drive torque, N m.
+    """
+
+    axial_input: str
+    force_set_point_n: float
+    rop_reference_m_s: float
+    min_command: float
+    max_command: float
+    max_torque_nm: float
+
+
+class AxialMeasurement(NamedTuple):
+    """What an axial controller sees at each decision: means over the last decision.
+
+    Attributes:
+        wob_n: Weight on bit, N (a downhole measurement; 0 off the rock).
+        rop_m_s: Rate of penetration, m/s.
+        surface_torque_nm: Torque at the top of the string at the decision, N m.
+        top_drive_torque_nm: Mean top-drive torque, N m.
+        command: The axial command held over the last decision, N or m/s.
+    """
+
+    wob_n: float
+    rop_m_s: float
+    surface_torque_nm: float
+    top_drive_torque_nm: float
+    command: float
+
+
+@runtime_checkable
+class AxialController(Protocol):
+    """A driller's loop on the axial input (applied force or hook speed), called per decision."""
+
+    def reset(self, setup: AxialSetup) -> None:
+        """Start an episode with ``setup``."""
+
+    def command(self, measurement: AxialMeasurement, dt_s: float) -> float:
+        """The axial command (N or m/s, :attr:`AxialSetup.axial_input`) for the next ``dt_s``
+        seconds."""
+        ...
+
+
+AXIAL_ENTRY_POINT_GROUP: Final = "drill_string_gym.axial_controllers"
+"""Entry point group through which installed packages offer axial controllers by name."""
+_AXIAL_FACTORIES: dict[str, Callable[..., AxialController]] = {}
+
+
+def register_axial_controller(name: str, factory: Callable[..., AxialController]) -> None:
+    """Offer ``factory`` under ``name`` as a ``force_loop`` of ``DrillStringCoupled-v0``; the
+    same factory twice is harmless, another under a taken name an error."""
+    if not isinstance(name, str) or not name or name in FORCE_LOOPS:
+        raise ValueError(f"axial controller name must be a new non-empty string, got {name!r}")
+    known = _AXIAL_FACTORIES.get(name)
+    if known is not None and known is not factory:
+        raise ValueError(f"axial controller name {name!r} is already registered")
+    _AXIAL_FACTORIES[name] = factory
+
+
+def _axial_entry_points() -> dict[str, metadata.EntryPoint]:
+    return {e.name: e for e in metadata.entry_points(group=AXIAL_ENTRY_POINT_GROUP)}
+
+
+def axial_controller_names() -> list[str]:
+    """The registered axial controller names (this process's, then the entry points')."""
+    return list(dict.fromkeys([*_AXIAL_FACTORIES, *_axial_entry_points()]))
+
+
+def make_axial_controller(name: str, **gains: Any) -> AxialController:
+    """A new axial controller ``name`` (``ValueError`` listing the valid names if unknown)."""
+    factory = _AXIAL_FACTORIES.get(name)
+    if factory is None:
+        entry = _axial_entry_points().get(name)
+        if entry is not None:
+            factory = entry.load()
+            register_axial_controller(name, factory)
+    if factory is None:
+        raise ValueError(
+            f"force_loop = {name!r} is not a known axial loop: allowed {list(FORCE_LOOPS)} or "
+            f"a registered axial controller {axial_controller_names()}"
+        )
+    return factory(**gains)
+
+
 OBSERVATION_NAMES: Final = (
     "top_drive_speed_rel",
     "bit_speed_rel",
@@ -426,10 +595,19 @@ class CoupledEnvConfig:
         bit: Bit and axial mass: a preset of :data:`drill_env.coupled.RGD_PRESETS` or an
             :class:`drill_env.coupled.RgdParameters` (its torsional fields are not used).
         reference_speed_rad_s: Reference bit speed of the speed loop and the reward, rad/s.
-        applied_force_n: Set point of the applied force, N (above the wear-flat force).
+        applied_force_n: Set point of the applied force, N (above the wear-flat force); with
+            the hook-speed input, the applied force at the start.
         action_mode: One of :data:`ACTION_MODES`.
-        torque_loop: One of :data:`TORQUE_LOOPS`.
-        force_loop: One of :data:`FORCE_LOOPS`.
+        torque_loop: One of :data:`TORQUE_LOOPS`, or a registered controller with a compiled
+            law (name or object).
+        force_loop: One of :data:`FORCE_LOOPS`, or a registered axial controller (name or
+            object, :class:`AxialController`).
+        axial_input: One of :data:`AXIAL_INPUTS`.
+        hook_stiffness_n_m: Axial stiffness ``K`` of the string between hook and bit with the
+            hook-speed input, N/m (default: ``E A / L`` of 1000 m of the RGD-A pipe, steel).
+        residual_hook_speed_m_s: Hook speed of a residual action of 1, m/s.
+        max_hook_speed_m_s: Largest hook speed magnitude, m/s (the range is [-max, max];
+            negative lifts).
         speed_loop_kp_nms_rad: Proportional gain of the PI speed loop, N m s/rad.
         speed_loop_ki_nm_rad: Integral gain of the PI speed loop, N m/rad.
         residual_torque_nm: Torque of a residual action of 1 (with the PI loop), N m.
@@ -449,8 +627,12 @@ class CoupledEnvConfig:
     reference_speed_rad_s: float = 12.0
     applied_force_n: float = 90e3
     action_mode: str = "both"
-    torque_loop: str = "pi"
-    force_loop: str = "fixed"
+    torque_loop: Any = "pi"
+    force_loop: Any = "fixed"
+    axial_input: str = "force"
+    hook_stiffness_n_m: float = 7.26e5
+    residual_hook_speed_m_s: float = 0.01
+    max_hook_speed_m_s: float = 0.1
     speed_loop_kp_nms_rad: float = 2_000.0
     speed_loop_ki_nm_rad: float = 500.0
     residual_torque_nm: float = 5_000.0
@@ -475,8 +657,34 @@ class CoupledEnvConfig:
         if isinstance(self.reward_weights, dict):
             object.__setattr__(self, "reward_weights", CoupledRewardWeights(**self.reward_weights))
         check_choice("action_mode", self.action_mode, ACTION_MODES, "action mode")
-        check_choice("torque_loop", self.torque_loop, TORQUE_LOOPS, "torque loop")
-        check_choice("force_loop", self.force_loop, FORCE_LOOPS, "force loop")
+        if isinstance(self.torque_loop, str) and self.torque_loop not in TORQUE_LOOPS:
+            names = controller_names()
+            if self.torque_loop not in names:
+                raise ValueError(
+                    f"torque_loop = {self.torque_loop!r} is not a known torque loop: allowed "
+                    f"{list(TORQUE_LOOPS)} or a registered controller {names}"
+                )
+        elif not isinstance(self.torque_loop, (str, CompiledController)):
+            raise TypeError(
+                "torque_loop must be 'pi', 'none', a controller name or a controller with a "
+                f"compiled_law, got {self.torque_loop!r}"
+            )
+        if isinstance(self.force_loop, str) and self.force_loop not in FORCE_LOOPS:
+            names = axial_controller_names()
+            if self.force_loop not in names:
+                raise ValueError(
+                    f"force_loop = {self.force_loop!r} is not a known axial loop: allowed "
+                    f"{list(FORCE_LOOPS)} or a registered axial controller {names}"
+                )
+        elif not isinstance(self.force_loop, (str, AxialController)):
+            raise TypeError(
+                "force_loop must be 'fixed', 'none', an axial controller name or an "
+                f"AxialController, got {self.force_loop!r}"
+            )
+        check_choice("axial_input", self.axial_input, AXIAL_INPUTS, "axial input")
+        check_range("hook_stiffness_n_m", self.hook_stiffness_n_m, 1e3, 1e10)
+        check_range("residual_hook_speed_m_s", self.residual_hook_speed_m_s, 0.0, 10.0)
+        check_range("max_hook_speed_m_s", self.max_hook_speed_m_s, 1e-6, 10.0)
         check_choice("surface", self.surface, ("max", "delay"), "surface rule")
         if not isinstance(self.randomize, bool):
             raise TypeError(f"randomize must be True or False, got {self.randomize!r}")
@@ -504,12 +712,13 @@ class CoupledEnvConfig:
             abs(steps - round(steps)) < 1e-6,
         )
         check_range("episode_s", self.episode_s, self.control_dt_s, 1e5)
-        if self.action_mode == "force" and self.torque_loop != "pi":
+        if self.action_mode == "force" and self.torque_loop == "none":
             raise ValueError(
-                "action_mode = 'force' needs torque_loop = 'pi': something must turn the string"
+                "action_mode = 'force' needs a torque loop (torque_loop not 'none'): something "
+                "must turn the string"
             )
-        if self.action_mode == "torque" and self.force_loop != "fixed":
-            raise ValueError("action_mode = 'torque' needs force_loop = 'fixed'")
+        if self.action_mode == "torque" and self.force_loop == "none":
+            raise ValueError("action_mode = 'torque' needs an axial loop (force_loop not 'none')")
 
     @property
     def string_parameters(self) -> DrillStringParameters:
@@ -559,7 +768,8 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
 
     **Info** (units in the keys): ``time_s``, ``bit_speed_rad_s``, ``top_drive_speed_rad_s``,
     ``top_drive_torque_nm``, ``base_torque_nm``, ``applied_force_n``, ``wob_n`` and
-    ``tob_nm`` (means over the decision), ``rop_m_s``, ``depth_m``, ``mse_pa`` (mechanical
+    ``tob_nm`` (means over the decision), ``rop_m_s``, ``depth_m``, ``depth_of_cut_m`` (the
+    depth of cut per blade ``d_n`` now: negative off the rock), ``mse_pa`` (mechanical
     specific energy so far: bit work over the rock volume cut, 0 before any cut),
     ``stuck_fraction``, ``bounce_fraction``, ``hold_fraction``, ``bit_stuck``, ``off_bottom``,
     ``top_drive_power_w``, ``reward_terms``.
@@ -575,17 +785,23 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
         obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
     """
 
-    metadata: dict[str, Any] = {"render_modes": [], "render_fps": 20}
+    metadata: dict[str, Any] = {"render_modes": list(render.RENDER_MODES), "render_fps": 20}
 
     def __init__(self, render_mode: str | None = None, **keywords: Any) -> None:
         from drill_env.validation import check_unknown
 
         check_unknown(keywords, [f.name for f in dataclasses.fields(CoupledEnvConfig)])
-        if render_mode is not None:
-            raise ValueError(f"render_mode = {render_mode!r} is not supported: allowed None")
+        render.check_render_mode(render_mode)
         self.render_mode = render_mode
         self.config = CoupledEnvConfig(**keywords)
         c = self.config
+        self.metadata = {
+            "render_modes": render.available_render_modes(),
+            "render_fps": 1.0 / c.control_dt_s,
+        }
+        self._rendering = (
+            None if render_mode is None else render.EnvRendering(render_mode, 4, c.control_dt_s)
+        )
         size = 2 if c.action_mode == "both" else 1
         self.action_space = gym.spaces.Box(-1.0, 1.0, (size,), dtype=np.float32)
         self.observation_space = gym.spaces.Box(
@@ -603,6 +819,19 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
         self._acc = np.zeros(_N_A)
         self._work = np.zeros((5, _N_Y))
         self._p = np.zeros(_N_Q)
+        self._meas = np.zeros(N_MEASUREMENT)
+        self._law: CompiledLaw | None = None
+        if c.torque_loop not in TORQUE_LOOPS:
+            controller = resolve_controller(c.torque_loop)
+            if not isinstance(controller, CompiledController):
+                raise TypeError(f"torque_loop = {c.torque_loop!r} has no compiled law")
+            self._law = compile_law(controller, self._string, TorqueLimits(0.0, c.max_torque_nm))
+        self._law_state = np.zeros(1) if self._law is None else self._law.initial_state.copy()
+        self._law_params = np.zeros(1) if self._law is None else self._law.params
+        self._axial: AxialController | None = None
+        if c.force_loop not in FORCE_LOOPS:
+            loop = c.force_loop
+            self._axial = make_axial_controller(loop) if isinstance(loop, str) else loop
         self._ready = False
 
     # ------------------------------------------------------------------------------ reset
@@ -636,6 +865,25 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
         p[_Q_C_DT], p[_Q_C_PI], p[_Q_C_CO], p[_Q_C_BI] = s.c_dt, s.c_pi, s.c_co, s.c_bi
         p[_Q_K_PI], p[_Q_K_CO], p[_Q_K_BI] = s.k_pi, s.k_co, s.k_bi
         p[_Q_TORQUE] = self._u_steady
+        hook = c.axial_input == "hook_speed"
+        if hook:
+            p[_P_K] = c.hook_stiffness_n_m
+        self._hook_m = 0.0
+        self._command = self._v_ref if hook else c.applied_force_n
+        self._law_state = np.zeros(1) if self._law is None else self._law.initial_state.copy()
+        self._meas[:] = 0.0
+        self._meas[M_APPLIED_TORQUE] = self._u_steady
+        if self._axial is not None:
+            self._axial.reset(
+                AxialSetup(
+                    axial_input=c.axial_input,
+                    force_set_point_n=c.applied_force_n,
+                    rop_reference_m_s=self._v_ref,
+                    min_command=-c.max_hook_speed_m_s if hook else 0.0,
+                    max_command=c.max_hook_speed_m_s if hook else c.max_force_n,
+                    max_torque_nm=c.max_torque_nm,
+                )
+            )
         y = self._y
         y[:] = 0.0
         y[_Y_V] = steady.rate_of_penetration_m_s
@@ -665,33 +913,62 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
         self._force = c.applied_force_n
         self._base = self._u_steady
         self._ready = True
+        if self._rendering is not None:
+            self._record_frame(new_episode=True)
         return self._observation(), self._info({}, 0.0, 0.0, 0.0)
 
     # ------------------------------------------------------------------------------- step
-    def _inputs(self, action: npt.NDArray[np.float64]) -> tuple[float, float, float]:
+    def _inputs(self, action: npt.NDArray[np.float64]) -> tuple[float, float, float, float]:
+        """``(top-drive torque N m, axial command N or m/s, base torque N m, residual torque
+        N m)`` for ``action``; with a compiled torque law the torque is the last one applied
+        (the law sets it at every plant step, adding the residual)."""
         c = self.config
-        error = c.reference_speed_rad_s - float(self._y[_Y_OM_DT])
-        base = 0.0
-        if c.torque_loop == "pi":
-            base = (
-                self._u_steady
-                + c.speed_loop_kp_nms_rad * error
-                + c.speed_loop_ki_nm_rad * self._integral
-            )
         a_torque = float(action[0]) if c.action_mode in ("both", "torque") else 0.0
-        a_force = float(action[-1]) if c.action_mode in ("both", "force") else 0.0
-        if c.torque_loop == "pi":
-            raw = base + a_torque * c.residual_torque_nm
+        a_axial = float(action[-1]) if c.action_mode in ("both", "force") else 0.0
+        residual = 0.0
+        if self._law is not None:
+            base = self._u
+            residual = a_torque * c.residual_torque_nm
+            torque = self._u
         else:
-            raw = 0.5 * (a_torque + 1.0) * c.max_torque_nm
-        torque = min(max(raw, 0.0), c.max_torque_nm)
-        if c.torque_loop == "pi" and raw == torque:  # integrate only while not saturated
-            self._integral += error * c.control_dt_s
-        if c.force_loop == "fixed":
-            force = c.applied_force_n + a_force * c.residual_force_n
+            error = c.reference_speed_rad_s - float(self._y[_Y_OM_DT])
+            base = 0.0
+            if c.torque_loop == "pi":
+                base = (
+                    self._u_steady
+                    + c.speed_loop_kp_nms_rad * error
+                    + c.speed_loop_ki_nm_rad * self._integral
+                )
+                raw = base + a_torque * c.residual_torque_nm
+            else:
+                raw = 0.5 * (a_torque + 1.0) * c.max_torque_nm
+            torque = min(max(raw, 0.0), c.max_torque_nm)
+            if c.torque_loop == "pi" and raw == torque:  # integrate only while not saturated
+                self._integral += error * c.control_dt_s
+        hook = c.axial_input == "hook_speed"
+        scale = c.residual_hook_speed_m_s if hook else c.residual_force_n
+        if self._axial is not None:
+            seen = AxialMeasurement(
+                wob_n=float(self._last["wob_n"]),
+                rop_m_s=float(self._last["rop_m_s"]),
+                surface_torque_nm=self._surface_torque(),
+                top_drive_torque_nm=self._u,
+                command=self._command,
+            )
+            command = float(self._axial.command(seen, c.control_dt_s)) + a_axial * scale
+            if not math.isfinite(command):
+                raise ValueError(f"the axial controller returned {command!r}: allowed finite")
+        elif c.force_loop == "fixed":
+            command = (self._v_ref if hook else c.applied_force_n) + a_axial * scale
+        elif hook:
+            command = a_axial * c.max_hook_speed_m_s
         else:
-            force = 0.5 * (a_force + 1.0) * c.max_force_n
-        return torque, min(max(force, 0.0), c.max_force_n), base
+            command = 0.5 * (a_axial + 1.0) * c.max_force_n
+        if hook:
+            command = min(max(command, -c.max_hook_speed_m_s), c.max_hook_speed_m_s)
+        else:
+            command = min(max(command, 0.0), c.max_force_n)
+        return torque, command, base, residual
 
     def step(
         self, action: Any
@@ -707,20 +984,34 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
             )
         a = np.clip(a, -1.0, 1.0)
         c = self.config
-        torque, force, base = self._inputs(a)
-        self._u, self._force, self._base = torque, force, base
+        torque, command, base, residual = self._inputs(a)
+        self._base, self._command = base, command
         self._p[_Q_TORQUE] = torque
-        self._p[_P_W0] = force
+        if c.axial_input == "hook_speed":
+            # F_ax = W_0 + K (x_hook - U) with x_hook = x_k + V_top (t - t_k): in the kernel's
+            # form W0' + K (V_top t - U), W0' = W_0 + K (x_k - V_top t_k).
+            self._p[_P_VTOP] = command
+            self._p[_P_W0] = c.applied_force_n + c.hook_stiffness_n_m * (
+                self._hook_m - command * self._t
+            )
+        else:
+            self._p[_P_W0] = command
         depth_before = float(self._y[_Y_U])
         n = c.substeps
         _chain_advance(
             self._p, self._y, self._regime, self._t, n, PLANT_STEP_S, c.reference_speed_rad_s,
             self._ring_phi, self._ring_r, self._ring, self._acc, self._work,
+            0 if self._law is None else self._law.address, self._law_params, self._law_state,
+            self._meas, residual, c.max_torque_nm,
         )  # fmt: skip
         acc = self._acc
         done = int(acc[_A_DONE])
         span = max(done, 1) * PLANT_STEP_S
         self._t += done * PLANT_STEP_S
+        if c.axial_input == "hook_speed":
+            self._hook_m += command * done * PLANT_STEP_S
+        self._u = acc[_A_TORQUE] / span if done else torque
+        self._force = self._applied_force()
         self._steps += 1
         diverged = done < n
         rop = (float(self._y[_Y_U]) - depth_before) / span
@@ -748,7 +1039,51 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
         if diverged:
             info["termination_reason"] = "diverged"
             self._ready = False
+        if self._rendering is not None:
+            self._record_frame()
         return self._observation(), reward, diverged, truncated, info
+
+    def _applied_force(self) -> float:
+        """The axial force on the bit from above now, N (``F_ax`` without axial damping)."""
+        c = self.config
+        if c.axial_input == "hook_speed":
+            return c.applied_force_n + c.hook_stiffness_n_m * (self._hook_m - self._y[_Y_U])
+        return self._command
+
+    # -------------------------------------------------------------------------- rendering
+    def _record_frame(self, new_episode: bool = False) -> None:
+        assert self._rendering is not None
+        y = self._y
+        state = (
+            y[_Y_OM_DT], y[_Y_PHI_DT] - y[_Y_PHI_PI], y[_Y_OM_PI], y[_Y_PHI_PI] - y[_Y_PHI_CO],
+            y[_Y_OM_CO], y[_Y_PHI_CO] - y[_Y_PHI], y[_Y_OM],
+        )  # fmt: skip
+        self._rendering.record(
+            self._t,
+            np.array(state),
+            self._u,
+            self.config.reference_speed_rad_s,
+            float(self._last["wob_n"]),
+            int(self._regime[0]) >= _STUCK,
+            new_episode=new_episode,
+        )
+
+    def render(self) -> npt.NDArray[np.uint8] | None:
+        """The frame of the last 20 s (``rgb_array``: an ``(H, W, 3)`` uint8 array; ``human``:
+        shown in the window, None); without a ``render_mode``, a warning and None."""
+        if self._rendering is None:
+            gym.logger.warn(
+                "render() without a render_mode: make the env with render_mode='rgb_array' "
+                "or 'human'"
+            )
+            return None
+        return self._rendering.render()
+
+    def close(self) -> None:
+        """Close the render window, if any."""
+        if self._rendering is not None:
+            self._rendering.close()
+        super().close()
 
     # ------------------------------------------------------------------------ observation
     def _surface_torque(self) -> float:
@@ -779,13 +1114,19 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
         depth = float(y[_Y_U])
         area = math.pi * self._bit.bit_radius_m**2
         regime = int(self._regime[0])
+        cursor = int(self._ring[2])  # the lookup moves the ring's cursor: put it back
+        surface = _surface(y[_Y_PHI] - self._p[_P_BLADE], self._ring_phi, self._ring_r, self._ring)
+        self._ring[2] = cursor
+        depth_of_cut = float(y[_Y_U] - surface)
         return {
             "time_s": self._t,
+            "depth_of_cut_m": depth_of_cut,
             "bit_speed_rad_s": float(y[_Y_OM]),
             "top_drive_speed_rad_s": float(y[_Y_OM_DT]),
             "top_drive_torque_nm": self._u,
             "base_torque_nm": self._base,
             "applied_force_n": self._force,
+            "hook_speed_m_s": self._command if self.config.axial_input == "hook_speed" else 0.0,
             "wob_n": float(self._last["wob_n"]),
             "tob_nm": float(self._last["tob_nm"]),
             "rop_m_s": float(self._last["rop_m_s"]),
@@ -802,7 +1143,8 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
     def episode_metrics(self) -> dict[str, float]:
         """Since the reset: ``rop_m_s`` (depth over time), ``mse_pa`` (bit work over the rock
         volume cut; 0 before any cut), ``stuck_fraction``, ``bounce_fraction``,
-        ``top_drive_energy_j`` and ``time_s``."""
+        ``top_drive_energy_j``, ``bit_work_j`` (work done on the rock), ``rock_volume_m3`` (the
+        volume cut: bit area times depth) and ``time_s``."""
         bit_work, td_work, stuck_s, off_s = self._totals
         t = max(self._t, 1e-12)
         depth = float(self._y[_Y_U])
@@ -814,4 +1156,169 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
             "stuck_fraction": stuck_s / t,
             "bounce_fraction": off_s / t,
             "top_drive_energy_j": float(td_work),
+            "bit_work_j": float(bit_work),
+            "rock_volume_m3": area * depth,
         }
+
+
+class DrillStringCoupledVectorEnv(VectorEnv):
+    """``num_envs`` coupled strings (``gym.make_vec("DrillStringCoupled-v0", num_envs=N)``,
+    the registered ``vector_entry_point``); the keywords are those of
+    :class:`DrillStringCoupledEnv`, shared by all strings.
+
+    Each string is a :class:`DrillStringCoupledEnv` advanced by its own compiled call (one
+    event-located plant per string: the regime switches of one string do not hold up the
+    others). ``reset(seed=s)`` seeds string ``i`` with ``s + i``, as Gymnasium's
+    ``SyncVectorEnv`` does, so string ``i`` reproduces a single env reset with ``seed=s + i``
+    bit for bit. Autoreset follows Gymnasium's next-step mode: the step after an episode ends
+    resets that string (reward 0, not terminated or truncated). ``infos`` hold one array per
+    key with its ``_key`` mask; ``reward_terms`` is a dict of such arrays.
+    """
+
+    metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        max_episode_steps: int | None = None,
+        render_mode: str | None = None,
+        **keywords: Any,
+    ) -> None:
+        if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
+            raise ValueError(f"num_envs = {num_envs!r} is out of range: allowed an integer >= 1")
+        if max_episode_steps is not None and (
+            isinstance(max_episode_steps, bool)
+            or not isinstance(max_episode_steps, int)
+            or max_episode_steps < 1
+        ):
+            raise ValueError(
+                f"max_episode_steps = {max_episode_steps!r} is out of range: allowed an "
+                "integer >= 1"
+            )
+        if render_mode is not None:
+            raise ValueError(
+                f"render_mode = {render_mode!r} is not supported by the vector env: allowed "
+                "None (render a single env)"
+            )
+        self.max_episode_steps = max_episode_steps
+        self.num_envs = num_envs
+        first = DrillStringCoupledEnv(**keywords)
+        self.envs = [first] + [
+            DrillStringCoupledEnv(**{**keywords, **_copied_loops(keywords)})
+            for _ in range(num_envs - 1)
+        ]
+        self.config = first.config
+        self.single_observation_space = first.observation_space
+        self.single_action_space = first.action_space
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        self._needs_reset = np.zeros(num_envs, dtype=bool)
+        self._steps = np.zeros(num_envs, dtype=np.int64)
+        self._started = False
+
+    def reset(
+        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[npt.NDArray[np.float32], dict[str, Any]]:
+        """Reset every string, or only those of ``options["reset_mask"]`` (a bool array of
+        ``num_envs``, Gymnasium's partial reset); ``s`` gives string ``i`` the seed ``s + i``,
+        a list one each."""
+        mask = np.ones(self.num_envs, dtype=bool)
+        if options and "reset_mask" in options:
+            options = dict(options)
+            mask = np.asarray(options.pop("reset_mask"))
+            if mask.shape != (self.num_envs,) or mask.dtype != np.bool_:
+                raise ValueError(
+                    f"reset_mask must be a bool array of shape ({self.num_envs},), got {mask!r}"
+                )
+            if not self._started and not mask.all():
+                raise ValueError("the first reset must reset every string (reset_mask all True)")
+        if options:
+            raise ValueError(
+                f"options = {options!r} is not supported: allowed None, {{}} or a reset_mask"
+            )
+        if seed is None or isinstance(seed, int):
+            seeds: list[int | None] = [
+                None if seed is None else seed + i for i in range(self.num_envs)
+            ]
+        else:
+            seeds = list(seed)
+            if len(seeds) != self.num_envs:
+                raise ValueError(f"seed list must have {self.num_envs} entries, got {len(seeds)}")
+        results = []
+        for i, (env, s) in enumerate(zip(self.envs, seeds, strict=True)):
+            if mask[i]:
+                results.append(env.reset(seed=s))
+                self._needs_reset[i] = False
+                self._steps[i] = 0
+            else:
+                results.append((env._observation(), {}))
+        self._started = True
+        return np.stack([r[0] for r in results]), self._batch_infos([r[1] for r in results])
+
+    def step(
+        self, actions: Any
+    ) -> tuple[
+        npt.NDArray[np.float32],
+        npt.NDArray[np.float64],
+        npt.NDArray[np.bool_],
+        npt.NDArray[np.bool_],
+        dict[str, Any],
+    ]:
+        """Step every string with its row of ``actions`` ``(num_envs, k)``."""
+        if not self._started:
+            raise RuntimeError("call reset() before step()")
+        a = np.asarray(actions, dtype=np.float64)
+        k = self.single_action_space.shape[0]  # type: ignore[index]
+        if a.shape != (self.num_envs, k):
+            raise ValueError(
+                f"actions have shape {a.shape}: allowed ({self.num_envs}, {k}) values in [-1, 1]"
+            )
+        observations, infos = [], []
+        rewards = np.zeros(self.num_envs)
+        terminated = np.zeros(self.num_envs, dtype=bool)
+        truncated = np.zeros(self.num_envs, dtype=bool)
+        for i, env in enumerate(self.envs):
+            if self._needs_reset[i]:
+                obs, info = env.reset()
+                self._steps[i] = 0
+            else:
+                obs, reward, term, trunc, info = env.step(a[i])
+                self._steps[i] += 1
+                if self.max_episode_steps is not None and self._steps[i] >= self.max_episode_steps:
+                    trunc = not term
+                rewards[i], terminated[i], truncated[i] = float(reward), term, trunc
+            observations.append(obs)
+            infos.append(info)
+        self._needs_reset = terminated | truncated
+        return np.stack(observations), rewards, terminated, truncated, self._batch_infos(infos)
+
+    def _batch_infos(self, infos: list[dict[str, Any]]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        keys = dict.fromkeys(k for info in infos for k in info if k != "reward_terms")
+        for key in keys:
+            present = np.array([key in info for info in infos])
+            example = next(info[key] for info in infos if key in info)
+            dtype = object if isinstance(example, str) else None
+            values = [info.get(key, "" if dtype is object else 0) for info in infos]
+            out[key] = np.array(values, dtype=dtype)
+            out["_" + key] = present
+        batch: dict[str, Any] = {}
+        for t in (f.name for f in dataclasses.fields(CoupledRewardWeights)):
+            batch[t] = np.array([info.get("reward_terms", {}).get(t, 0.0) for info in infos])
+            batch["_" + t] = np.array([t in info.get("reward_terms", {}) for info in infos])
+        out["reward_terms"] = batch
+        out["_reward_terms"] = np.ones(self.num_envs, dtype=bool)
+        return out
+
+    def episode_metrics(self) -> list[dict[str, float]]:
+        """:meth:`DrillStringCoupledEnv.episode_metrics` of every string."""
+        return [env.episode_metrics() for env in self.envs]
+
+
+def _copied_loops(keywords: dict[str, Any]) -> dict[str, Any]:
+    """Controller objects given as loops, copied so that no two strings share one's state."""
+    return {
+        key: copy.deepcopy(keywords[key])
+        for key in ("torque_loop", "force_loop")
+        if key in keywords and not isinstance(keywords[key], str)
+    }

@@ -3,7 +3,7 @@
 Subcommands, each a module with ``main(argv)`` imported only when used (so the core needs no
 torch): ``compare``, ``map``, ``probability-map``, ``train``, ``sweep-train``, ``evaluate``,
 ``convert``, ``waves``, ``realism``, ``tune``, ``coupled``, ``benchmark``,
-``calibrate``, ``replay``. Every user error ends with
+``calibrate``, ``replay``, ``coupled-controllers``. Every user error ends with
 one line on standard error and exit code 2 (:mod:`experiments.arguments`); ``DRILL_GYM_DEBUG=1``
 shows the traceback instead.
 """
@@ -73,6 +73,10 @@ SUBCOMMANDS = {
     "replay": (
         "experiments.replay",
         "drive a calibrated plant with a log's top-drive speed; stick-slip features",
+    ),
+    "coupled-controllers": (
+        "experiments.coupled_controllers",
+        "which top-drive and axial loops hold where on the coupled string's stability map",
     ),
 }
 """Subcommand name -> (module with ``main(argv)``, one line of help)."""

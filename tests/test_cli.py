@@ -111,7 +111,7 @@ def test_an_unknown_command_is_one_line(
     assert re.match(
         r"drill-gym: error: unknown (command|option) '.*': allowed commands compare, map, "
         r"probability-map, train, sweep-train, evaluate, convert, waves, realism, tune, coupled, "
-        r"benchmark, calibrate, replay \(see drill-gym --help\)\n$",
+        r"benchmark, calibrate, replay, coupled-controllers \(see drill-gym --help\)\n$",
         err,
     )
 
