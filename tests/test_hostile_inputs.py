@@ -464,7 +464,7 @@ def test_the_largest_accepted_string_builds_quickly() -> None:
         with_measured_depth("deep_5000m", MAX_MEASURED_DEPTH_M), element_length_m=6.0
     )
     assert sum(drill_env.distributed.section_element_counts(string)) <= MAX_ELEMENTS
-    env = gym.make(FIELD_ID, parameters=string, episode_s=0.1)
+    env = gym.make(FIELD_ID, parameters=string, episode_s=0.2)
     obs, _ = env.reset(seed=0)
     assert np.all(np.isfinite(obs))
 
