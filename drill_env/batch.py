@@ -18,6 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from drill_env import kernel
+from drill_env._cache import announce_compilation
 from drill_env.actuator import lag_factor
 from drill_env.chain import CHAIN_WORK_ROWS, chain_parameter_length, chain_parameter_vector
 from drill_env.control import (
@@ -236,7 +237,14 @@ class StringBatch:
         else:
             serial, parallel = kernel.advance_batch, kernel.advance_batch_parallel
         dispatcher = parallel if n >= PARALLEL_THRESHOLD else serial
-        self._advance = kernel.fast_entry(dispatcher, self.arrays, self.settings)
+        with announce_compilation(*self._kernel_name()):
+            self._advance = kernel.fast_entry(dispatcher, self.arrays, self.settings)
+
+    def _kernel_name(self) -> tuple[str, float]:
+        """What compiling this batch's kernel is called, and about how long it takes, s."""
+        if self.chain:
+            return "the distributed-string plant kernel", 10.0
+        return "the plant kernel", 6.0
 
     # ------------------------------------------------------------- arrays by name
     @property
@@ -386,7 +394,8 @@ class StringBatch:
                 a.law_params[i] = law.params
                 a.law_state[i] = law.initial_state
         a.report[i] = 0.0
-        kernel.observe(a, self.settings, i)
+        with announce_compilation(*self._kernel_name()):
+            kernel.observe(self._advance, a, self.settings, i)
 
     def law_info(self) -> dict[str, npt.NDArray[np.float64]]:
         """The state slots the compiled law names (:class:`drill_env.control.CompiledLaw`
@@ -419,7 +428,8 @@ class StringBatch:
     def measurement(self, i: int) -> npt.NDArray[np.float64]:
         """The measurement vector of string ``i`` now (``drill_env.layout.M_*``: the measured
         state in ``state`` mode, the surface signals, the telemetry), a copy."""
-        kernel.measure(self.arrays, self.settings, i)
+        with announce_compilation("the measurement channel for Python controllers", 4.0):
+            kernel.measure(self.arrays, self.settings, i)
         return self.arrays.measurement[i].copy()
 
     def _draw_node_noise(self, i: int) -> None:
