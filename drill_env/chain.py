@@ -101,6 +101,7 @@ CHAIN_HEADER: Final = 6
 """Entries of the parameter vector before the per-node and per-element arrays."""
 
 # Rows of the scratch array: start state, crossing state, result, RK4 stage, element torques.
+# Every RK4 step runs from the START rows into the OUT rows; events copy rows around it.
 _START_W, _START_T, _CROSS_W, _CROSS_T, _OUT_W, _OUT_T, _STAGE_W, _STAGE_T, _TAU = range(9)
 CHAIN_WORK_ROWS: Final = 9
 """Rows of the scratch array :func:`chain_step` needs (columns: at least ``n``)."""
@@ -194,7 +195,7 @@ def chain_derivative(x, u: float, p, t_a: float, t_0: float, mode: int, dx) -> N
         dx[2 * m] = (tau_prev - p[h + n + m] * wb - slip) * p[h + m]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _stage(
     n, in_w, in_t, out_w, out_t, w0, t0, acc_w, acc_t, tau, inv_j, d, k, c,
     u, mode, t_a, t_0, xi, a, b, first, last,
@@ -256,16 +257,21 @@ def _stage(
 
 
 @njit(cache=True)
-def _rk4(p, n, work, w0, t0, acc_w, acc_t, u, t_a, t_0, mode, h) -> None:
-    """One classical RK4 step of ``h`` s, slip mode frozen: rows (w0, t0) -> (acc_w, acc_t) of
-    ``work``; the source rows are left unchanged. (Rows travel as arrays, not as row numbers:
-    a constant row number would make numba compile one copy per call site.)"""
+def _rk4(p, n, work, u, t_a, t_0, mode, h) -> None:
+    """One classical RK4 step of ``h`` s, slip mode frozen, from the START rows of ``work``
+    into its OUT rows; the START rows are left unchanged. (Always the same rows, fixed here: the
+    compiler then knows they do not overlap and vectorises the stages, and there is one
+    compiled copy of the step.)"""
     o = 6
     inv_j = p[o : o + n]
     d = p[o + n : o + 2 * n]
     k = p[o + 2 * n : o + 3 * n - 1]
     c = p[o + 3 * n - 1 : o + 4 * n - 2]
     xi = p[4]
+    w0 = work[_START_W]
+    t0 = work[_START_T]
+    acc_w = work[_OUT_W]
+    acc_t = work[_OUT_T]
     sw = work[_STAGE_W]
     st = work[_STAGE_T]
     tau = work[_TAU]
@@ -313,12 +319,12 @@ def _mode_after_stop(p, n, w, t, t_a) -> int:
 @njit(cache=True)
 def _slip_step(p, n, work, mode, u, t_a, t_0, h) -> int:
     """Advance a slipping bit from the START rows by ``h`` into the OUT rows, stopping it where
-    its speed crosses zero."""
+    its speed crosses zero (the START rows may then be overwritten)."""
     m = n - 1
     start_w, start_t = work[_START_W], work[_START_T]
     cross_w, cross_t = work[_CROSS_W], work[_CROSS_T]
     out_w, out_t = work[_OUT_W], work[_OUT_T]
-    _rk4(p, n, work, start_w, start_t, out_w, out_t, u, t_a, t_0, mode, h)
+    _rk4(p, n, work, u, t_a, t_0, mode, h)
     wb = out_w[m]
     if mode * wb > 0.0:
         if abs(wb) < p[5] and abs(_torque_on_bit(p, n, out_w, out_t)) <= t_a:
@@ -336,7 +342,8 @@ def _slip_step(p, n, work, mode, u, t_a, t_0, h) -> int:
             _copy_rows(n, start_w, start_t, cross_w, cross_t)
             break
         theta = lo + (hi - lo) * f_lo / (f_lo - f_hi)
-        _rk4(p, n, work, start_w, start_t, cross_w, cross_t, u, t_a, t_0, mode, theta * h)
+        _rk4(p, n, work, u, t_a, t_0, mode, theta * h)
+        _copy_rows(n, out_w, out_t, cross_w, cross_t)
         f = cross_w[m]
         if mode * f > 0.0:
             lo, f_lo = theta, f
@@ -348,7 +355,8 @@ def _slip_step(p, n, work, mode, u, t_a, t_0, h) -> int:
     if rest <= 0.0:
         _copy_rows(n, cross_w, cross_t, out_w, out_t)
         return new_mode
-    _rk4(p, n, work, cross_w, cross_t, out_w, out_t, u, t_a, t_0, new_mode, rest)
+    _copy_rows(n, cross_w, cross_t, start_w, start_t)
+    _rk4(p, n, work, u, t_a, t_0, new_mode, rest)
     return new_mode
 
 
@@ -366,7 +374,7 @@ def _advance_work(x, mode: int, u: float, p, t_a: float, t_0: float, h: float, w
     if mode != STUCK:
         new_mode = _slip_step(p, n, work, mode, u, t_a, t_0, h)
     else:
-        _rk4(p, n, work, start_w, start_t, out_w, out_t, u, t_a, t_0, mode, h)
+        _rk4(p, n, work, u, t_a, t_0, mode, h)
         te_new = _torque_on_bit(p, n, out_w, out_t)
         if abs(te_new) <= t_a:
             new_mode = STUCK
@@ -379,10 +387,8 @@ def _advance_work(x, mode: int, u: float, p, t_a: float, t_0: float, h: float, w
                 theta = min(max((limit - te_old) / (te_new - te_old), 0.0), 1.0)
             direction = 1 if te_new > 0.0 else -1
             if theta > 0.0:
-                cross_w, cross_t = work[_CROSS_W], work[_CROSS_T]
-                _rk4(p, n, work, start_w, start_t, cross_w, cross_t,
-                     u, t_a, t_0, mode, theta * h)  # fmt: skip
-                _copy_rows(n, cross_w, cross_t, start_w, start_t)
+                _rk4(p, n, work, u, t_a, t_0, mode, theta * h)
+                _copy_rows(n, out_w, out_t, start_w, start_t)
             rest = (1.0 - theta) * h
             if rest <= 0.0:
                 _copy_rows(n, start_w, start_t, out_w, out_t)
