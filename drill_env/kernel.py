@@ -467,7 +467,7 @@ def _is_lumped(state: Any) -> bool:
     return isinstance(state, types.BaseTuple)
 
 
-@overload(_plant_probe)
+@overload(_plant_probe, inline="always")
 def _probe_impl(state, p, probes):
     if _is_lumped(state):
 
@@ -482,14 +482,14 @@ def _probe_impl(state, p, probes):
     return chain
 
 
-@overload(_friction)
+@overload(_friction, inline="always")
 def _friction_impl(state, p):
     if _is_lumped(state):
         return lambda state, p: (p[P_MU_A] * p[P_R], p[P_MU_0] * p[P_R])
     return lambda state, p: (p[CP_MU_A] * p[CP_R], p[CP_MU_0] * p[CP_R])
 
 
-@overload(_step)
+@overload(_step, inline="always")
 def _step_impl(state, mi, u, p, t_a, t_0, dt, work):
     if _is_lumped(state):
 
@@ -512,7 +512,7 @@ def _step_impl(state, mi, u, p, t_a, t_0, dt, work):
     return chain
 
 
-@overload(_store)
+@overload(_store, inline="always")
 def _store_impl(state, xs):
     if _is_lumped(state):
 
@@ -524,7 +524,7 @@ def _store_impl(state, xs):
     return lambda state, xs: None  # advanced in place
 
 
-@overload(_measured_state)
+@overload(_measured_state, inline="always")
 def _measured_state_impl(src, state, std, noise, row, node_noise, p):
     if _is_lumped(state):
 
