@@ -5,10 +5,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from numba import cfunc
-
 from baselines.smc import VARIANT_ASMC, SlidingModeController, SurfaceGains, smc_law
-from drill_env.control import LAW_SIGNATURE
+from drill_env.control import compiled_law_function
 
 __all__ = ["asmc_law", "ASMC", "ASMCGains"]
 
@@ -40,7 +38,7 @@ class ASMCGains(SurfaceGains):
         return self.k0
 
 
-@cfunc(LAW_SIGNATURE, cache=True)
+@compiled_law_function
 def asmc_law(lp, ls, m, ref, dt):
     """The compiled law of ``asmc`` (see :func:`baselines.smc.smc_torque`)."""
     return smc_law(VARIANT_ASMC, lp, ls, m, ref, dt)

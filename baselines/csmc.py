@@ -4,10 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from numba import cfunc
-
 from baselines.smc import VARIANT_CSMC, SlidingModeController, SurfaceGains, smc_law
-from drill_env.control import LAW_SIGNATURE
+from drill_env.control import compiled_law_function
 
 __all__ = ["csmc_law", "CSMC", "CSMCGains"]
 
@@ -30,7 +28,7 @@ class CSMCGains(SurfaceGains):
         return (self.k1,)
 
 
-@cfunc(LAW_SIGNATURE, cache=True)
+@compiled_law_function
 def csmc_law(lp, ls, m, ref, dt):
     """The compiled law of ``csmc`` (see :func:`baselines.smc.smc_torque`)."""
     return smc_law(VARIANT_CSMC, lp, ls, m, ref, dt)

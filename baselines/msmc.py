@@ -5,10 +5,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from numba import cfunc
-
 from baselines.smc import VARIANT_MSMC, SlidingModeController, SurfaceGains, smc_law
-from drill_env.control import LAW_SIGNATURE
+from drill_env.control import compiled_law_function
 
 __all__ = ["msmc_law", "MSMC", "MSMCGains"]
 
@@ -34,7 +32,7 @@ class MSMCGains(SurfaceGains):
         return (self.k2, self.k3)
 
 
-@cfunc(LAW_SIGNATURE, cache=True)
+@compiled_law_function
 def msmc_law(lp, ls, m, ref, dt):
     """The compiled law of ``msmc`` (see :func:`baselines.smc.smc_torque`)."""
     return smc_law(VARIANT_MSMC, lp, ls, m, ref, dt)

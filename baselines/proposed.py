@@ -6,10 +6,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from numba import cfunc
-
 from baselines.smc import VARIANT_PROPOSED, SlidingModeController, SurfaceGains, smc_law
-from drill_env.control import LAW_SIGNATURE
+from drill_env.control import compiled_law_function
 
 __all__ = ["proposed_law", "ProposedASMC", "ProposedGains"]
 
@@ -50,7 +48,7 @@ class ProposedGains(SurfaceGains):
         return self.k0
 
 
-@cfunc(LAW_SIGNATURE, cache=True)
+@compiled_law_function
 def proposed_law(lp, ls, m, ref, dt):
     """The compiled law of ``proposed`` (see :func:`baselines.smc.smc_torque`)."""
     return smc_law(VARIANT_PROPOSED, lp, ls, m, ref, dt)

@@ -22,10 +22,10 @@ from typing import Any, Final
 
 import numpy as np
 import numpy.typing as npt
-from numba import carray, cfunc, njit
+from numba import carray, njit
 
 from baselines.base import CompiledLawController, Gains
-from drill_env.control import LAW_SIGNATURE
+from drill_env.control import compiled_law_function
 from drill_env.distributed import DistributedStringParameters
 from drill_env.layout import M_STATE, M_SURFACE_TORQUE, M_TOP_DRIVE_SPEED, N_MEASUREMENT
 from drill_env.limits import DEFAULT_TORQUE_LIMITS, TorqueLimits
@@ -94,7 +94,7 @@ def speed_loop_torque(lp, ls, m, ref: float, dt: float) -> float:
     return u
 
 
-@cfunc(LAW_SIGNATURE, cache=True)
+@compiled_law_function
 def speed_loop_law(lp_ptr, ls_ptr, m_ptr, ref, dt):
     """The compiled law of every speed-loop controller (:func:`speed_loop_torque`)."""
     lp = carray(lp_ptr, (N_PI_PARAMS,))

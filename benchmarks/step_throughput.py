@@ -6,7 +6,14 @@ Prints, for the default scenario (100 s episodes, 50 ms decisions, noise on):
 (b) the raw batched kernel at N = 1024 strings (aggregate), serial and with numba threads;
 (c) a naive per-step numpy implementation of the same dynamics (matrix form, RK4, Karnopp);
 
-and the ratios between them. Run: ``.venv/bin/python benchmarks/step_throughput.py``.
+and the ratios between them. Then, side by side, the single env against the compiled floor of
+the same plant: the same configuration run in compiled calls of 10 s (a batch of one), in direct mode and in residual mode on ``proposed``,
+and ``DrillStringField-v0`` with its field defaults against its own floor (each with
+``randomize=False``, so that env and floor run the same string: the nominal scenario); the rates are
+measured in alternating slices of CPU time (the machine is shared) and the best slice of each
+is kept.
+
+Run: ``.venv/bin/python benchmarks/step_throughput.py``.
 Thread pools: set ``OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1`` (scripts/ do) so that BLAS does
 not fight numba's threads on 2 cores.
 """
@@ -14,6 +21,7 @@ not fight numba's threads on 2 cores.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import time
 
@@ -24,7 +32,7 @@ import numpy as np
 import drill_env  # noqa: F401  (registers DrillString-v0)
 from drill_env import kernel
 from drill_env.batch import StringBatch
-from drill_env.options import EnvConfig
+from drill_env.options import EnvConfig, FieldEnvConfig
 from drill_env.parameters import PRESETS
 
 WOB_N = 97_347.0
@@ -49,6 +57,70 @@ def env_throughput(seconds: float, **kwargs: object) -> float:
             if terminated or truncated:
                 env.reset()
     return steps * dt / (time.perf_counter() - start)
+
+
+def _env_stepper(env_id: str, **kwargs: object) -> tuple[object, float]:
+    """A ``gym.make`` env ready to step with a constant action, and its decision period, s."""
+    env = gym.make(env_id, **kwargs)
+    env.reset(seed=0)
+    residual = env.unwrapped.config.residual  # type: ignore[attr-defined]
+    span = env.unwrapped.config.max_torque_nm  # type: ignore[attr-defined]
+    # 13 kN m in direct mode (about the steady drilling torque), no residual in residual mode.
+    action = np.array([0.0 if residual else 2 * 13_000 / span - 1], dtype=np.float32)
+    for _ in range(50):
+        env.step(action)
+
+    def run(seconds: float) -> float:
+        steps = 0
+        start = time.process_time()
+        while time.process_time() - start < seconds:
+            for _ in range(100):
+                _, _, terminated, truncated, _ = env.step(action)
+                steps += 1
+                if terminated or truncated:
+                    env.reset()
+        return steps
+
+    return run, env.unwrapped.config.control_dt_s  # type: ignore[attr-defined]
+
+
+def _floor_stepper(config: EnvConfig) -> tuple[object, float]:
+    """The same plant as compiled calls of 10 s (the longest decision period: a call's own cost
+    is then below 0.1 % of it) on a batch of one, and that period, s."""
+    whole = dataclasses.replace(config, control_dt_s=10.0, episode_s=1e5)
+    batch = StringBatch(whole, 1)
+    batch.reset_string(0, 0, None)
+    action = np.zeros(1)
+
+    def run(seconds: float) -> float:
+        calls = 0
+        start = time.process_time()
+        while time.process_time() - start < seconds:
+            batch.step(action)
+            calls += 1
+        return calls
+
+    run(0.0)
+    return run, whole.control_dt_s
+
+
+def side_by_side(seconds: float, env_id: str, **kwargs: object) -> tuple[float, float]:
+    """(env, floor) simulated s per wall s of one ``gym.make`` env and of its compiled floor,
+    measured alternately in slices; the best slice of each. The time is this process's CPU
+    time (one thread each: on a shared machine it is steadier than the wall clock)."""
+    env_run, env_dt = _env_stepper(env_id, **kwargs)
+    config_type = FieldEnvConfig if env_id == "DrillStringField-v0" else EnvConfig
+    floor_run, floor_dt = _floor_stepper(config_type.from_kwargs(dict(kwargs)))
+    best_env = best_floor = 0.0
+    rounds = 6
+    for _ in range(rounds):
+        start = time.process_time()
+        steps = env_run(seconds / (2 * rounds))  # type: ignore[operator]
+        best_env = max(best_env, steps * env_dt / (time.process_time() - start))
+        start = time.process_time()
+        episodes = floor_run(seconds / (2 * rounds))  # type: ignore[operator]
+        best_floor = max(best_floor, episodes * floor_dt / (time.process_time() - start))
+    return best_env, best_floor
 
 
 def kernel_throughput(num: int, seconds: float, parallel: bool) -> float:
@@ -135,10 +207,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=3.0, help="wall time per measurement")
     parser.add_argument("--num", type=int, default=1024, help="strings in the batched run")
+    parser.add_argument(
+        "--side-by-side-only", action="store_true", help="only the env-beside-floor ratios"
+    )
     args = parser.parse_args()
     print(
         f"numba threads: {numba.get_num_threads()}, threading layer: {numba.config.THREADING_LAYER}"
     )
+    if args.side_by_side_only:
+        _print_side_by_side(args.seconds)
+        return
     results = {
         "(a) gym.make env, direct": env_throughput(args.seconds),
         "(a') gym.make env, residual on proposed": env_throughput(
@@ -159,6 +237,23 @@ def main() -> None:
     a = results["(a) gym.make env, direct"]
     b = max(v for k, v in results.items() if k.startswith("(b"))
     print(f"batched kernel / single env: {b / a:.1f}")
+    print()
+    _print_side_by_side(args.seconds)
+
+
+def _print_side_by_side(seconds: float) -> None:
+    print(f"{'one env beside its compiled floor':<44} {'env':>9} {'floor':>9} {'ratio':>6}")
+    for label, env_id, kwargs in (
+        ("DrillString-v0, direct", "DrillString-v0", {"randomize": False}),
+        (
+            "DrillString-v0, residual on proposed",
+            "DrillString-v0",
+            {"randomize": False, "base_controller": "proposed"},
+        ),
+        ("DrillStringField-v0, field defaults", "DrillStringField-v0", {"randomize": False}),
+    ):
+        env_rate, floor_rate = side_by_side(2 * seconds, env_id, **kwargs)
+        print(f"{label:<44} {env_rate:>9,.0f} {floor_rate:>9,.0f} {env_rate / floor_rate:>6.2f}")
 
 
 if __name__ == "__main__":

@@ -19,6 +19,7 @@ import numpy as np
 import numpy.typing as npt
 
 from drill_env import coupled_chain, kernel
+from drill_env._cache import announce_compilation
 from drill_env.actuator import lag_factor
 from drill_env.chain import CHAIN_WORK_ROWS, chain_parameter_length, chain_parameter_vector
 from drill_env.control import (
@@ -319,13 +320,21 @@ class StringBatch:
                 entry(arrays, settings, coupled)
 
             self._advance = advance
+            self._coupled_entry = entry
             return
         if self.chain:
             serial, parallel = kernel.advance_chain_batch, kernel.advance_chain_batch_parallel
         else:
             serial, parallel = kernel.advance_batch, kernel.advance_batch_parallel
         dispatcher = parallel if n >= PARALLEL_THRESHOLD else serial
-        self._advance = kernel.fast_entry(dispatcher, self.arrays, self.settings)
+        with announce_compilation(*self._kernel_name()):
+            self._advance = kernel.fast_entry(dispatcher, self.arrays, self.settings)
+
+    def _kernel_name(self) -> tuple[str, float]:
+        """What compiling this batch's kernel is called, and about how long it takes, s."""
+        if self.chain:
+            return "the distributed-string plant kernel", 10.0
+        return "the plant kernel", 6.0
 
     # ------------------------------------------------------------- arrays by name
     @property
@@ -490,7 +499,16 @@ class StringBatch:
             out = self.coupled_arrays.out[i]
             a.sources[i, -2] = out[coupled_chain.OUT_WOB]
             a.sources[i, -1] = out[coupled_chain.OUT_ROP]
-        kernel.observe(a, self.settings, i)
+        advance = self._advance
+        if self.coupled_arrays is not None:  # string i's rows of the coupled arrays too
+            rows = coupled_chain.string_rows(self.coupled_arrays, i)
+            entry = self._coupled_entry
+
+            def advance(arrays: kernel.BatchArrays, settings: kernel.LoopSettings) -> None:
+                entry(arrays, settings, rows)
+
+        with announce_compilation(*self._kernel_name()):
+            kernel.observe(advance, a, self.settings, i)
 
     def law_info(self) -> dict[str, npt.NDArray[np.float64]]:
         """The state slots the compiled law names (:class:`drill_env.control.CompiledLaw`
@@ -534,7 +552,8 @@ class StringBatch:
     def measurement(self, i: int) -> npt.NDArray[np.float64]:
         """The measurement vector of string ``i`` now (``drill_env.layout.M_*``: the measured
         state in ``state`` mode, the surface signals, the telemetry), a copy."""
-        kernel.measure(self.arrays, self.settings, i)
+        with announce_compilation("the measurement channel for Python controllers", 4.0):
+            kernel.measure(self.arrays, self.settings, i)
         return self.arrays.measurement[i].copy()
 
     def _draw_node_noise(self, i: int) -> None:
@@ -582,6 +601,18 @@ class StringBatch:
         if self._node_noise:  # for the strings that move (not those being reset)
             for i in np.flatnonzero(self.status == STATUS_OK).tolist():
                 self._draw_node_noise(i)
+        if self.compiled or not self.controllers:
+            self._advance(self.arrays, self.settings)
+        else:
+            self._step_python_controllers()
+
+    def step_one(self, action: float) -> None:
+        """:meth:`step` for a batch of one under ``action`` in [-1, 1] (the single env's hot
+        path: the same arithmetic, fewer Python operations)."""
+        self.arrays.scalars[0, F_COMMAND] = action * self._action_gain + self._action_offset
+        self._refill_noise()
+        if self._node_noise and self.arrays.ints[0, I_STATUS] == STATUS_OK:
+            self._draw_node_noise(0)
         if self.compiled or not self.controllers:
             self._advance(self.arrays, self.settings)
         else:

@@ -101,6 +101,7 @@ CHAIN_HEADER: Final = 6
 """Entries of the parameter vector before the per-node and per-element arrays."""
 
 # Rows of the scratch array: start state, crossing state, result, RK4 stage, element torques.
+# Every RK4 step runs from the START rows into the OUT rows; events copy rows around it.
 _START_W, _START_T, _CROSS_W, _CROSS_T, _OUT_W, _OUT_T, _STAGE_W, _STAGE_T, _TAU = range(9)
 CHAIN_WORK_ROWS: Final = 9
 """Rows of the scratch array :func:`chain_step` needs (columns: at least ``n``)."""
@@ -256,19 +257,21 @@ def _stage(
 
 
 @njit(cache=True)
-def _rk4(p, n, work, src_w, src_t, dst_w, dst_t, u, t_a, t_0, mode, h) -> None:
-    """One classical RK4 step of ``h`` s, slip mode frozen: rows (src_w, src_t) -> (dst_w,
-    dst_t) of ``work``; the source rows are left unchanged."""
+def _rk4(p, n, work, u, t_a, t_0, mode, h) -> None:
+    """One classical RK4 step of ``h`` s, slip mode frozen, from the START rows of ``work``
+    into its OUT rows; the START rows are left unchanged. (Always the same rows, fixed here: the
+    compiler then knows they do not overlap and vectorises the stages, and there is one
+    compiled copy of the step.)"""
     o = 6
     inv_j = p[o : o + n]
     d = p[o + n : o + 2 * n]
     k = p[o + 2 * n : o + 3 * n - 1]
     c = p[o + 3 * n - 1 : o + 4 * n - 2]
     xi = p[4]
-    w0 = work[src_w]
-    t0 = work[src_t]
-    acc_w = work[dst_w]
-    acc_t = work[dst_t]
+    w0 = work[_START_W]
+    t0 = work[_START_T]
+    acc_w = work[_OUT_W]
+    acc_t = work[_OUT_T]
     sw = work[_STAGE_W]
     st = work[_STAGE_T]
     tau = work[_TAU]
@@ -284,31 +287,30 @@ def _rk4(p, n, work, src_w, src_t, dst_w, dst_t, u, t_a, t_0, mode, h) -> None:
 
 
 @njit(cache=True)
-def _torque_on_bit(p, n, work, row_w, row_t) -> float:
-    """``T_e = k theta + c (w_{n-2} - w_{n-1}) - d_{n-1} w_{n-1}`` at rows of ``work``, N m."""
+def _torque_on_bit(p, n, w, t) -> float:
+    """``T_e = k theta + c (w_{n-2} - w_{n-1}) - d_{n-1} w_{n-1}`` at the rows ``w``, ``t``, N m."""
     m = n - 1
     o = 6
-    w = work[row_w]
     wb = w[m]
     return (
-        p[o + 2 * n + m - 1] * work[row_t, m - 1]
+        p[o + 2 * n + m - 1] * t[m - 1]
         + p[o + 3 * n - 1 + m - 1] * (w[m - 1] - wb)
         - p[o + n + m] * wb
     )
 
 
 @njit(cache=True)
-def _copy_rows(work, n, src_w, src_t, dst_w, dst_t) -> None:
+def _copy_rows(n, src_w, src_t, dst_w, dst_t) -> None:
     for i in range(n - 1):
-        work[dst_w, i] = work[src_w, i]
-        work[dst_t, i] = work[src_t, i]
-    work[dst_w, n - 1] = work[src_w, n - 1]
+        dst_w[i] = src_w[i]
+        dst_t[i] = src_t[i]
+    dst_w[n - 1] = src_w[n - 1]
 
 
 @njit(cache=True)
-def _mode_after_stop(p, n, work, row_w, row_t, t_a) -> int:
-    """Slip mode of a bit that has just come to rest (bit speed 0 in ``row_w``)."""
-    t_e = _torque_on_bit(p, n, work, row_w, row_t)
+def _mode_after_stop(p, n, w, t, t_a) -> int:
+    """Slip mode of a bit that has just come to rest (bit speed 0 in ``w``)."""
+    t_e = _torque_on_bit(p, n, w, t)
     if abs(t_e) <= t_a:
         return STUCK
     return 1 if t_e > 0.0 else -1
@@ -317,39 +319,44 @@ def _mode_after_stop(p, n, work, row_w, row_t, t_a) -> int:
 @njit(cache=True)
 def _slip_step(p, n, work, mode, u, t_a, t_0, h) -> int:
     """Advance a slipping bit from the START rows by ``h`` into the OUT rows, stopping it where
-    its speed crosses zero."""
+    its speed crosses zero (the START rows may then be overwritten)."""
     m = n - 1
-    _rk4(p, n, work, _START_W, _START_T, _OUT_W, _OUT_T, u, t_a, t_0, mode, h)
-    wb = work[_OUT_W, m]
+    start_w, start_t = work[_START_W], work[_START_T]
+    cross_w, cross_t = work[_CROSS_W], work[_CROSS_T]
+    out_w, out_t = work[_OUT_W], work[_OUT_T]
+    _rk4(p, n, work, u, t_a, t_0, mode, h)
+    wb = out_w[m]
     if mode * wb > 0.0:
-        if abs(wb) < p[5] and abs(_torque_on_bit(p, n, work, _OUT_W, _OUT_T)) <= t_a:
-            work[_OUT_W, m] = 0.0  # Karnopp capture inside the stick band
+        if abs(wb) < p[5] and abs(_torque_on_bit(p, n, out_w, out_t)) <= t_a:
+            out_w[m] = 0.0  # Karnopp capture inside the stick band
             return STUCK
         return mode
     # The speed crossed zero inside the step: find the instant by regula falsi on theta.
     lo, hi = 0.0, 1.0
-    f_lo, f_hi = work[_START_W, m], wb
+    f_lo, f_hi = start_w[m], wb
     theta = 1.0
-    _copy_rows(work, n, _OUT_W, _OUT_T, _CROSS_W, _CROSS_T)
+    _copy_rows(n, out_w, out_t, cross_w, cross_t)
     for _ in range(_FALSE_POSITION_ITERATIONS):
         if mode * f_lo <= 0.0:  # already at or past zero at the start
             theta = lo
-            _copy_rows(work, n, _START_W, _START_T, _CROSS_W, _CROSS_T)
+            _copy_rows(n, start_w, start_t, cross_w, cross_t)
             break
         theta = lo + (hi - lo) * f_lo / (f_lo - f_hi)
-        _rk4(p, n, work, _START_W, _START_T, _CROSS_W, _CROSS_T, u, t_a, t_0, mode, theta * h)
-        f = work[_CROSS_W, m]
+        _rk4(p, n, work, u, t_a, t_0, mode, theta * h)
+        _copy_rows(n, out_w, out_t, cross_w, cross_t)
+        f = cross_w[m]
         if mode * f > 0.0:
             lo, f_lo = theta, f
         else:
             hi, f_hi = theta, f
-    work[_CROSS_W, m] = 0.0
-    new_mode = _mode_after_stop(p, n, work, _CROSS_W, _CROSS_T, t_a)
+    cross_w[m] = 0.0
+    new_mode = _mode_after_stop(p, n, cross_w, cross_t, t_a)
     rest = (1.0 - theta) * h
     if rest <= 0.0:
-        _copy_rows(work, n, _CROSS_W, _CROSS_T, _OUT_W, _OUT_T)
+        _copy_rows(n, cross_w, cross_t, out_w, out_t)
         return new_mode
-    _rk4(p, n, work, _CROSS_W, _CROSS_T, _OUT_W, _OUT_T, u, t_a, t_0, new_mode, rest)
+    _copy_rows(n, cross_w, cross_t, start_w, start_t)
+    _rk4(p, n, work, u, t_a, t_0, new_mode, rest)
     return new_mode
 
 
@@ -358,32 +365,33 @@ def _advance_work(x, mode: int, u: float, p, t_a: float, t_0: float, h: float, w
     """One step from ``x`` into the OUT rows of ``work``; returns the new slip mode."""
     n = int(p[0])
     m = n - 1
+    start_w, start_t = work[_START_W], work[_START_T]
+    out_w, out_t = work[_OUT_W], work[_OUT_T]
     for i in range(m):
-        work[_START_W, i] = x[2 * i]
-        work[_START_T, i] = x[2 * i + 1]
-    work[_START_W, m] = x[2 * m]
+        start_w[i] = x[2 * i]
+        start_t[i] = x[2 * i + 1]
+    start_w[m] = x[2 * m]
     if mode != STUCK:
         new_mode = _slip_step(p, n, work, mode, u, t_a, t_0, h)
     else:
-        _rk4(p, n, work, _START_W, _START_T, _OUT_W, _OUT_T, u, t_a, t_0, STUCK, h)
-        te_new = _torque_on_bit(p, n, work, _OUT_W, _OUT_T)
+        _rk4(p, n, work, u, t_a, t_0, mode, h)
+        te_new = _torque_on_bit(p, n, out_w, out_t)
         if abs(te_new) <= t_a:
             new_mode = STUCK
         else:
             # Break-away inside the step: T_e is linear in the state, so interpolate it.
-            te_old = _torque_on_bit(p, n, work, _START_W, _START_T)
+            te_old = _torque_on_bit(p, n, start_w, start_t)
             limit = t_a if te_new > 0.0 else -t_a
             theta = 0.0
             if te_new != te_old:
                 theta = min(max((limit - te_old) / (te_new - te_old), 0.0), 1.0)
             direction = 1 if te_new > 0.0 else -1
             if theta > 0.0:
-                _rk4(p, n, work, _START_W, _START_T, _CROSS_W, _CROSS_T,
-                     u, t_a, t_0, STUCK, theta * h)  # fmt: skip
-                _copy_rows(work, n, _CROSS_W, _CROSS_T, _START_W, _START_T)
+                _rk4(p, n, work, u, t_a, t_0, mode, theta * h)
+                _copy_rows(n, out_w, out_t, start_w, start_t)
             rest = (1.0 - theta) * h
             if rest <= 0.0:
-                _copy_rows(work, n, _START_W, _START_T, _OUT_W, _OUT_T)
+                _copy_rows(n, start_w, start_t, out_w, out_t)
                 new_mode = direction
             else:
                 new_mode = _slip_step(p, n, work, direction, u, t_a, t_0, rest)

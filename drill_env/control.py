@@ -23,6 +23,7 @@ registry below (the built-in ones of :mod:`baselines` through the
 from __future__ import annotations
 
 import ctypes
+import functools
 import inspect
 from collections.abc import Callable
 from importlib import metadata
@@ -31,9 +32,10 @@ from typing import Any, Final, NamedTuple, Protocol, runtime_checkable
 import numpy as np
 import numpy.typing as npt
 from llvmlite import ir
-from numba import types
+from numba import cfunc, types
 from numba.extending import intrinsic
 
+from drill_env._cache import announce_compilation
 from drill_env.layout import (
     M_STATE,
     M_TELEMETRY_AGE,
@@ -55,8 +57,10 @@ __all__ = [
     "Controller",
     "Measurement",
     "MissingSignalError",
+    "LazyLaw",
     "call_law",
     "compile_law",
+    "compiled_law_function",
     "controller_names",
     "make_controller",
     "register_controller",
@@ -174,6 +178,46 @@ _CTYPES_ARGS: Final = (
     ctypes.c_double,
     ctypes.c_double,
 )
+
+
+class LazyLaw:
+    """A compiled law (a numba ``cfunc`` of :data:`LAW_SIGNATURE`, cached on disk) that is
+    compiled, or loaded from numba's cache, at its first use instead of at import: a package of
+    many controllers then compiles only the laws that run. Every attribute of the ``cfunc``
+    (``address``, ``ctypes``, ...) is read through to it; made by
+    :func:`compiled_law_function`."""
+
+    def __init__(self, py_func: Callable[..., float]) -> None:
+        functools.update_wrapper(self, py_func)
+        self.py_func = py_func
+        self._compiled: Any = None
+
+    @property
+    def compiled(self) -> Any:
+        """The ``cfunc`` (compiled now if it is not yet)."""
+        if self._compiled is None:
+            name = getattr(self.py_func, "__name__", "law")
+            with announce_compilation(f"the controller law {name}", 3):
+                self._compiled = cfunc(LAW_SIGNATURE, cache=True)(self.py_func)
+        return self._compiled
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("__") or name in ("py_func", "_compiled"):
+            raise AttributeError(name)
+        return getattr(self.compiled, name)
+
+    def __call__(self, *args: Any) -> float:
+        return float(self.compiled(*args))
+
+    def __repr__(self) -> str:
+        return f"<compiled law {getattr(self.py_func, '__qualname__', self.py_func)!r}>"
+
+
+def compiled_law_function(py_func: Callable[..., float]) -> LazyLaw:
+    """Decorator: ``py_func`` (``torque = law(params*, state*, measurement*, reference_rad_s,
+    dt_s)``) as a law compiled at its first use (:class:`LazyLaw`), the lazy form of
+    ``@numba.cfunc(LAW_SIGNATURE, cache=True)``."""
+    return LazyLaw(py_func)
 
 
 class CompiledLaw(NamedTuple):

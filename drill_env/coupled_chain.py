@@ -1201,6 +1201,14 @@ def _advance_coupled_one(i, b, s, c):
     _finish(i, b, s, xi, mi, k, wob, u_base_last, command_last)
 
 
+def string_rows(c: CoupledArrays, i: int) -> CoupledArrays:
+    """The views of string ``i``'s rows of ``c`` (a batch of one string; ``sources`` as is)."""
+    return CoupledArrays._make(
+        value if name == "sources" else value[i : i + 1]
+        for name, value in zip(CoupledArrays._fields, c, strict=True)
+    )
+
+
 @njit(cache=True)
 def coupled_outputs(i, c, span_s: float, depth_start: float, wob_integral: float) -> None:
     """Fill ``c.out[i]`` at the end of a call that lasted ``span_s`` seconds (0: the start of

@@ -15,6 +15,7 @@ from drill_env.batch import StringBatch
 from drill_env.distributed import Chain, discretize
 from drill_env.evaluation import PlantSamples
 from drill_env.layout import (
+    I_STATUS,
     OBS_BOUND,
     REP_BASE_TORQUE,
     REP_BIT_SPEED,
@@ -383,15 +384,18 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
     ) -> tuple[npt.NDArray[np.float32], SupportsFloat, bool, bool, dict[str, Any]]:
         if not self._started:
             raise RuntimeError("call reset() before step()")
-        a, clipped = validate_actions(action, 1)
+        value = float(action[0]) if type(action) is np.ndarray and action.shape == (1,) else 2.0
+        was_clipped = False
+        if not -1.0 <= value <= 1.0:  # anything but the common case (also NaN): checked
+            a, clipped = validate_actions(action, 1)
+            value, was_clipped = float(a[0]), bool(clipped[0])
         b = self._batch
         episode = b.episodes[0]
         assert episode is not None
-        if b.status[0] != STATUS_OK:
+        if b.arrays.ints[0, I_STATUS] != STATUS_OK:
             raise RuntimeError("the episode has ended (diverged): call reset()")
-        was_clipped = bool(clipped[0])
         episode.actions_clipped += was_clipped
-        b.step(a)
+        b.step_one(value)
         report = b.report[0].tolist()
         weights = episode.config.reward_weights
         terms = reward_terms(report, weights, self.config.max_torque_nm, self._residual_scale)

@@ -1,10 +1,12 @@
 """The compiled closed-loop engine: a batch of strings, their exogenous signals, measurement
 channel, in-loop controller and actuator, advanced by many plant steps in one call.
 
-Two loops share every step but the physics: :func:`advance_batch` for the 4-DOF plant (its
-state travels as a tuple of floats, in registers) and :func:`advance_chain_batch` for a
-distributed string (an array state advanced in place by :func:`drill_env.chain.chain_step`).
-Per plant step ``j`` of string ``i`` (time ``t_j = step_index * dt``):
+One loop, :func:`_string_loop`, is written once and compiled once per plant, chosen by the
+type of the state it carries: :func:`advance_batch` for the 4-DOF plant (its state a tuple of
+floats, in registers) and :func:`advance_chain_batch` for a distributed string (an array state
+advanced in place by :func:`drill_env.chain.chain_step`); the few lines that differ are the
+small functions of each plant below. Per plant step ``j`` of string ``i`` (time
+``t_j = step_index * dt``):
 
 1. WOB and reference speed are read from piecewise-linear knot tables (a repeated knot time
    makes a step change);
@@ -29,7 +31,10 @@ its source vector (``drill_env.layout.SRC_*``) through the observation's source 
 scales.
 
 The kernel's inputs travel as two named tuples, :class:`BatchArrays` (the per-string arrays,
-updated in place) and :class:`LoopSettings` (what the batch shares).
+updated in place) and :class:`LoopSettings` (what the batch shares). Each entry point has one
+signature (every batch of a plant has the same argument types), so it is compiled once and then
+loaded from numba's cache; the start of an episode (:func:`observe`) runs the same entry for no
+plant step on the views of one string instead of compiling a loop of its own.
 """
 
 from __future__ import annotations
@@ -41,7 +46,8 @@ from typing import Any, NamedTuple
 import numba
 import numpy as np
 import numpy.typing as npt
-from numba import njit, prange
+from numba import njit, prange, types
+from numba.extending import overload
 
 from drill_env.actuator import actuator_step
 from drill_env.chain import (
@@ -424,12 +430,126 @@ def _finish(i, b, s, x, mi, k, wob, u_base_last, command_last) -> None:
     rep[REP_TELEMETRY_RECEIVED] = 1.0 if received else 0.0
 
 
+# ------------------------------------------------------------------ the two plants
+# The string loop below is written once for both plants; what differs is chosen at compile time
+# by the type of the state: a tuple of 7 floats for the 4-DOF plant (kept in registers), a row
+# of the batch advanced in place for a distributed string. Each function here is a stub that
+# numba replaces by the implementation for that type.
+
+
+def _plant_probe(state, p, probes):  # pragma: no cover
+    """The 4-DOF (probe) state and the true torque at the top of the string, N m."""
+    raise NotImplementedError
+
+
+def _friction(state, p):  # pragma: no cover
+    """``(mu_a R, mu_0 R)``, m: the static and sliding bit torques per newton of WOB."""
+    raise NotImplementedError
+
+
+def _step(state, mi, u, p, t_a, t_0, dt, work):  # pragma: no cover
+    """One checked plant step: ``(state, mode, accepted)``; a state that is not finite or
+    out of bounds, or a torque that is not finite, is not accepted (the old state returns)."""
+    raise NotImplementedError
+
+
+def _store(state, xs) -> None:  # pragma: no cover
+    """Write the carried state back to the string's row."""
+    raise NotImplementedError
+
+
+def _measured_state(src, state, std, noise, row, node_noise, p) -> None:  # pragma: no cover
+    """The measured state into the sources: speeds with their noise, twists exact."""
+    raise NotImplementedError
+
+
+def _is_lumped(state: Any) -> bool:
+    return isinstance(state, types.BaseTuple)
+
+
+@overload(_plant_probe, inline="always")
+def _probe_impl(state, p, probes):
+    if _is_lumped(state):
+
+        def lumped(state, p, probes):
+            return state, p[P_K_PI] * state[1] + p[P_C_PI] * (state[0] - state[2])
+
+        return lumped
+
+    def chain(state, p, probes):
+        return chain_probe_state(state, probes), chain_surface_torque(state, p)
+
+    return chain
+
+
+@overload(_friction, inline="always")
+def _friction_impl(state, p):
+    if _is_lumped(state):
+        return lambda state, p: (p[P_MU_A] * p[P_R], p[P_MU_0] * p[P_R])
+    return lambda state, p: (p[CP_MU_A] * p[CP_R], p[CP_MU_0] * p[CP_R])
+
+
+@overload(_step, inline="always")
+def _step_impl(state, mi, u, p, t_a, t_0, dt, work):
+    if _is_lumped(state):
+
+        def lumped(state, mi, u, p, t_a, t_0, dt, work):
+            xn, mn = plant_step(state, mi, u, p, t_a, t_0, dt)
+            if _in_bounds(xn) and math.isfinite(u):
+                return xn, mn, True
+            return state, mi, False
+
+        return lumped
+
+    def chain(state, mi, u, p, t_a, t_0, dt, work):
+        if math.isfinite(u):
+            mn, accepted = chain_step_checked(
+                state, mi, u, p, t_a, t_0, dt, work, MAX_SPEED_RAD_S, MAX_TWIST_RAD
+            )
+            return state, mn, accepted
+        return state, mi, False
+
+    return chain
+
+
+@overload(_store, inline="always")
+def _store_impl(state, xs):
+    if _is_lumped(state):
+
+        def lumped(state, xs):
+            for c in range(N_STATE):
+                xs[c] = state[c]
+
+        return lumped
+    return lambda state, xs: None  # advanced in place
+
+
+@overload(_measured_state, inline="always")
+def _measured_state_impl(src, state, std, noise, row, node_noise, p):
+    if _is_lumped(state):
+
+        def lumped(src, state, std, noise, row, node_noise, p):
+            for c in range(N_STATE):
+                src[SRC_STATE + c] = state[c] + std * noise[row, c // 2] if c % 2 == 0 else state[c]
+
+        return lumped
+
+    def chain(src, state, std, noise, row, node_noise, p):
+        for c in range(2 * int(p[CP_N]) - 1):  # every node
+            src[SRC_STATE + c] = state[c] + std * node_noise[c // 2] if c % 2 == 0 else state[c]
+
+    return chain
+
+
+# ------------------------------------------------------------------------ the loop
 @njit(cache=True)
-def _advance_one(i, b, s):
-    """One string of the 4-DOF plant (its state a tuple of floats)."""
+def _string_loop(i, b, s, state):
+    """String ``i`` of the batch by ``s.n_sub`` plant steps (none: only its observation and
+    report now, the start of an episode), from its ``state`` (the plant's kind, above)."""
     p = b.plant[i]
     xs = b.x[i]
-    xi = (xs[0], xs[1], xs[2], xs[3], xs[4], xs[5], xs[6])
+    work = b.work[i]
+    probes = b.probes[i]
     ints = b.ints[i]
     f = b.scalars[i]
     ch = b.channel[i]
@@ -452,8 +572,7 @@ def _advance_one(i, b, s):
     std, torque_std, tel_std = f[F_NOISE_STD], f[F_TORQUE_NOISE_STD], f[F_TELEMETRY_NOISE_STD]
     command = f[F_COMMAND]
     external = f[F_BASE_TORQUE]
-    mu_a_r = p[P_MU_A] * p[P_R]
-    mu_0_r = p[P_MU_0] * p[P_R]
+    mu_a_r, mu_0_r = _friction(state, p)
     k = ints[I_STEP]
     row = ints[I_NOISE_POS]
     active = ints[I_STATUS] == STATUS_OK
@@ -461,7 +580,7 @@ def _advance_one(i, b, s):
     u_prev = f[F_LAST_TORQUE]
     u_base_last = rep[REP_BASE_TORQUE]
     command_last = f[F_LAST_COMMAND]
-    wob = rep[REP_WOB]
+    wob = profile_value(wob_t, wob_v, wob_n, k * s.dt)  # each step's when there are steps
     tracking = 0.0
     variation = 0.0
     torque_squared = 0.0
@@ -477,7 +596,7 @@ def _advance_one(i, b, s):
         t = k * s.dt
         wob = profile_value(wob_t, wob_v, wob_n, t)
         ref = profile_value(ref_t, ref_v, ref_n, t)
-        surface = p[P_K_PI] * xi[1] + p[P_C_PI] * (xi[0] - xi[2])
+        xi, surface = _plant_probe(state, p, probes)
         if ideal_channel:
             _sense_ideal(meas, hold, k, xi, surface, std, torque_std, u_prev, noise, sensor,
                          row + j)  # fmt: skip
@@ -499,113 +618,7 @@ def _advance_one(i, b, s):
         if mi == STUCK:
             stuck += 1.0
         n_done += 1
-        xn, mn = plant_step(xi, mi, u, p, mu_a_r * wob, mu_0_r * wob, s.dt)
-        if _in_bounds(xn) and math.isfinite(u):
-            xi, mi = xn, mn
-            k += 1
-        else:
-            ok = False
-            ints[I_STATUS] = STATUS_DIVERGED
-    _sums(rep, tracking, variation, stuck, n_done, torque_squared, residual_squared)
-    if not active:
-        return
-    for c in range(N_STATE):
-        xs[c] = xi[c]
-    ints[I_MODE] = mi
-    ints[I_STEP] = k
-    f[F_LAST_TORQUE] = u_prev
-    f[F_LAST_COMMAND] = command_last
-    row += s.n_sub
-    ints[I_NOISE_POS] = row
-    surface = p[P_K_PI] * xi[1] + p[P_C_PI] * (xi[0] - xi[2])
-    _sense(meas, hold, tel, tel_buf, s, k, xi, surface, std, torque_std, tel_std, u_prev,
-           noise, sensor, row)  # fmt: skip
-    src = b.sources[i]
-    for c in range(N_STATE):  # the measured state: speeds with their noise, twists exact
-        src[SRC_STATE + c] = xi[c] + std * noise[row, c // 2] if c % 2 == 0 else xi[c]
-    _finish(i, b, s, xi, mi, k, wob, u_base_last, command_last)
-
-
-@njit(cache=True)
-def _advance_chain_one(i, b, s):
-    """One distributed string (its state an array advanced in place)."""
-    p = b.plant[i]
-    xs = b.x[i]
-    work = b.work[i]
-    probes = b.probes[i]
-    n = int(p[CP_N])
-    size = 2 * n - 1
-    ints = b.ints[i]
-    f = b.scalars[i]
-    ch = b.channel[i]
-    prof = b.profiles[i]
-    mi = ints[I_MODE]
-    lp = b.law_params[i]
-    ls = b.law_state[i]
-    rep = b.report[i]
-    rec = b.records[i]
-    meas = b.measurement[i]
-    hold = ch[CH_HOLD:CH_TELEMETRY]
-    tel = ch[CH_TELEMETRY:CH_ACTUATOR]
-    tel_buf = b.telemetry_buffer[i]
-    act = ch[CH_ACTUATOR:N_CHANNEL]
-    line = b.delay_line[i]
-    noise = b.noise[i]
-    sensor = b.sensor_noise[i]
-    wob_t, wob_v, wob_n = prof[PROF_WOB_T], prof[PROF_WOB_V], ints[I_WOB_KNOTS]
-    ref_t, ref_v, ref_n = prof[PROF_REF_T], prof[PROF_REF_V], ints[I_REF_KNOTS]
-    std, torque_std, tel_std = f[F_NOISE_STD], f[F_TORQUE_NOISE_STD], f[F_TELEMETRY_NOISE_STD]
-    command = f[F_COMMAND]
-    external = f[F_BASE_TORQUE]
-    mu_a_r = p[CP_MU_A] * p[CP_R]
-    mu_0_r = p[CP_MU_0] * p[CP_R]
-    k = ints[I_STEP]
-    row = ints[I_NOISE_POS]
-    active = ints[I_STATUS] == STATUS_OK
-    ok = active
-    u_prev = f[F_LAST_TORQUE]
-    u_base_last = rep[REP_BASE_TORQUE]
-    command_last = f[F_LAST_COMMAND]
-    wob = rep[REP_WOB]
-    tracking = 0.0
-    variation = 0.0
-    torque_squared = 0.0
-    residual_squared = 0.0
-    stuck = 0.0
-    n_done = 0
-    for j in range(s.n_sub):
-        if not ok:
-            for c in range(N_RECORD):
-                rec[j, c] = math.nan
-            continue
-        t = k * s.dt
-        wob = profile_value(wob_t, wob_v, wob_n, t)
-        ref = profile_value(ref_t, ref_v, ref_n, t)
-        xi = chain_probe_state(xs, probes)
-        surface = chain_surface_torque(xs, p)
-        _sense(meas, hold, tel, tel_buf, s, k, xi, surface, std, torque_std, tel_std, u_prev,
-               noise, sensor, row + j)  # fmt: skip
-        gain = _slot(ls, s.gain_slot)
-        u_base = _base_torque(s, lp, ls, meas, external, ref)
-        u_command, u = _command_and_torque(s, act, line, u_base, command)
-        _record(rec, j, xi, mi, u, u_command, ref, u_base, wob, _slot(ls, s.error_slot), gain,
-                surface)  # fmt: skip
-        tracking += tracking_error(ref, xi[X_BIT_SPEED])
-        variation += abs(u - u_prev)
-        torque_squared += u * u
-        residual_squared += (u - u_base) * (u - u_base)
-        u_prev = u
-        u_base_last = u_base
-        command_last = u_command
-        if mi == STUCK:
-            stuck += 1.0
-        n_done += 1
-        accepted = False
-        if math.isfinite(u):
-            mi, accepted = chain_step_checked(
-                xs, mi, u, p, mu_a_r * wob, mu_0_r * wob, s.dt, work, MAX_SPEED_RAD_S,
-                MAX_TWIST_RAD,
-            )  # fmt: skip
+        state, mi, accepted = _step(state, mi, u, p, mu_a_r * wob, mu_0_r * wob, s.dt, work)
         if accepted:
             k += 1
         else:
@@ -614,24 +627,28 @@ def _advance_chain_one(i, b, s):
     _sums(rep, tracking, variation, stuck, n_done, torque_squared, residual_squared)
     if not active:
         return
+    _store(state, xs)
     ints[I_MODE] = mi
     ints[I_STEP] = k
     f[F_LAST_TORQUE] = u_prev
     f[F_LAST_COMMAND] = command_last
     row += s.n_sub
     ints[I_NOISE_POS] = row
-    xi = chain_probe_state(xs, probes)
-    _sense(meas, hold, tel, tel_buf, s, k, xi, chain_surface_torque(xs, p), std, torque_std,
-           tel_std, u_prev, noise, sensor, row)  # fmt: skip
-    src = b.sources[i]
-    node_noise = b.node_noise[i]
-    for c in range(size):  # the measured state of every node
-        src[SRC_STATE + c] = xs[c] + std * node_noise[c // 2] if c % 2 == 0 else xs[c]
+    xi, surface = _plant_probe(state, p, probes)
+    _sense(meas, hold, tel, tel_buf, s, k, xi, surface, std, torque_std, tel_std, u_prev,
+           noise, sensor, row)  # fmt: skip
+    _measured_state(b.sources[i], state, std, noise, row, b.node_noise[i], p)
     _finish(i, b, s, xi, mi, k, wob, u_base_last, command_last)
 
 
 @njit(cache=True, inline="always")
-def _probe(i, b, s):
+def _advance_lumped(i, b, s) -> None:
+    xs = b.x[i]
+    _string_loop(i, b, s, (xs[0], xs[1], xs[2], xs[3], xs[4], xs[5], xs[6]))
+
+
+@njit(cache=True, inline="always")
+def _string_probe(i, b, s):
     """The 4-DOF (probe) state of string ``i`` and the true torque at the top of its string."""
     xs = b.x[i]
     p = b.plant[i]
@@ -645,30 +662,8 @@ def _probe(i, b, s):
 def measure(b, s, i) -> None:
     """Fill the measurement vector of string ``i`` at its current step (the slow path reads it
     before each plant step; an instant already sensed is not sampled again)."""
-    xi, surface = _probe(i, b, s)
+    xi, surface = _string_probe(i, b, s)
     _sense_string(i, b, s, b.ints[i, I_STEP], xi, surface, b.ints[i, I_NOISE_POS])
-
-
-@njit(cache=True)
-def observe(b, s, i) -> None:
-    """The observation and the report of string ``i`` at its current step without stepping
-    (the start of an episode)."""
-    measure(b, s, i)
-    xi, _ = _probe(i, b, s)
-    xs = b.x[i]
-    src = b.sources[i]
-    std = b.scalars[i, F_NOISE_STD]
-    if s.chain:
-        for c in range(2 * int(b.plant[i, CP_N]) - 1):
-            src[SRC_STATE + c] = xs[c] + std * b.node_noise[i, c // 2] if c % 2 == 0 else xs[c]
-    else:
-        noise_row = b.noise[i, b.ints[i, I_NOISE_POS]]
-        for c in range(N_STATE):
-            src[SRC_STATE + c] = xi[c] + std * noise_row[c // 2] if c % 2 == 0 else xi[c]
-    k = b.ints[i, I_STEP]
-    prof = b.profiles[i]
-    wob = profile_value(prof[PROF_WOB_T], prof[PROF_WOB_V], b.ints[i, I_WOB_KNOTS], k * s.dt)
-    _finish(i, b, s, xi, b.ints[i, I_MODE], k, wob, 0.0, 0.0)
 
 
 @njit(cache=True)
@@ -712,7 +707,7 @@ def advance_batch(b, s):
     of ``s.dt`` seconds under the settings ``s`` (:class:`LoopSettings`)."""
     _check_noise_room(b.noise, b.ints, s.n_sub)
     for i in range(b.x.shape[0]):
-        _advance_one(i, b, s)
+        _advance_lumped(i, b, s)
 
 
 @njit(cache=True, parallel=True)
@@ -720,7 +715,7 @@ def advance_batch_parallel(b, s):
     """:func:`advance_batch` with the strings spread over numba's threads (large batches)."""
     _check_noise_room(b.noise, b.ints, s.n_sub)
     for i in prange(b.x.shape[0]):
-        _advance_one(i, b, s)
+        _advance_lumped(i, b, s)
 
 
 @njit(cache=True)
@@ -728,7 +723,7 @@ def advance_chain_batch(b, s):
     """:func:`advance_batch` for distributed strings."""
     _check_noise_room(b.noise, b.ints, s.n_sub)
     for i in range(b.x.shape[0]):
-        _advance_chain_one(i, b, s)
+        _string_loop(i, b, s, b.x[i])
 
 
 @njit(cache=True, parallel=True)
@@ -736,7 +731,15 @@ def advance_chain_batch_parallel(b, s):
     """:func:`advance_chain_batch` with the strings spread over numba's threads."""
     _check_noise_room(b.noise, b.ints, s.n_sub)
     for i in prange(b.x.shape[0]):
-        _advance_chain_one(i, b, s)
+        _string_loop(i, b, s, b.x[i])
+
+
+def observe(advance: Callable[..., None], b: BatchArrays, s: LoopSettings, i: int) -> None:
+    """The observation and the report of string ``i`` at its current step without stepping
+    (the start of an episode): ``advance`` (the batch's entry point, :func:`fast_entry`) for no
+    plant step on a batch of the views of string ``i``."""
+    one = BatchArrays._make(array[i : i + 1] for array in b)
+    advance(one, s._replace(n_sub=0))
 
 
 def fast_entry(dispatcher: Any, *args: Any) -> Callable[..., None]:

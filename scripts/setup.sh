@@ -48,3 +48,4 @@ if ! installed; then
     rm -f ".venv/.installed-${label}-"*
     touch "${stamp}"
 fi
+.venv/bin/python -m drill_env.precompile  # compile the envs into numba's cache now, not at first use
