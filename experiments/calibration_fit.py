@@ -65,6 +65,26 @@ FEATURE_KEYS: Final = (
 """The stick-slip features of a window, units in the names."""
 
 
+WOB_SMOOTHING_S: Final = 0.1
+"""Length of the centred moving average of the measured WOB that scales the friction torques
+in the simulations, s (WOB varies slowly; its sensor noise, fed raw into the static
+threshold, would make the break-away time jump with the parameters and the cost rough)."""
+
+
+def wob_input(log: MeasuredLog) -> npt.NDArray[np.float64]:
+    """The WOB (N) that scales the simulated friction: the measured ``wob_n`` under a centred
+    moving average of :data:`WOB_SMOOTHING_S` (shorter windows at the ends; unchanged when
+    the samples are farther apart than that)."""
+    wob = log.column("wob_n")
+    half = int(WOB_SMOOTHING_S / (2 * log.sample_period_s))
+    if half < 1 or wob.size < 3:
+        return wob
+    kernel = np.ones(2 * half + 1)
+    total = np.convolve(wob, kernel, mode="same")
+    count = np.convolve(np.ones_like(wob), kernel, mode="same")
+    return np.asarray(total / count)
+
+
 def _speed0(speed: npt.NDArray[np.float64], threshold: float) -> float:
     value = float(np.median(speed[:5]))
     return 0.0 if abs(value) < threshold else value
@@ -74,6 +94,66 @@ def stuck_threshold(bit_speed: npt.NDArray[np.float64]) -> float:
     """Speed below which the bit counts as stuck, rad/s: 5 % of the measured speed's 1-99 %
     range (so that noise around 0 counts as stuck)."""
     return 0.05 * float(np.percentile(bit_speed, 99) - np.percentile(bit_speed, 1))
+
+
+@dataclass
+class MomentumBalance:
+    """The bit's momentum balance integrated once over a window, ``J w_b(t) - k int(twist) -
+    c twist + int(T_bit) = a + b t`` with the twist integrated from the measured speeds
+    (``a``, ``b`` absorb the initial speed and twist): linear in ``J, k, c`` and independent
+    of the friction law. Its residual, with ``a, b`` projected out, joins the fit's
+    residuals when the window's direct estimates are consistent (fine sampling, one
+    inertia), so that the string's inertia and stiffness are those of the measured momentum
+    balance and not traded against the friction's shape."""
+
+    bit: npt.NDArray[np.float64]
+    twist_integral: npt.NDArray[np.float64]
+    twist: npt.NDArray[np.float64]
+    torque_integral: npt.NDArray[np.float64]
+    nuisance: npt.NDArray[np.float64]  # orthonormal basis of (1, t), shape (n, 2)
+    scale: float
+
+    @classmethod
+    def of(cls, log: MeasuredLog) -> MomentumBalance:
+        t = log.time_s - log.time_s[0]
+        dt = np.diff(t)
+
+        def cumulative(y: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+            return np.concatenate(([0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * dt)))
+
+        bit = log.column("bit_speed_rad_s")
+        twist = cumulative(log.column("top_speed_rad_s") - bit)
+        q, _ = np.linalg.qr(np.column_stack([np.ones_like(t), t]))
+        torque_integral = cumulative(log.column("bit_torque_nm"))
+        centred = torque_integral - q @ (q.T @ torque_integral)
+        return cls(bit, cumulative(twist), twist, torque_integral, q, float(np.std(centred)) or 1.0)
+
+    def residuals(self, p: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        e = p[P_J] * self.bit - p[P_K] * self.twist_integral - p[P_C] * self.twist
+        e = e + self.torque_integral
+        return np.asarray((e - self.nuisance @ (self.nuisance.T @ e)) / self.scale)
+
+
+def _balance_estimates(log: MeasuredLog) -> tuple[float, float, float, float, bool]:
+    """``(J, k, k twist0, c, consistent)`` by least squares on the integrated momentum balance;
+    ``consistent`` when ``J, k > 0`` and ``k`` within a factor 2 of the stuck phases' slope
+    (or no stuck phases)."""
+    t = log.time_s - log.time_s[0]
+    dt = np.diff(t)
+
+    def cumulative(y: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        return np.concatenate(([0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * dt)))
+
+    top = log.column("top_speed_rad_s")
+    bit = log.column("bit_speed_rad_s")
+    torque = log.column("bit_torque_nm")
+    twist_rel = cumulative(top - bit)
+    a = np.column_stack([bit, -cumulative(twist_rel), -t, -twist_rel, -np.ones_like(t)])
+    coef, *_ = np.linalg.lstsq(a, -cumulative(torque), rcond=None)
+    j_est, k_est, kx0, c_est, _ = (float(v) for v in coef)
+    stick_k, _ = _stick_slip_estimates(t, top, bit, torque)
+    consistent = j_est > 0 and k_est > 0 and (stick_k <= 0 or 0.5 < k_est / stick_k < 2.0)
+    return j_est, k_est, kx0, c_est, consistent
 
 
 def initial_estimates(log: MeasuredLog, uses_wob: bool) -> tuple[npt.NDArray[np.float64], float]:
@@ -92,20 +172,10 @@ def initial_estimates(log: MeasuredLog, uses_wob: bool) -> tuple[npt.NDArray[np.
     top = log.column("top_speed_rad_s")
     bit = log.column("bit_speed_rad_s")
     torque = log.column("bit_torque_nm")
-    dt = np.diff(t)
-
-    def cumulative(y: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        return np.concatenate(([0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * dt)))
-
-    twist_rel = cumulative(top - bit)
-    a = np.column_stack([bit, -cumulative(twist_rel), -t, -twist_rel, -np.ones_like(t)])
-    coef, *_ = np.linalg.lstsq(a, -cumulative(torque), rcond=None)
-    j_est, k_est, kx0, c_est, _ = (float(v) for v in coef)
+    j_est, k_est, kx0, c_est, consistent = _balance_estimates(log)
     p = np.zeros(N_MODEL_PARAMS)
-    stick_k, stick_j = _stick_slip_estimates(t, top, bit, torque)
-    if not (j_est > 0 and k_est > 0) or (
-        stick_k > 0 and not 0.5 < k_est / stick_k < 2.0
-    ):  # the equation error failed (coarse sampling, a string with more inertias)
+    if not consistent:  # the equation error failed (coarse sampling, a string with more inertias)
+        stick_k, stick_j = _stick_slip_estimates(t, top, bit, torque)
         j_est, k_est, c_est = stick_j, stick_k, 0.0
         kx0 = float(np.median(torque[:5]))
     p[P_J] = j_est if j_est > 0 else 1.0
@@ -152,7 +222,9 @@ SEGMENT_MIN_STUCK_S: Final = 0.02
 """Shortest measured stuck run that starts a segment of the multiple-shooting stage, s."""
 
 
-def stuck_segments(log: MeasuredLog) -> list[tuple[int, int, float]] | None:
+def stuck_segments(
+    log: MeasuredLog, cycles: int = SEGMENT_CYCLES
+) -> list[tuple[int, int, float]] | None:
     """Segments ``(first, end, torque)`` of the multiple-shooting stage of the fit: each starts
     in the middle of every :data:`SEGMENT_CYCLES`-th measured stuck run (``|bit speed|`` below :func:`stuck_threshold`
     for :data:`SEGMENT_MIN_STUCK_S`) with the median measured torque of its first 5 samples,
@@ -169,7 +241,7 @@ def stuck_segments(log: MeasuredLog) -> list[tuple[int, int, float]] | None:
             starts.append(int(a + b) // 2)
     if len(starts) < 2:
         return None
-    starts = starts[::SEGMENT_CYCLES]
+    starts = starts[::cycles]
     ends = [*starts[1:], bit.size]
     return [
         (a, b, float(np.median(torque[a : a + 5])))
@@ -223,6 +295,7 @@ class _Problem:
     substeps: int
     twist0_fixed: float = 0.0
     segments: list[tuple[int, int, float]] | None = None
+    balance: MomentumBalance | None = None
 
     def unpack(self, theta: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], float]:
         p = self.fixed_p.copy()
@@ -262,7 +335,7 @@ class _Problem:
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
         p, twist0 = self.unpack(theta)
         top = self.log.column("top_speed_rad_s")
-        wob = self.log.column("wob_n") if self.uses_wob else None
+        wob = wob_input(self.log) if self.uses_wob else None
         if self.segments is None:
             speed, torque, _ = simulate_bit(
                 self.log.time_s, top, p, self.family, twist0, self.speed0, wob, self.substeps
@@ -288,8 +361,10 @@ class _Problem:
                 (torque - self.log.column("bit_torque_nm")) / self.scales[1],
             ]
         )
+        if self.balance is not None:
+            r = np.concatenate([r, self.balance.residuals(self.unpack(theta)[0])])
         r = np.where(np.isfinite(r), r, 1e3)
-        return np.asarray(r * self.weights)
+        return np.asarray(r * self.weights[: r.size])
 
 
 def _initial_twist_grid(problem: _Problem, p: npt.NDArray[np.float64]) -> float:
@@ -417,6 +492,7 @@ def _fit_family(
     starts_p: list[tuple[npt.NDArray[np.float64], float]],
     direct: npt.NDArray[np.float64],
     user_fixed: dict[str, float],
+    balance: MomentumBalance | None = None,
 ) -> FamilyFit:
     bit = log.column("bit_speed_rad_s")
     torque = log.column("bit_torque_nm")
@@ -434,9 +510,11 @@ def _fit_family(
             q[index] = value
         candidates.append((q, twist_start))
     p, start_twist0 = candidates[0]
+    if balance is not None:  # its rows left out where the bit speed is
+        weights = np.concatenate([weights, weights[: bit.size]])
     problem = _Problem(
         log, family, uses_wob, [n for n in names if n not in fixed], p.copy(),
-        weights, scales, _speed0(bit, stuck_threshold(bit)), 1, start_twist0,
+        weights, scales, _speed0(bit, stuck_threshold(bit)), 1, start_twist0, None, balance,
     )  # fmt: skip
     iterations = 0
     free_full = list(problem.free)
@@ -444,7 +522,10 @@ def _fit_family(
         tried = []
         free_shooting = [n for n in free_full if n != "initial_twist"]
         shooting = stuck_segments(log)
-        problem.segments = shooting
+        # Continuation: one-cycle segments first (a smoother cost, each prediction short),
+        # then the two-cycle segments from their optimum.
+        short = stuck_segments(log, 1) if shooting is not None else None
+        problem.segments = short
         if shooting is not None:
             problem.free = free_shooting
         for q, twist_q in candidates:
@@ -465,8 +546,13 @@ def _fit_family(
         best_run = None
         for _, q, th in tried[:STARTS_REFINED]:
             problem.fixed_p = q
-            problem.segments = shooting
             problem.free = free_shooting if shooting is not None else free_full
+            if short is not None:
+                problem.segments = short
+                problem.substeps = substeps_for(problem.unpack(th)[0], log.sample_period_s)
+                th, _, it = _levenberg_marquardt(problem, th)
+                iterations += it
+            problem.segments = shooting
             problem.substeps = substeps_for(problem.unpack(th)[0], log.sample_period_s)
             theta_run, cost_run, it = _levenberg_marquardt(problem, th)
             iterations += it
@@ -615,6 +701,7 @@ def calibrate(
         raise ValueError("column 'wob_n' has values <= 0 in the window: allowed > 0 N")
     weights, defects = fit_weights(window)
     direct, twist0 = initial_estimates(window, uses_wob)
+    balance = MomentumBalance.of(window) if _balance_estimates(window)[4] else None
     fits: dict[str, FamilyFit] = {}
     previous: tuple[npt.NDArray[np.float64], float] | None = None
     for family in FAMILIES:
@@ -624,7 +711,7 @@ def calibrate(
         starts = [(direct.copy(), twist0)]
         if previous is not None:
             starts.append(previous)
-        fit = _fit_family(window, family, uses_wob, weights, starts, direct, fam_fixed)
+        fit = _fit_family(window, family, uses_wob, weights, starts, direct, fam_fixed, balance)
         fits[family] = fit
         previous = (fit.p.copy(), fit.twist0)
     # One effective sample size for every family (the simplest family's), so that the BIC
@@ -720,7 +807,7 @@ def simulate_plant(
     if log.has("bit_speed_rad_s"):
         bit = log.column("bit_speed_rad_s")
         speed0 = _speed0(bit, stuck_threshold(bit))
-    wob = log.column("wob_n") if uses_wob else None
+    wob = wob_input(log) if uses_wob else None
     if twist0 is None:
         twist0 = initial_twist(plant, log, speed0)
     speed, torque, _ = simulate_bit(
@@ -753,7 +840,7 @@ def initial_twist(plant: CalibratedPlant, log: MeasuredLog, speed0: float) -> fl
     top = log.column("top_speed_rad_s")[:n]
     bit = log.column("bit_speed_rad_s")[:n]
     torque = log.column("bit_torque_nm")[:n]
-    wob = log.column("wob_n")[:n] if plant.uses_wob else None
+    wob = wob_input(log)[:n] if plant.uses_wob else None
     span = p[P_AA] * (float(np.mean(wob)) if wob is not None else 1.0) / p[P_K]
     scales = (float(np.std(bit)) or 1.0, float(np.std(torque)) or 1.0)
     best = (math.inf, balance)
