@@ -29,6 +29,7 @@ __all__ = [
     "FIELD_ENV_ID",
     "MAX_FRAME_STACK",
     "PAPER_ENV_ID",
+    "TRAINING_RANGE_NAMES",
     "TrainConfig",
     "config_from_namespace",
     "config_parser",
@@ -44,6 +45,8 @@ FIELD_ENV_ID: Final = "DrillStringField-v0"
 """The distributed field string with surface sensors, telemetry and a rig's top drive."""
 ENV_IDS: Final = (PAPER_ENV_ID, FIELD_ENV_ID)
 """The envs ``drill-gym train`` trains on (``--env-id``)."""
+TRAINING_RANGE_NAMES: Final = ("env", "wide")
+"""The named scenario ranges of training on the field string (``--training-ranges``)."""
 MAX_FRAME_STACK: Final = 256
 """Most past observations a policy may stack (``--frame-stack``)."""
 
@@ -135,6 +138,13 @@ class TrainConfig:
     """Observation mode of ``DrillStringField-v0`` (``surface``: what a rig measures;
     ``state``: every node measured); empty: the env's own default. ``DrillString-v0`` models
     take the empty value."""
+    training_ranges: str = "env"
+    """Scenario ranges of the training episodes on ``DrillStringField-v0``: ``env`` (the env's
+    randomisation, docs/specification.md section 18) or ``wide`` (those ranges widened toward
+    stick-slip: WOB to 230 kN, down to 25 rpm, 0.8-5.5 km, static friction to 1.15, ``mu_0 /
+    mu_a`` from 0.42, Stribeck rate to 1.3 s/rad, mud damping from x0.3;
+    ``agents.train.TRAINING_RANGES``). Validation always draws from the env's ranges.
+    ``DrillString-v0`` takes ``env``."""
     frame_stack: int = 1
     """The policy sees its last this many observations, oldest first (zeros before the start
     of an episode, the history reset at every reset): memory for a partially observed string.
@@ -301,6 +311,17 @@ class TrainConfig:
                 f"{_option('observation')} = {self.observation!r} is not valid with "
                 f"{_option('env_id')} {PAPER_ENV_ID}: allowed empty (the observation is set "
                 f"on {FIELD_ENV_ID} only)"
+            )
+        if self.training_ranges not in TRAINING_RANGE_NAMES:
+            raise ValueError(
+                f"{_option('training_ranges')} = {self.training_ranges!r} is not valid: allowed "
+                f"{', '.join(TRAINING_RANGE_NAMES)}"
+            )
+        if self.env_id == PAPER_ENV_ID and self.training_ranges != "env":
+            raise ValueError(
+                f"{_option('training_ranges')} = {self.training_ranges!r} is not valid with "
+                f"{_option('env_id')} {PAPER_ENV_ID}: allowed env (the ranges are set on "
+                f"{FIELD_ENV_ID} only)"
             )
         if self.observation not in ("", "state", "surface"):
             raise ValueError(

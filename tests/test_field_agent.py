@@ -93,6 +93,45 @@ def test_bad_env_settings_are_one_line_errors() -> None:
         parse_config(["--frame-stack", "0"])
 
 
+def test_wide_training_ranges_contain_the_envs_and_leave_validation_alone() -> None:
+    from agents.train import TRAINING_RANGES, env_kwargs, validation_scenarios
+    from drill_env.scenarios import FieldRandomization
+
+    config = TrainConfig.for_env(FIELD, training_ranges="wide")
+    wide = env_kwargs(config)["randomization"]
+    assert wide is TRAINING_RANGES["wide"]
+    env = FieldRandomization()
+    for f in dataclasses.fields(FieldRandomization):
+        low, high = getattr(env, f.name), getattr(wide, f.name)
+        if isinstance(low, tuple):
+            assert high[0] <= low[0] and low[1] <= high[1], f.name
+        else:
+            assert high == low, f.name
+    # stickier than the env ever draws: heavier, slower, stickier, less mud damping
+    assert wide.wob_range_n[1] > env.wob_range_n[1]
+    assert wide.reference_range_rad_s[0] < env.reference_range_rad_s[0]
+    assert wide.mu_a_range[1] > env.mu_a_range[1]
+    assert wide.mud_damping_factor_range[0] < env.mud_damping_factor_range[0]
+    # the env's own ranges: no randomization keyword; validation never takes the wide ranges
+    assert "randomization" not in env_kwargs(TrainConfig.for_env(FIELD, training_ranges="env"))
+    assert "randomization" not in validation_scenarios(config)[0]
+    # the training envs draw from the wide ranges
+    made = gym.make(FIELD, **{**env_kwargs(config), "episode_s": 1.0})
+    try:
+        assert made.unwrapped.config.randomization == wide
+    finally:
+        made.close()
+
+
+def test_bad_training_ranges_are_one_line_errors() -> None:
+    with pytest.raises(
+        ValueError, match=r"--training-ranges = 'sticky' is not valid: allowed env, wide"
+    ):
+        parse_config(["--env", FIELD, "--training-ranges", "sticky"])
+    with pytest.raises(ValueError, match=r"--training-ranges = 'wide' is not valid with --env-id"):
+        parse_config(["--training-ranges", "wide"])
+
+
 def test_help_shows_the_field_defaults(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit):
         parse_config(["--help"])
