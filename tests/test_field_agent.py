@@ -137,7 +137,8 @@ def test_help_shows_the_field_defaults(capsys: pytest.CaptureFixture[str]) -> No
         parse_config(["--help"])
     flat = " ".join(capsys.readouterr().out.split())
     assert f"(default: 1; {FIELD}: {ENV_DEFAULTS[FIELD]['frame_stack']})" in flat
-    assert f"(default: proposed; {FIELD}: soft_speed)" in flat
+    assert f"(default: proposed; {FIELD}: z_torque_tuned)" in flat
+    assert f"(default: env; {FIELD}: wide)" in flat
 
 
 # --------------------------------------------------------------------------- frame stacking
@@ -292,7 +293,7 @@ def test_tiny_field_training_writes_a_field_model(field_run: tuple[TrainConfig, 
     policy = load_policy(model)
     assert policy.env_id == FIELD and policy.frame_stack == 3
     assert policy.env_kwargs == {
-        "base_controller": "soft_speed",
+        "base_controller": ENV_DEFAULTS[FIELD]["base_controller"],
         "control_dt_s": 0.1,
         "residual_scale_nm": ENV_DEFAULTS[FIELD]["residual_scale_nm"],
         "min_torque_nm": 0.0,
