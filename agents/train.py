@@ -50,9 +50,11 @@ from drill_env import RewardWeights
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout
 from drill_env.limits import DEFAULT_TORQUE_LIMITS
 from drill_env.options import FIELD_MAX_TORQUE_NM, FieldEnvConfig
+from drill_env.scenarios import RPM, FieldRandomization
 
 __all__ = [
     "REFERENCE_CONTROLLER",
+    "TRAINING_RANGES",
     "VALIDATION_SEED",
     "env_kwargs",
     "find_last_checkpoint",
@@ -137,6 +139,24 @@ def policy_env_kwargs(config: TrainConfig) -> dict[str, Any]:
     return kwargs
 
 
+TRAINING_RANGES: Final[dict[str, FieldRandomization | None]] = {
+    "env": None,
+    "wide": FieldRandomization(
+        wob_range_n=(50e3, 230e3),
+        reference_range_rad_s=(25 * RPM, 160 * RPM),
+        measured_depth_range_m=(800.0, 5_500.0),
+        mu_a_range=(0.6, 1.15),
+        mu_0_ratio_range=(0.42, 0.8),
+        xi_range=(0.3, 1.3),
+        mud_damping_factor_range=(0.3, 2.0),
+    ),
+}
+"""The scenario ranges of ``--training-ranges`` on ``DrillStringField-v0`` (``None``: the env's
+own randomisation). ``wide`` contains the env's ranges and reaches further toward stick-slip
+(heavier, slower, longer and shorter strings, stickier bits, less mud damping), where a
+residual on a well-tuned loop has something to correct."""
+
+
 def env_kwargs(config: TrainConfig) -> dict[str, Any]:
     """The keywords of training on ``config.env_id``: randomised scenarios (the env's default
     ranges; ``DrillString-v0``: WOB 60-200 kN with a 50 % chance of a step, V_ref 4-16 rad/s,
@@ -147,6 +167,9 @@ def env_kwargs(config: TrainConfig) -> dict[str, Any]:
     if config.env_id == COUPLED_ENV_ID:  # the env's own reward (CoupledRewardWeights)
         return {**kwargs, "randomize": True, "episode_s": config.episode_s}
     residual = kwargs["base_controller"] is not None
+    ranges = TRAINING_RANGES[config.training_ranges]
+    if ranges is not None:
+        kwargs["randomization"] = ranges
     return {
         **kwargs,
         "randomize": True,

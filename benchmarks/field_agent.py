@@ -225,7 +225,12 @@ def curves(runs: dict[str, Path], figure: Path) -> Path:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--out", default="runs/field-agent", help="folder of the run")
-    parser.add_argument("--seed", type=int, default=TrainConfig.seed, help="seed of the run")
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=TrainConfig.for_env(FIELD_ENV_ID).seed,
+        help="seed of the run (the field default)",
+    )
     parser.add_argument(
         "--ship", action="store_true", help="copy the model to agents/models/ and the figure"
     )
@@ -285,9 +290,11 @@ def main() -> None:
             )
         return
     if args.ship_model:
-        seed = load_policy(args.ship_model).metadata["train_config"]["seed"]
+        record = load_policy(args.ship_model).metadata
+        seed = record["train_config"]["seed"]
+        selected = record.get("selected", "best on validation")
         wall = "" if args.wall_s is None else f", {args.wall_s:.0f} s wall"
-        source = f"{RETRAIN} --seed {seed} (the selected model: best on validation{wall})"
+        source = f"{RETRAIN} --seed {seed} (the selected model: {selected}{wall})"
         print(f"shipped to {ship(args.ship_model, source)}")
         return
     if args.figures:

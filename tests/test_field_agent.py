@@ -93,12 +93,52 @@ def test_bad_env_settings_are_one_line_errors() -> None:
         parse_config(["--frame-stack", "0"])
 
 
+def test_wide_training_ranges_contain_the_envs_and_leave_validation_alone() -> None:
+    from agents.train import TRAINING_RANGES, env_kwargs, validation_scenarios
+    from drill_env.scenarios import FieldRandomization
+
+    config = TrainConfig.for_env(FIELD, training_ranges="wide")
+    wide = env_kwargs(config)["randomization"]
+    assert wide is TRAINING_RANGES["wide"]
+    env = FieldRandomization()
+    for f in dataclasses.fields(FieldRandomization):
+        low, high = getattr(env, f.name), getattr(wide, f.name)
+        if isinstance(low, tuple):
+            assert high[0] <= low[0] and low[1] <= high[1], f.name
+        else:
+            assert high == low, f.name
+    # stickier than the env ever draws: heavier, slower, stickier, less mud damping
+    assert wide.wob_range_n[1] > env.wob_range_n[1]
+    assert wide.reference_range_rad_s[0] < env.reference_range_rad_s[0]
+    assert wide.mu_a_range[1] > env.mu_a_range[1]
+    assert wide.mud_damping_factor_range[0] < env.mud_damping_factor_range[0]
+    # the env's own ranges: no randomization keyword; validation never takes the wide ranges
+    assert "randomization" not in env_kwargs(TrainConfig.for_env(FIELD, training_ranges="env"))
+    assert "randomization" not in validation_scenarios(config)[0]
+    # the training envs draw from the wide ranges
+    made = gym.make(FIELD, **{**env_kwargs(config), "episode_s": 1.0})
+    try:
+        assert made.unwrapped.config.randomization == wide
+    finally:
+        made.close()
+
+
+def test_bad_training_ranges_are_one_line_errors() -> None:
+    with pytest.raises(
+        ValueError, match=r"--training-ranges = 'sticky' is not valid: allowed env, wide"
+    ):
+        parse_config(["--env", FIELD, "--training-ranges", "sticky"])
+    with pytest.raises(ValueError, match=r"--training-ranges = 'wide' is not valid with --env-id"):
+        parse_config(["--training-ranges", "wide"])
+
+
 def test_help_shows_the_field_defaults(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit):
         parse_config(["--help"])
     flat = " ".join(capsys.readouterr().out.split())
     assert f"(default: 1; {FIELD}: {ENV_DEFAULTS[FIELD]['frame_stack']})" in flat
-    assert f"(default: proposed; {FIELD}: soft_speed)" in flat
+    assert f"(default: proposed; {FIELD}: z_torque_tuned)" in flat
+    assert f"(default: env; {FIELD}: wide)" in flat
 
 
 # --------------------------------------------------------------------------- frame stacking
@@ -253,7 +293,7 @@ def test_tiny_field_training_writes_a_field_model(field_run: tuple[TrainConfig, 
     policy = load_policy(model)
     assert policy.env_id == FIELD and policy.frame_stack == 3
     assert policy.env_kwargs == {
-        "base_controller": "soft_speed",
+        "base_controller": ENV_DEFAULTS[FIELD]["base_controller"],
         "control_dt_s": 0.1,
         "residual_scale_nm": ENV_DEFAULTS[FIELD]["residual_scale_nm"],
         "min_torque_nm": 0.0,

@@ -45,6 +45,9 @@ FORMAT2 = ROOT / "tests" / "data" / "format2"
 """The shipped models as they were in the previous format (``.npz`` arrays), before the
 conversion."""
 SHIPPED_NAMES = ("residual_ppo", "direct_ppo", "field_agent")
+CONVERTED_NAMES = ("residual_ppo", "direct_ppo")
+"""The shipped models converted from the previous format (the field agent shipped since was
+written in format 3 by ``drill-gym train``; its format-2 predecessor stays in ``FORMAT2``)."""
 
 
 class _Payload:
@@ -1100,7 +1103,7 @@ def _recorded_observations(name: str = "residual_ppo", seeds: tuple[int, ...] = 
     return np.concatenate(obs)
 
 
-@pytest.mark.parametrize("name", SHIPPED_NAMES)
+@pytest.mark.parametrize("name", CONVERTED_NAMES)
 def test_shipped_models_are_the_previous_format_converted_bit_for_bit(
     name: str, tmp_path: Path
 ) -> None:
