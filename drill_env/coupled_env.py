@@ -54,7 +54,13 @@ from drill_env.coupled import (
 )
 from drill_env.limits import MAX_SPEED_RAD_S
 from drill_env.parameters import PRESETS, DrillStringParameters
-from drill_env.validation import check_choice, check_finite_fields, check_range, require
+from drill_env.validation import (
+    check_choice,
+    check_finite_fields,
+    check_range,
+    check_unknown,
+    require,
+)
 
 __all__ = [
     "ACTION_MODES",
@@ -578,8 +584,6 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
     metadata: dict[str, Any] = {"render_modes": [], "render_fps": 20}
 
     def __init__(self, render_mode: str | None = None, **keywords: Any) -> None:
-        from drill_env.validation import check_unknown
-
         check_unknown(keywords, [f.name for f in dataclasses.fields(CoupledEnvConfig)])
         if render_mode is not None:
             raise ValueError(f"render_mode = {render_mode!r} is not supported: allowed None")

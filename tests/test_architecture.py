@@ -1,5 +1,7 @@
-"""The house rules: each package one floor that imports only the floors below it, the studies
-on the public interface, and every index of the engine's vectors read from its one home."""
+"""The house rules: each package one floor that imports only the floors below it, no import
+cycle, project imports at the top of a module (lazy only where laziness is the point), the
+studies on the public interface, and every index of the engine's vectors read from its one
+home."""
 
 from __future__ import annotations
 
@@ -8,6 +10,7 @@ import re
 import subprocess
 import sys
 from pathlib import Path
+from typing import Final, NamedTuple
 
 import pytest
 
@@ -30,6 +33,126 @@ def _imports(path: Path) -> set[str]:
 
 def _sources(package: str) -> list[Path]:
     return sorted((ROOT / package).rglob("*.py"))
+
+
+LAZY_IMPORTS: Final[dict[tuple[str, str], str]] = {
+    ("agents.train", "agents.vec_env"): "imports Stable-Baselines3, the optional [rl] extra",
+}
+"""The function-local project imports allowed, (importer, imported) -> why the import is lazy.
+The subcommands of ``drill-gym`` are loaded by name (``importlib``), not by an import
+statement."""
+
+
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+class ProjectImport(NamedTuple):
+    """One import statement of a project module that names another project module."""
+
+    importer: str
+    imported: str
+    line: int
+    in_function: bool
+
+
+def _project_imports() -> list[ProjectImport]:
+    """Every import of a project module by another, at the top, under ``TYPE_CHECKING`` or
+    inside a function (an imported name counts as its module when it is one)."""
+    modules = {_module_name(path): path for package in FLOORS for path in _sources(package)}
+
+    def owner(name: str) -> str | None:
+        while name and name not in modules:
+            name = name.rpartition(".")[0]
+        return name or None
+
+    found: list[ProjectImport] = []
+    for module, path in modules.items():
+        package = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
+
+        def visit(
+            node: ast.AST, in_function: bool, module: str = module, package: list[str] = package
+        ) -> None:
+            for child in ast.iter_child_nodes(node):
+                inner = in_function or isinstance(child, ast.FunctionDef | ast.AsyncFunctionDef)
+                names: list[str] = []
+                if isinstance(child, ast.Import):
+                    names = [alias.name for alias in child.names]
+                elif isinstance(child, ast.ImportFrom):
+                    base = child.module or ""
+                    if child.level:
+                        stem = package[: len(package) - child.level + 1]
+                        base = ".".join([*stem, base] if base else stem)
+                    names = [base, *(f"{base}.{alias.name}" for alias in child.names)]
+                for target in {owner(name) for name in names} - {None, module}:
+                    found.append(ProjectImport(module, str(target), child.lineno, in_function))
+                visit(child, inner)
+
+        visit(ast.parse(path.read_text(), filename=str(path)), False)
+    return found
+
+
+def import_cycles(edges: set[tuple[str, str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan's algorithm)."""
+    graph: dict[str, set[str]] = {}
+    for a, b in edges:
+        graph.setdefault(a, set()).add(b)
+        graph.setdefault(b, set())
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    cycles: list[list[str]] = []
+
+    def connect(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                connect(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                cycles.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            connect(v)
+    return cycles
+
+
+def test_the_cycle_finder_finds_cycles() -> None:
+    edges = {("a", "b"), ("b", "c"), ("c", "a"), ("c", "d"), ("d", "e")}
+    assert import_cycles(edges) == [["a", "b", "c"]]
+    assert import_cycles({("a", "b"), ("b", "c")}) == []
+
+
+def test_no_import_cycle() -> None:
+    """No cycle among the project's modules, counting ``TYPE_CHECKING`` and function-local
+    imports."""
+    cycles = import_cycles({(i.importer, i.imported) for i in _project_imports()})
+    assert not cycles, "import cycles:\n" + "\n".join(" <-> ".join(c) for c in cycles)
+
+
+def test_project_imports_are_at_the_top() -> None:
+    """A project import inside a function only where laziness is the point (see
+    :data:`LAZY_IMPORTS`)."""
+    offenders = [
+        f"{i.importer}:{i.line} imports {i.imported} inside a function"
+        for i in _project_imports()
+        if i.in_function and (i.importer, i.imported) not in LAZY_IMPORTS
+    ]
+    assert not offenders, "\n".join(offenders)
+    used = {(i.importer, i.imported) for i in _project_imports() if i.in_function}
+    assert set(LAZY_IMPORTS) <= used, f"stale entries: {sorted(set(LAZY_IMPORTS) - used)}"
 
 
 @pytest.mark.parametrize("floor", range(len(FLOORS)), ids=FLOORS)

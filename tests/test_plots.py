@@ -25,8 +25,6 @@ from experiments.plots import (
     downsample,
     envelope,
     learning_curves_figure,
-    map_figure,
-    maps_figure,
     panels_figure,
     speed_torque_figure,
     text_outside,
@@ -34,7 +32,7 @@ from experiments.plots import (
     text_problems,
     time_window,
 )
-from experiments.stick_slip_map import compute_map
+from experiments.stick_slip_map import compute_map, map_figure, maps_figure
 
 
 @pytest.fixture(scope="module")
