@@ -23,6 +23,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
+from drill_env.ids import ENV_ID
+from drill_env.ids import FIELD_ENV_ID as _FIELD_ENV_ID
+
 __all__ = [
     "ENV_DEFAULTS",
     "ENV_IDS",
@@ -38,9 +41,9 @@ __all__ = [
 ]
 
 
-PAPER_ENV_ID: Final = "DrillString-v0"
+PAPER_ENV_ID: Final = ENV_ID
 """The paper's 4-DOF string: the env of the dataclass defaults."""
-FIELD_ENV_ID: Final = "DrillStringField-v0"
+FIELD_ENV_ID: Final = _FIELD_ENV_ID
 """The distributed field string with surface sensors, telemetry and a rig's top drive."""
 ENV_IDS: Final = (PAPER_ENV_ID, FIELD_ENV_ID)
 """The envs ``drill-gym train`` trains on (``--env-id``)."""

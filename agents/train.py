@@ -37,7 +37,7 @@ import sys
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Final
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -51,10 +51,11 @@ from agents.checkpoints import (
     load_checkpoint,
     save_checkpoint,
 )
-from agents.config import FIELD_ENV_ID, PAPER_ENV_ID, TrainConfig
+from agents.config import FIELD_ENV_ID, TrainConfig
 from agents.model_format import read_json
 from agents.policy import PICKLE_RISK, ResidualPolicy, is_model_folder, load_policy, policy_from_sb3
 from baselines import controller_names
+from baselines.registry import REFERENCE_CONTROLLER
 from drill_env import RewardWeights
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout
 from drill_env.limits import DEFAULT_TORQUE_LIMITS
@@ -82,11 +83,6 @@ set of ``drill-gym evaluate`` is a fixed list of scenarios)."""
 RMSD_TARGET = 0.99
 """Model selection on validation: score = mean IAE ratio + 10 x the mean RMSD ratio's excess
 over this (a 1 % margin below the base controller's RMSD)."""
-
-
-REFERENCE_CONTROLLER: Final = {PAPER_ENV_ID: "proposed", FIELD_ENV_ID: "soft_speed"}
-"""The controller a from-scratch agent (``--base-controller none``) is validated against, per
-env (a residual agent is validated against its own base controller)."""
 
 
 def validation_scenarios(config: TrainConfig) -> tuple[dict[str, Any], list[int]]:

@@ -48,6 +48,7 @@ import baselines  # noqa: F401  (registers the built-in controllers, in their or
 from agents import DEFAULT_MODEL_DIR, load_policy
 from agents.config import TrainConfig
 from agents.policy import is_model_folder
+from baselines.registry import family_members
 from drill_env.control import controller_names, make_controller
 from drill_env.evaluation import Trace, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
@@ -139,7 +140,7 @@ __all__ = [
     "write_figures",
 ]
 
-PAPER_CONTROLLERS: Final = ("csmc", "msmc", "asmc", "proposed")
+PAPER_CONTROLLERS: Final = family_members("sliding_mode")
 """The paper's four controllers, listed first in every table."""
 
 CONDITIONS: Final = tuple(UNCERTAINTY_CONDITIONS)
@@ -590,14 +591,7 @@ def summary_table(rows: Sequence[Mapping[str, Any]]) -> str:
     return _markdown(ranked_summary(rows), SUMMARY_COLUMNS)
 
 
-INDUSTRY_CONTROLLERS: Final = (
-    "stiff_pi",
-    "stiff_pi_tuned",
-    "soft_speed",
-    "soft_speed_tuned",
-    "z_torque",
-    "z_torque_tuned",
-)
+INDUSTRY_CONTROLLERS: Final = family_members("speed_loop")
 """The industry top-drive speed loops, default and tuned (:mod:`baselines.tuned`), drawn
 together in the noise figure."""
 

@@ -49,6 +49,7 @@ from agents.policy import (
     is_model_folder,
     load_policy,
 )
+from baselines.registry import REFERENCE_CONTROLLER, rig_loops
 from drill_env.control import controller_names
 from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
@@ -123,9 +124,9 @@ __all__ = [
     "write_figures",
 ]
 
-BASE_CONTROLLER: Final = "proposed"
+BASE_CONTROLLER: Final = REFERENCE_CONTROLLER[PAPER_ENV]
 """The controller the goal is measured against."""
-RIG_LOOPS: Final = ("soft_speed", "z_torque", "soft_speed_tuned", "z_torque_tuned")
+RIG_LOOPS: Final = rig_loops()
 """The industry speed loops an agent of the field string is compared with (on surface signals,
 as on a rig), those of them that are registered: :func:`versus_rig_loops`."""
 

@@ -42,7 +42,10 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 from matplotlib.text import Text
 
+from baselines.registry import BUILT_IN
 from drill_env.evaluation import Trace
+from drill_env.metrics import METRIC_LABELS as CORE_METRIC_LABELS
+from drill_env.metrics import STICK_SLIP_SEVERITY
 
 __all__ = [
     "DPI",
@@ -76,18 +79,11 @@ __all__ = [
 ]
 
 METRIC_LABELS: Final[dict[str, str]] = {
-    "ise": "ISE (rad$^2$/s)",
-    "iae": "IAE (rad)",
-    "rmse": "RMSE (rad/s)",
-    "rmsd_nm": "RMSD of the torque (N m)",
-    "overshoot_pct": "overshoot (%)",
-    "settling_time_s": "settling time (s)",
-    "chattering_nm_per_s": "chattering (N m/s)",
-    "stick_slip_severity": "stick-slip severity",
-    "stuck_fraction": "stuck fraction",
+    **CORE_METRIC_LABELS,
     "static_error_rad_s": "static error (rad/s)",
 }
-"""Axis label (with unit) of each metric key of :mod:`drill_env.metrics`."""
+"""Axis label (with unit) of each metric key of :mod:`drill_env.metrics` (its
+:data:`~drill_env.metrics.METRIC_LABELS`) and of the comparison's static error."""
 
 KEY_LABELS: Final[dict[str, str]] = {
     "controller": "controller",
@@ -114,15 +110,24 @@ _PALETTE: Final = (
     "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd",
     "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf",
 )  # fmt: skip
+_PALETTE_LIGHT: Final = (
+    "#aec7e8", "#ffbb78", "#98df8a", "#ff9896", "#c5b0d5",
+    "#c49c94", "#f7b6d2", "#c7c7c7", "#dbdb8d", "#9edae5",
+)  # fmt: skip
+"""The lighter partner of each colour of :data:`_PALETTE` (matplotlib's tab20 pairs)."""
+_AGENTS: Final = ("residual_ppo", "direct_ppo")
+"""The shipped agents, coloured after the built-in controllers."""
+_DEFAULT_LOOPS: Final = [name for name, cls in BUILT_IN.items() if not hasattr(cls, "base_name")]
 _NAMED_COLORS: Final[dict[str, str]] = {
-    name: _PALETTE[k]
-    for k, name in enumerate(
-        (
-            "csmc", "msmc", "asmc", "proposed", "stiff_pi",
-            "soft_speed", "z_torque", "residual_ppo", "direct_ppo",
-        )
-    )
-}  # fmt: skip
+    **{name: _PALETTE[k] for k, name in enumerate((*_DEFAULT_LOOPS, *_AGENTS))},
+    **{
+        name: _PALETTE_LIGHT[_DEFAULT_LOOPS.index(cls.base_name)]
+        for name, cls in BUILT_IN.items()
+        if hasattr(cls, "base_name")
+    },
+}
+"""Every built-in controller's colour and the agents': the registry's order; a ``*_tuned``
+loop in the lighter shade of its default loop."""
 _DASHES: Final = (("-", 2.6), ("--", 1.8), (":", 2.2), ("-.", 1.2), ((0, (5, 1, 1, 1)), 1.0))
 """Line style and width of the k-th line of a panel: overlapping lines stay visible."""
 _CONDITION_STYLES: Final[dict[str, Any]] = {
@@ -1034,12 +1039,8 @@ def cell_edges(values: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
 # ------------------------------------------------------------------------ realism study
 REALISM_METRICS: Final = ("iae", "stick_slip_severity", "stuck_fraction", "torque_at_limit")
 """The metrics of each row of :func:`realism_figure`."""
-_REALISM_TITLES: Final = {
-    "iae": "IAE (rad)",
-    "stick_slip_severity": "stick-slip severity",
-    "stuck_fraction": "stuck fraction",
-    "torque_at_limit": "share at a torque limit",
-}
+_REALISM_TITLES: Final = {"torque_at_limit": "share at a torque limit"}
+"""Panel titles of the realism figure's own quantities (the metrics take their labels)."""
 
 
 def realism_figure(
@@ -1049,7 +1050,7 @@ def realism_figure(
     title: str = "",
     *,
     breaks: Mapping[tuple[str, str], int] | None = None,
-    severity_limit: float = 0.5,
+    severity_limit: float = STICK_SLIP_SEVERITY,
     metrics: Sequence[str] = REALISM_METRICS,
 ) -> Figure:
     """Metrics of the controllers against the values of one factor: one row of panels per

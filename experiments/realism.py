@@ -63,6 +63,7 @@ from baselines.observer import ObserverGains, design_observer
 from drill_env.control import controller_names, make_controller
 from drill_env.distributed import Chain, chain_from_parameters
 from drill_env.evaluation import ZeroAction, episode_metrics
+from drill_env.metrics import STICK_SLIP_SEVERITY
 from drill_env.options import REALISM_KEYWORDS, EnvConfig, FieldEnvConfig, realism_keywords
 from drill_env.parameters import PLANT_DT_S, PRESETS
 from experiments.arguments import (
@@ -124,7 +125,7 @@ __all__ = [
 
 IAE_RATIO: Final = 1.5
 """A controller breaks when its mean IAE exceeds this many times its own ideal mean IAE."""
-SEVERITY_LIMIT: Final = 0.5
+SEVERITY_LIMIT: Final = STICK_SLIP_SEVERITY
 """A controller breaks when its mean stick-slip severity exceeds this where the ideal one did
 not (the stick-slip threshold of the maps, docs/specification.md section 14)."""
 LIMIT_RISE: Final = 0.1

@@ -55,7 +55,7 @@ from drill_env.control import controller_names
 from drill_env.distributed import DISTRIBUTED_PRESETS, with_measured_depth
 from drill_env.evaluation import reset_each
 from drill_env.limits import MAX_REFERENCE_RAD_S, MAX_WOB_N
-from drill_env.metrics import WindowStatistics
+from drill_env.metrics import STICK_SLIP_SEVERITY, WindowStatistics
 from drill_env.options import REALISM_LEVELS, realism_keywords
 from drill_env.parameters import PLANT_DT_S, PRESETS
 from drill_env.scenarios import RPM
@@ -124,7 +124,7 @@ FIELD_WINDOW_S: Final = 50.0
 (4-11 s at 1.5-5 km)."""
 MAX_CHUNK_STEPS: Final = 1000
 """Plant steps per compiled call (1 s): bounds the memory of the per-step records."""
-UNSTABLE_SEVERITY: Final = 0.5
+UNSTABLE_SEVERITY: Final = STICK_SLIP_SEVERITY
 """A cell counts as stick-slipping when its severity exceeds this or its bit ever sticks."""
 DEFAULT_REALISM: Final[dict[str, str | None]] = {PAPER_ENV: "ideal", FIELD_ENV: None}
 """The level of realism (``drill_env.options.REALISM_LEVELS``) a map runs at by default:
@@ -1231,7 +1231,9 @@ SEVERITY_LABEL: Final = "stick-slip severity (max - min) / (2 mean)"
 """Colour-bar label of the severity: the bit speed's over the analysis window."""
 STUCK_LABEL: Final = "stuck fraction of the window"
 """Colour-bar label of the stuck fraction."""
-BOUNDARY_LABEL: Final = "boundary of stick-slip: the bit sticks, or severity > 0.5"
+BOUNDARY_LABEL: Final = (
+    f"boundary of stick-slip: the bit sticks, or severity > {STICK_SLIP_SEVERITY:g}"
+)
 """Legend entry of the white line of the maps."""
 
 

@@ -54,6 +54,7 @@ from agents import train as training
 from agents.config import TrainConfig
 from agents.policy import is_model_folder, load_policy
 from agents.train import planned_timesteps, train
+from baselines.registry import REFERENCE_CONTROLLER
 from experiments.arguments import (
     ArgumentParser,
     names_type,
@@ -62,14 +63,13 @@ from experiments.arguments import (
     seed_type,
 )
 from experiments.evaluate import (
-    BASE_CONTROLLER,
     FIELD_HELD_OUT,
     HELD_OUT,
     evaluate,
     held_out_set,
     summarize,
 )
-from experiments.field import is_field, run_label
+from experiments.field import ENV_IDS, FIELD_ENV, PAPER_ENV, is_field, run_label
 from experiments.sweep import ADDRESS_VARIABLE, Backend, ray_session
 from experiments.tables import Column, markdown_table, write_csv, write_json
 
@@ -235,7 +235,7 @@ class SweepSpec:
     scheduler: str
     settings: Mapping[str, Any]
     grace_period: int = 2
-    env_id: str = "DrillString-v0"
+    env_id: str = PAPER_ENV
 
     def __post_init__(self) -> None:
         if not self.seeds:
@@ -354,7 +354,7 @@ def train_trial(config: dict[str, Any]) -> None:
     trial = tune.get_context().get_trial_id()
     run_dir = Path(config["runs_dir"]) / f"{trial}__seed{seed}"
     train_config = TrainConfig.for_env(
-        config.get("env_id", "DrillString-v0"),
+        config.get("env_id", PAPER_ENV),
         **{**settings, **chosen, "seed": seed, "run_dir": str(run_dir)},
     )
     with _report_validations():
@@ -428,7 +428,7 @@ def _heldout(model: Path, scenario_ids: Sequence[str] | None) -> dict[str, Any]:
 
     agent = load_policy(model)
     field = is_field(agent.env_id)
-    fallback = "soft_speed" if field else BASE_CONTROLLER
+    fallback = REFERENCE_CONTROLLER[FIELD_ENV if field else PAPER_ENV]
     base = agent.env_kwargs.get("base_controller") or fallback
     observation = agent.env_kwargs.get("observation", "surface") if field else None
     held_out = held_out_set(agent.env_id)
@@ -635,8 +635,8 @@ def _parser() -> ArgumentParser:
     )
     p.add_argument(
         "--env",
-        choices=("DrillString-v0", "DrillStringField-v0"),
-        default="DrillString-v0",
+        choices=ENV_IDS,
+        default=PAPER_ENV,
         help="the env of every trial; the settings not given take its drill-gym train "
         "defaults (DrillStringField-v0: the field agent's)",
     )

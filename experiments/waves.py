@@ -49,6 +49,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 import baselines  # noqa: F401  (registers the built-in controllers, in their order)
+from baselines.registry import family_members, needs_full_state
 from baselines.string_modes import reflection_coefficient, string_modes, top_drive_impedance
 from drill_env.control import controller_names, make_controller
 from drill_env.distributed import (
@@ -57,7 +58,7 @@ from drill_env.distributed import (
     with_measured_depth,
 )
 from drill_env.evaluation import ZeroAction, rollout
-from drill_env.metrics import episode_metrics_from_samples
+from drill_env.metrics import STEADY_SEVERITY, episode_metrics_from_samples, stick_slip_severity
 from drill_env.modes import (
     lumped_equivalent,
     natural_frequencies_hz,
@@ -110,8 +111,6 @@ WINDOW_S: Final = 50.0
 """Analysis window at the end of each run, s (as ``drill-gym map`` on the field string)."""
 SPACE_TIME_S: Final = 12.0
 """Length of the space-time figures, s (two stick-slip cycles at 2,500 m)."""
-STEADY_SEVERITY: Final = 0.1
-"""Below this severity a run turns steadily and table 4 gives no cycle period."""
 RESPONSE_S: Final = 30.0
 """Length of the response figure, s."""
 ACTUATOR: Final = {
@@ -322,7 +321,7 @@ def record_run(
     w = np.concatenate(bit)
     late = history.window(start)
     metrics = {
-        "stick_slip_severity": float((w.max() - w.min()) / (2.0 * max(w.mean(), 1e-9))),
+        "stick_slip_severity": stick_slip_severity(float(w.max()), float(w.min()), float(w.mean())),
         "stuck_fraction": float(window["stuck_fraction"]),
         "rmse": float(window["rmse"]),
         "mean_bit_speed_rad_s": float(w.mean()),
@@ -396,7 +395,7 @@ def reflection_table(string: DistributedStringParameters) -> list[dict[str, Any]
     ``dT / z`` behind the high-pass of its running mean, ``Z_td = z (1 + 1 / (i w tau))``.
     """
     rows = []
-    for name in ("stiff_pi", "soft_speed", "z_torque"):
+    for name in family_members("speed_loop", tuned=False):
         try:
             tuning = make_controller(name).tuning(string)  # type: ignore[attr-defined]
         except ValueError as err:
@@ -492,7 +491,7 @@ def equivalent_table(
                     env.close()
                 late = trace.time_s >= duration_s - window_s
                 w = trace.bit_speed_rad_s[late]
-                severity = float((w.max() - w.min()) / (2 * max(w.mean(), 1e-9)))
+                severity = stick_slip_severity(float(w.max()), float(w.min()), float(w.mean()))
                 out[f"{key}_severity"] = severity
                 out[f"{key}_stuck_fraction"] = float(trace.bit_stuck[late].mean())
                 # the cycle of a run that turns steadily is that of its ripples: left out
@@ -702,7 +701,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             )
     run_rows = [{"label": r.label, **r.metrics} for r in runs]
     equivalent: list[dict[str, Any]] = []
-    smcs = [n for n in names if n in ("csmc", "msmc", "asmc", "proposed")]
+    smcs = [n for n in names if needs_full_state(n)]
     if not args.no_equivalent and smcs:
         cases = [
             _case(d, w * 1e3, r, args.condition) for w, r in COMPARE_POINTS for d in args.depths

@@ -228,3 +228,126 @@ def test_a_controller_name_is_found_without_importing_baselines() -> None:
         [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
     )
     assert out.stdout.strip() == "baselines.proposed"
+
+
+# --------------------------------------------------------------------- one home per fact
+ENV_IDS_HOME: Final = "drill_env/ids.py"
+"""The one module that spells the env ids; everything else imports them."""
+
+CONTROLLER_LISTS_ALLOWED: Final[dict[str, str]] = {
+    "experiments/realism.py:SPEED_LOOPS": "the loops whose margins the study derives",
+}
+"""Literal tuples, lists or sets of built-in controller names allowed, ``path:name`` -> why
+(families, full-state needs, rig loops and reference controllers come from
+:mod:`baselines.registry`)."""
+
+SEVERITY_LITERALS_ALLOWED: Final[dict[str, str]] = {
+    "experiments/plots.py:SEVERITY_LIMIT": "the top of the maps' colour scale, not a threshold",
+}
+"""Numbers bound to a severity name outside :mod:`drill_env.metrics`, ``path:name`` -> why."""
+
+
+def _docstrings(tree: ast.AST) -> set[int]:
+    """The ``id`` of every docstring constant (module, class, function, attribute)."""
+    found: set[int] = set()
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        if not isinstance(body, list):
+            continue
+        for k, statement in enumerate(body):
+            is_doc = isinstance(statement, ast.Expr) and isinstance(statement.value, ast.Constant)
+            if is_doc and (k == 0 or isinstance(body[k - 1], ast.Assign | ast.AnnAssign)):
+                found.add(id(statement.value))
+    return found
+
+
+def _package_trees() -> list[tuple[str, ast.Module]]:
+    return [
+        (str(path.relative_to(ROOT)), ast.parse(path.read_text(), filename=str(path)))
+        for package in FLOORS
+        for path in _sources(package)
+    ]
+
+
+def _bound_name(tree: ast.Module, node: ast.AST) -> str:
+    """The name a top-level or class-level assignment containing ``node`` binds, or the line."""
+    for statement in ast.walk(tree):
+        if isinstance(statement, ast.Assign | ast.AnnAssign) and any(
+            n is node for n in ast.walk(statement)
+        ):
+            targets = statement.targets if isinstance(statement, ast.Assign) else [statement.target]
+            names = [t.id for t in targets if isinstance(t, ast.Name)]
+            if names:
+                return names[0]
+    return f"line {getattr(node, 'lineno', '?')}"
+
+
+def test_env_ids_are_spelled_in_one_place() -> None:
+    """An env id as a string literal (docstrings aside) only in :data:`ENV_IDS_HOME`."""
+    from drill_env.ids import COUPLED_ENV_ID, ENV_ID, FIELD_ENV_ID
+
+    ids = {ENV_ID, FIELD_ENV_ID, COUPLED_ENV_ID}
+    offenders = [
+        f"{path}:{node.lineno}: {node.value!r}"
+        for path, tree in _package_trees()
+        if path != ENV_IDS_HOME
+        for docs in [_docstrings(tree)]
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Constant) and node.value in ids and id(node) not in docs
+    ]
+    assert not offenders, "import the id from drill_env.ids:\n" + "\n".join(offenders)
+
+
+def test_controller_names_are_not_listed_by_hand() -> None:
+    """No literal tuple, list or set of two or more built-in controller names: the families
+    and the rest are read from :mod:`baselines.registry`."""
+    from baselines.registry import BUILT_IN
+
+    offenders = []
+    for path, tree in _package_trees():
+        if path == "baselines/registry.py":
+            continue
+        for node in ast.walk(tree):
+            if not isinstance(node, ast.Tuple | ast.List | ast.Set):
+                continue
+            names = [
+                e.value for e in node.elts if isinstance(e, ast.Constant) and e.value in BUILT_IN
+            ]
+            key = f"{path}:{_bound_name(tree, node)}"
+            if len(names) >= 2 and key not in CONTROLLER_LISTS_ALLOWED:
+                offenders.append(f"{path}:{node.lineno}: {names}")
+    assert not offenders, "read the registry (baselines.registry):\n" + "\n".join(offenders)
+    assert len(CONTROLLER_LISTS_ALLOWED) <= 3
+
+
+def test_severity_thresholds_have_one_home() -> None:
+    """A number bound to a severity name (a constant or a default argument) only in
+    :mod:`drill_env.metrics`."""
+    offenders = []
+    for path, tree in _package_trees():
+        if path == "drill_env/metrics.py":
+            continue
+        for node in ast.walk(tree):
+            pairs: list[tuple[str, ast.AST | None]] = []
+            if isinstance(node, ast.Assign):
+                pairs = [(t.id, node.value) for t in node.targets if isinstance(t, ast.Name)]
+            elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+                pairs = [(node.target.id, node.value)]
+            elif isinstance(node, ast.arguments):
+                positional = [*node.posonlyargs, *node.args]
+                defaults = [None] * (len(positional) - len(node.defaults)) + list(node.defaults)
+                pairs = [(a.arg, d) for a, d in zip(positional, defaults, strict=True)]
+                pairs += [
+                    (a.arg, d) for a, d in zip(node.kwonlyargs, node.kw_defaults, strict=True)
+                ]
+            for name, value in pairs:
+                number = isinstance(value, ast.Constant) and type(value.value) in (int, float)
+                if (
+                    number
+                    and "severity" in name.lower()
+                    and f"{path}:{name}" not in (SEVERITY_LITERALS_ALLOWED)
+                ):
+                    offenders.append(
+                        f"{path}:{node.lineno if hasattr(node, 'lineno') else '?'}: {name}"
+                    )
+    assert not offenders, "read the threshold from drill_env.metrics:\n" + "\n".join(offenders)
