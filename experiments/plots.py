@@ -881,7 +881,8 @@ def metric_bars_figure(
     """A metric of a table of runs per group and hue, one panel per metric.
 
     Groups with long names (controllers) are listed down the value axis (horizontal bars),
-    many short ones (scenarios) along it, one panel per metric stacked. With ``zoom`` the values
+    many short ones (scenarios) along it, one panel per metric stacked; more than 12 long names
+    (the field comparison's controllers and observation modes) stand upright along it. With ``zoom`` the values
     are drawn as dots on an axis fitted to them (not from zero), each group labelled with the
     change of its last hue against its first, so differences of a few percent show.
 
@@ -906,7 +907,8 @@ def metric_bars_figure(
     metrics = [metric] if isinstance(metric, str) else list(metric)
     groups = list(dict.fromkeys(r[group] for r in rows))
     hues = list(dict.fromkeys(r[hue] for r in rows))
-    horizontal = max(len(str(g)) for g in groups) > 4 and len(groups) <= 12
+    long_names = max(len(str(g)) for g in groups) > 4
+    horizontal = long_names and len(groups) <= 12
     colors = {
         h: (color_of(str(h), k) if hue == "controller" else _PALETTE[k % len(_PALETTE)])
         for k, h in enumerate(hues)
@@ -916,13 +918,17 @@ def metric_bars_figure(
         fig = new_figure(4.4 * len(metrics) + 2.8, height)
         axes = fig.subplots(1, len(metrics), squeeze=False, sharey=True)[0]
     else:
+        upright = 0.09 * max(len(str(g)) for g in groups) if long_names else 0.0
         fig = new_figure(
-            max(8.0, 0.45 * len(groups) * max(len(hues), 2) / 2 + 2.5), 2.9 * len(metrics) + 1.0
+            max(8.0, 0.45 * len(groups) * max(len(hues), 2) / 2 + 2.5),
+            2.9 * len(metrics) + 1.0 + upright,
         )
         axes = fig.subplots(len(metrics), 1, squeeze=False, sharex=True)[:, 0]
     for ax, m in zip(axes, metrics, strict=True):
         _, _, value = _grouped(rows, m, group, hue)
         _draw_metric(ax, groups, hues, value, colors, horizontal, log, zoom)
+        if long_names and not horizontal:  # many long names along the axis: stand them up
+            ax.tick_params(axis="x", labelrotation=90)
         label = METRIC_LABELS.get(m, key_label(m))
         if log:
             label += ", log scale"
