@@ -46,6 +46,7 @@ from agents.model_format import (
     validate_json,
     write_safetensors,
 )
+from agents.policy import export_policy
 
 __all__ = [
     "CHECKPOINT_DIR",
@@ -138,7 +139,6 @@ def save_checkpoint(
     Returns:
         The folder.
     """
-    from agents.policy import export_policy
 
     tmp = folder.with_name(folder.name + ".partial")
     if tmp.exists():

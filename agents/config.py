@@ -23,6 +23,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
+from drill_env.ids import COUPLED_ENV_ID as _COUPLED_ENV_ID
+from drill_env.ids import ENV_ID
+from drill_env.ids import FIELD_ENV_ID as _FIELD_ENV_ID
 from drill_env.validation import shown
 
 __all__ = [
@@ -42,11 +45,11 @@ __all__ = [
 ]
 
 
-PAPER_ENV_ID: Final = "DrillString-v0"
+PAPER_ENV_ID: Final = ENV_ID
 """The paper's 4-DOF string: the env of the dataclass defaults."""
-FIELD_ENV_ID: Final = "DrillStringField-v0"
+FIELD_ENV_ID: Final = _FIELD_ENV_ID
 """The distributed field string with surface sensors, telemetry and a rig's top drive."""
-COUPLED_ENV_ID: Final = "DrillStringCoupled-v0"
+COUPLED_ENV_ID: Final = _COUPLED_ENV_ID
 """The 4-DOF string on the regenerative bit: two actions (top-drive torque and applied force)."""
 ENV_IDS: Final = (PAPER_ENV_ID, FIELD_ENV_ID, COUPLED_ENV_ID)
 """The envs ``drill-gym train`` trains on (``--env-id``)."""

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 import numpy.typing as npt
 
+import drill_env  # noqa: F401  (registers the envs)
 from agents.inference import GaussianMlp, ObsNorm, PolicySpec, stack_frames
 from agents.legacy_format import LEGACY_NORM_FILE, LEGACY_WEIGHTS_FILE, read_npz
 from agents.model_format import (
@@ -47,6 +48,7 @@ from agents.model_format import (
     validate_env_kwargs,
     write_model_files,
 )
+from baselines import controller_names
 from drill_env import COUPLED_ENV_ID
 from drill_env.layout import observation_size
 
@@ -413,7 +415,6 @@ def is_model_folder(folder: Path) -> bool:
 def _check_environment(config: ModelConfig, where: str, path: Path, base_controller: Any) -> None:
     """The config against ``DrillString-v0``: registered base controller, observation and
     action sizes."""
-    from baselines import controller_names
 
     if config.env_id == COUPLED_ENV_ID:
         _check_coupled(config, where)
@@ -471,8 +472,6 @@ def _check_coupled(config: ModelConfig, where: str) -> None:
 def _observation_size(env_id: str, env_kwargs: Mapping[str, Any]) -> int:
     """Length of the observation of ``env_id`` made with ``env_kwargs`` (an env is made)."""
     import gymnasium as gym
-
-    import drill_env  # noqa: F401  (registers the envs)
 
     env = gym.make(env_id, **env_kwargs)
     try:

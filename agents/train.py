@@ -43,9 +43,19 @@ import gymnasium as gym
 import numpy as np
 
 import drill_env  # noqa: F401  (registers DrillString-v0)
-from agents.checkpoints import CHECKPOINT_DIR, PREFIX, Checkpoint, find_last_checkpoint
-from agents.config import COUPLED_ENV_ID, FIELD_ENV_ID, PAPER_ENV_ID, TrainConfig
-from agents.policy import ResidualPolicy, is_model_folder, load_policy, policy_from_sb3
+from agents.checkpoints import (
+    CHECKPOINT_DIR,
+    PREFIX,
+    Checkpoint,
+    find_last_checkpoint,
+    load_checkpoint,
+    save_checkpoint,
+)
+from agents.config import COUPLED_ENV_ID, FIELD_ENV_ID, TrainConfig
+from agents.model_format import read_json
+from agents.policy import PICKLE_RISK, ResidualPolicy, is_model_folder, load_policy, policy_from_sb3
+from baselines import controller_names
+from baselines.registry import REFERENCE_CONTROLLER
 from drill_env import RewardWeights
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout
 from drill_env.limits import DEFAULT_TORQUE_LIMITS
@@ -75,15 +85,6 @@ set of ``drill-gym evaluate`` is a fixed list of scenarios)."""
 RMSD_TARGET = 0.99
 """Model selection on validation: score = mean IAE ratio + 10 x the mean RMSD ratio's excess
 over this (a 1 % margin below the base controller's RMSD)."""
-
-
-REFERENCE_CONTROLLER: Final = {
-    PAPER_ENV_ID: "proposed",
-    FIELD_ENV_ID: "soft_speed",
-    COUPLED_ENV_ID: "stiff_pi",
-}
-"""The controller a from-scratch agent (``--base-controller none``) is validated against, per
-env (a residual agent is validated against its own base controller)."""
 
 
 def validation_scenarios(config: TrainConfig) -> tuple[dict[str, Any], list[int]]:
@@ -319,8 +320,6 @@ def _check_settings(config: TrainConfig) -> None:
     """User errors that need no training: base controller, progress bar packages."""
     import importlib.util
 
-    from baselines import controller_names
-
     names = controller_names()
     if config.base_controller.lower() != "none" and config.base_controller not in names:
         raise ValueError(
@@ -340,7 +339,6 @@ def _check_settings(config: TrainConfig) -> None:
 def _prepare_run_dir(config: TrainConfig, run_dir: Path) -> Checkpoint | None:
     """The checkpoint to resume (``--resume``), after refusing a run folder that already
     holds files unless ``--resume`` or ``--overwrite`` (which deletes it) is given."""
-    from agents.policy import PICKLE_RISK
 
     if config.resume:
         last = find_last_checkpoint(run_dir)
@@ -394,7 +392,6 @@ def _start_line(config: TrainConfig, total: int, last: Checkpoint | None) -> str
 
 def _save_checkpoint(model: Any, venv: Any, config: TrainConfig, run_dir: Path) -> Path:
     """A checkpoint folder ``checkpoints/steps_N`` (:mod:`agents.checkpoints`)."""
-    from agents.checkpoints import save_checkpoint
 
     steps = int(model.num_timesteps)
     folder = run_dir / CHECKPOINT_DIR / f"{PREFIX}{steps}"
@@ -459,8 +456,6 @@ def train(config: TrainConfig, progress: bool = True) -> Path:
         )
         model.set_random_seed(config.seed + start_steps)
     else:
-        from agents.checkpoints import load_checkpoint
-
         model = make_model(config, venv)
         load_checkpoint(model, venv, last.path)
         model.set_random_seed(config.seed + start_steps)
@@ -606,8 +601,6 @@ class _Validation:
     (lowest mean IAE ratio plus a penalty on a mean RMSD ratio above ``RMSD_TARGET``)."""
 
     def __init__(self, config: TrainConfig, run_dir: Path, progress: bool = True) -> None:
-        from agents.model_format import read_json
-
         self.config = config
         self.progress = progress
         self.best_dir = run_dir / "best"

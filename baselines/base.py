@@ -85,6 +85,14 @@ class CompiledLawController:
     law: ClassVar[Any]
     error_slot: ClassVar[int] = -1
     gain_slot: ClassVar[int] = -1
+    family: ClassVar[str] = "other"
+    """The controller's family: ``sliding_mode`` (the paper's), ``speed_loop`` (the industry
+    top-drive speed loops) or ``other``."""
+    needs_full_state: ClassVar[bool] = False
+    """Whether the law is written on the whole 4-DOF state (on the field string read at its
+    probe nodes), so that it cannot run on surface signals alone."""
+    rig_loop: ClassVar[bool] = False
+    """Whether it is a stick-slip mitigation loop of rig software (SoftSpeed, Z-Torque)."""
 
     def __init__(
         self,

@@ -221,6 +221,8 @@ class SlidingModeController(CompiledLawController):
 
     gains_type: ClassVar[type[SurfaceGains]]
     variant: ClassVar[int]
+    family = "sliding_mode"
+    needs_full_state = True
     error_slot = S_SLIDING
     gain_slot = S_GAIN
     _design: ObserverDesign | None = None

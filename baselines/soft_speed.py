@@ -77,6 +77,7 @@ class SoftSpeed(SpeedLoopController):
     """PI speed loop tuned as a matched damper at the stick-slip frequency (SoftSpeed)."""
 
     name = "soft_speed"
+    rig_loop = True
     gains_type = SoftSpeedGains
 
     def tuning(

@@ -169,6 +169,8 @@ class SpeedLoopController(CompiledLawController):
         **overrides: Individual gains replacing those of ``gains`` (validated).
     """
 
+    family = "speed_loop"
+
     def tuning(
         self, model: DrillStringParameters | DistributedStringParameters | None = None
     ) -> SpeedLoopTuning:

@@ -51,6 +51,7 @@ from baselines.speed_loop import SpeedLoopController
 from baselines.stiff_pi import StiffPI, StiffPIGains
 from baselines.z_torque import ZTorque, ZTorqueGains
 from drill_env.distributed import DistributedStringParameters
+from drill_env.ids import ENV_ID, FIELD_ENV_ID
 from drill_env.parameters import DrillStringParameters
 from drill_env.validation import check_unknown, printable, shown
 
@@ -80,8 +81,8 @@ TUNABLE: Final[dict[str, type[Any]]] = {
 }
 """The loops whose factors can be tuned, with their gains dataclasses."""
 KIND_ENVS: Final = {
-    "DrillStringParameters": "DrillString-v0",
-    "DistributedStringParameters": "DrillStringField-v0",
+    "DrillStringParameters": ENV_ID,
+    "DistributedStringParameters": FIELD_ENV_ID,
 }
 """Plant kind (the type of the controller's model) -> the env its factors are tuned on."""
 _MAX_BYTES: Final = 1_000_000

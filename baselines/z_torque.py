@@ -78,6 +78,7 @@ class ZTorque(SpeedLoopController):
     """Stiff speed loop with an impedance-matched torque feedback on its set-point (Z-Torque)."""
 
     name = "z_torque"
+    rig_loop = True
     gains_type = ZTorqueGains
 
     def tuning(

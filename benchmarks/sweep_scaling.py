@@ -33,9 +33,8 @@ import time
 import numba
 import numpy as np
 
-from experiments.stick_slip_map import compute_map
+from experiments.stick_slip_map import MapStudy, compute_map
 from experiments.sweep import MAP_TASK_CELLS, Backend, ray_session, run_sweep
-from experiments.sweep_studies import MapStudy
 
 
 def _wall(function: object, *args: object, **kwargs: object) -> tuple[float, object]:

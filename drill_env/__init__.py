@@ -65,9 +65,7 @@ __all__ = [
 
 __version__ = "0.1.0"
 
-ENV_ID = "DrillString-v0"
-FIELD_ENV_ID = "DrillStringField-v0"
-COUPLED_ENV_ID = "DrillStringCoupled-v0"
+from drill_env.ids import COUPLED_ENV_ID, ENV_ID, FIELD_ENV_ID  # noqa: E402
 
 # No registered step limit: the envs truncate themselves after ``episode_s`` and report the
 # number of decisions that takes as ``env.spec.max_episode_steps``.

@@ -77,7 +77,13 @@ from drill_env.layout import (
 )
 from drill_env.limits import MAX_SPEED_RAD_S, TorqueLimits
 from drill_env.parameters import PRESETS, DrillStringParameters
-from drill_env.validation import check_choice, check_finite_fields, check_range, require
+from drill_env.validation import (
+    check_choice,
+    check_finite_fields,
+    check_range,
+    check_unknown,
+    require,
+)
 
 __all__ = [
     "ACTION_MODES",
@@ -788,8 +794,6 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
     metadata: dict[str, Any] = {"render_modes": list(render.RENDER_MODES), "render_fps": 20}
 
     def __init__(self, render_mode: str | None = None, **keywords: Any) -> None:
-        from drill_env.validation import check_unknown
-
         check_unknown(keywords, [f.name for f in dataclasses.fields(CoupledEnvConfig)])
         render.check_render_mode(render_mode)
         self.render_mode = render_mode

@@ -16,6 +16,7 @@ import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
 
+from drill_env.ids import ENV_ID
 from drill_env.layout import (
     N_RECORD,
     N_STATE,
@@ -251,7 +252,7 @@ def run_episode(
 ) -> Trace:
     """One episode of ``gym.make("DrillString-v0", **env_kwargs)`` under ``policy`` (the env
     is made, rolled out and closed)."""
-    env = gym.make("DrillString-v0", **env_kwargs)
+    env = gym.make(ENV_ID, **env_kwargs)
     try:
         return rollout(env, policy, seed, options)
     finally:

@@ -14,7 +14,10 @@ import numpy.typing as npt
 
 __all__ = [
     "METRIC_KEYS",
+    "METRIC_LABELS",
     "SEVERITY_WINDOW_S",
+    "STEADY_SEVERITY",
+    "STICK_SLIP_SEVERITY",
     "WindowStatistics",
     "episode_metrics_from_samples",
     "stick_slip_severity",
@@ -24,6 +27,10 @@ SEVERITY_WINDOW_S: Final = 20.0
 """Stick-slip severity is measured over the last this many seconds, s."""
 SETTLING_BAND: Final = 0.05
 """Settling band as a fraction of the reference speed."""
+STICK_SLIP_SEVERITY: Final = 0.5
+"""A run stick-slips when its severity exceeds this (or its bit sticks) in the window."""
+STEADY_SEVERITY: Final = 0.1
+"""Below this severity a run turns steadily (it has no stick-slip cycle to time)."""
 
 METRIC_KEYS: Final = (
     "ise",
@@ -36,6 +43,19 @@ METRIC_KEYS: Final = (
     "stick_slip_severity",
     "stuck_fraction",
 )
+
+METRIC_LABELS: Final[dict[str, str]] = {
+    "ise": "ISE (rad$^2$/s)",
+    "iae": "IAE (rad)",
+    "rmse": "RMSE (rad/s)",
+    "rmsd_nm": "RMSD of the torque (N m)",
+    "overshoot_pct": "overshoot (%)",
+    "settling_time_s": "settling time (s)",
+    "chattering_nm_per_s": "chattering (N m/s)",
+    "stick_slip_severity": "stick-slip severity",
+    "stuck_fraction": "stuck fraction",
+}
+"""Axis label (with unit) of each key of :data:`METRIC_KEYS`."""
 
 
 def stick_slip_severity(high: Any, low: Any, mean: Any) -> Any:

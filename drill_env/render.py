@@ -47,6 +47,7 @@ from typing import Any, Final
 import numpy as np
 import numpy.typing as npt
 
+from drill_env.ids import ENV_ID
 from drill_env.validation import shown
 
 __all__ = [
@@ -629,7 +630,7 @@ class HumanWindow:
             which, and suggests ``render_mode="rgb_array"``).
     """
 
-    def __init__(self, fps: float, title: str = "DrillString-v0") -> None:
+    def __init__(self, fps: float, title: str = ENV_ID) -> None:
         problem = human_mode_problem()
         if problem is not None:
             raise RuntimeError(problem)

@@ -58,10 +58,14 @@ from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 
+from agents.policy import load_policy
+from drill_env.control import controller_names
+from drill_env.distributed import DISTRIBUTED_PRESETS
 from drill_env.evaluation import Policy, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
 from drill_env.scenarios import WobProfile
 from experiments.arguments import (
+    SEED_HIGH,
     ArgumentParser,
     number_type,
     one_line,
@@ -74,6 +78,7 @@ from experiments.controllers import (
     is_user_controller,
     resolve_controller_name,
 )
+from experiments.evaluate import shipped_models
 from experiments.field import (
     CONTROLLER_MODELS,
     ENV_IDS,
@@ -85,7 +90,7 @@ from experiments.field import (
     run_on,
 )
 from experiments.heldout import HeldOutScenario, held_out_scenario
-from experiments.plots import METRIC_LABELS
+from experiments.plots import METRIC_LABELS, save_figure
 from experiments.tables import json_clean, write_csv
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -298,8 +303,6 @@ _FRICTION_KEYS: Final = ("name", "mu_a", "mu_0_ratio", "xi", "mud_damping_factor
 
 
 def _seeds(r: _Reader) -> tuple[int, ...]:
-    from experiments.arguments import SEED_HIGH
-
     seeds = r.data["seeds"]
     ok = (
         isinstance(seeds, list)
@@ -350,8 +353,6 @@ def _paper_scenario(r: _Reader, noise: float) -> SuiteScenario:
 
 
 def _field_scenario(r: _Reader, noise: float, controller_model: str) -> SuiteScenario:
-    from drill_env.distributed import DISTRIBUTED_PRESETS
-
     seeds = _seeds(r)
     wob, step, final = _wob(r)
     f = _Reader(r.data["friction"], f"{r.where}.friction", _FRICTION_KEYS)
@@ -535,12 +536,9 @@ def make_entry(text: str) -> Entry:
         ValueError: naming ``text`` and what it could have been.
         FileNotFoundError: for an incomplete model folder.
     """
-    from drill_env.control import controller_names
 
     path = Path(text)
     if text not in controller_names() and ":" not in text and path.exists():
-        from agents.policy import load_policy
-
         agent = load_policy(path)
         return Entry(agent.name, agent, text)
     try:
@@ -552,9 +550,6 @@ def make_entry(text: str) -> Entry:
 
 
 def _default_entries() -> list[str]:
-    from drill_env.control import controller_names
-    from experiments.evaluate import shipped_models
-
     return [*controller_names(), *(str(p) for p in shipped_models())]
 
 
@@ -1046,8 +1041,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         write_csv(rows, out / "runs.csv", RUN_KEYS),
     ]
     if not args.no_plots:
-        from experiments.plots import save_figure
-
         written.append(save_figure(profiles_figure(suites, rows), out / "profiles.png"))
     for suite in suites:
         print(f"{suite.label} ({suite.env_id}, reference {suite.reference}):")

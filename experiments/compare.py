@@ -32,10 +32,12 @@ Example::
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import sys
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final, NamedTuple
 
@@ -43,6 +45,10 @@ import numpy as np
 from tqdm import tqdm
 
 import baselines  # noqa: F401  (registers the built-in controllers, in their order)
+from agents import DEFAULT_MODEL_DIR, load_policy
+from agents.config import TrainConfig
+from agents.policy import is_model_folder
+from baselines.registry import family_members
 from drill_env.control import controller_names, make_controller
 from drill_env.evaluation import Trace, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
@@ -75,7 +81,35 @@ from experiments.field import (
     run_on,
 )
 from experiments.paths import output_file
-from experiments.sweep import COMPARE_TASK_RUNS, add_sweep_options, sweep_requested
+from experiments.plots import (
+    adaptive_gains_figure,
+    downsample,
+    envelope,
+    metric_bars_figure,
+    panels_figure,
+    save_figure,
+    speed_torque_figure,
+    time_window,
+    value_label,
+)
+from experiments.results_db import Exactly, Fields, Flag, Name, Number, Schema, exactly
+from experiments.sweep import (
+    COMPARE_TASK_RUNS,
+    SweepOutcome,
+    Task,
+    TaskResult,
+    add_sweep_options,
+    agent_fingerprint,
+    backend_from_args,
+    check_controllers,
+    check_observations,
+    check_task_size,
+    chunks,
+    report_outcome,
+    results_path_from_args,
+    run_sweep,
+    sweep_requested,
+)
 from experiments.tables import Column, write_csv, write_json
 from experiments.tables import markdown_table as _markdown
 
@@ -91,19 +125,24 @@ __all__ = [
     "PAPER_CONTROLLERS",
     "RESCALED_GAINS",
     "ROW_KEYS",
-    "Case",
-    "RunTraces",
     "SCENARIO",
+    "Case",
+    "CompareJob",
+    "CompareStudy",
+    "RunTraces",
+    "compare_item",
+    "compare_runs_task",
     "comparison_cases",
     "comparison_figures",
     "default_controllers",
     "main",
     "markdown_table",
+    "run_compare_sweep",
     "run_comparison",
     "write_figures",
 ]
 
-PAPER_CONTROLLERS: Final = ("csmc", "msmc", "asmc", "proposed")
+PAPER_CONTROLLERS: Final = family_members("sliding_mode")
 """The paper's four controllers, listed first in every table."""
 
 CONDITIONS: Final = tuple(UNCERTAINTY_CONDITIONS)
@@ -439,8 +478,6 @@ def run_comparison(
         metrics = {**episode_metrics(trace), "static_error_rad_s": static_error(trace)}
         rows.append(_row(label, observation, case, noise, metrics, gain_label, seed, duration_s))
         if keep_traces:
-            from experiments.plots import downsample, envelope, time_window
-
             traces[(name, case.name, noise)] = RunTraces(
                 downsample(trace, PLOT_EVERY),
                 time_window(trace, max(trace.duration_s - TAIL_S, 0.0)),
@@ -556,14 +593,7 @@ def summary_table(rows: Sequence[Mapping[str, Any]]) -> str:
     return _markdown(ranked_summary(rows), SUMMARY_COLUMNS)
 
 
-INDUSTRY_CONTROLLERS: Final = (
-    "stiff_pi",
-    "stiff_pi_tuned",
-    "soft_speed",
-    "soft_speed_tuned",
-    "z_torque",
-    "z_torque_tuned",
-)
+INDUSTRY_CONTROLLERS: Final = family_members("speed_loop")
 """The industry top-drive speed loops, default and tuned (:mod:`baselines.tuned`), drawn
 together in the noise figure."""
 
@@ -620,13 +650,6 @@ def comparison_figures(
     (:func:`experiments.field.run_label`) and its figure names use
     :func:`experiments.field.file_label`.
     """
-    from experiments.plots import (
-        adaptive_gains_figure,
-        metric_bars_figure,
-        panels_figure,
-        speed_torque_figure,
-        value_label,
-    )
 
     field = bool(rows) and "scenario" in rows[0]
     case_key, case_title = (
@@ -746,7 +769,6 @@ def write_figures(
     focus: str | None = None,
 ) -> list[Path]:
     """Write :func:`comparison_figures` as PNG files into ``folder``; returns their paths."""
-    from experiments.plots import save_figure
 
     folder.mkdir(parents=True, exist_ok=True)
     return [
@@ -761,9 +783,6 @@ def shipped_agent(env_id: str = PAPER_ENV) -> Any:
     training recipe writes (``agents.config.TrainConfig.for_env(env_id).exp_name``:
     ``residual_ppo`` on ``DrillString-v0``, ``field_agent`` on ``DrillStringField-v0``), or
     ``None`` when it is not shipped."""
-    from agents import DEFAULT_MODEL_DIR, load_policy
-    from agents.config import TrainConfig
-    from agents.policy import is_model_folder
 
     folder = DEFAULT_MODEL_DIR / TrainConfig.for_env(env_id).exp_name
     return load_policy(folder) if is_model_folder(folder) else None
@@ -978,8 +997,6 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
     start = time.perf_counter()
     figures = not args.no_plots
     if sweep_requested(args):  # on the sweep runner: Ray, a results database, a resume
-        from experiments.sweep_studies import run_compare_sweep
-
         rows, traces, figures = run_compare_sweep(
             args,
             list(dict.fromkeys(controllers)),
@@ -1054,3 +1071,266 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
 
 if __name__ == "__main__":  # pragma: no cover
     raise SystemExit(main())
+
+
+# ------------------------------------------------------------------- sweep adapter
+# ----------------------------------------------------------------------------- compare
+class CompareJob(NamedTuple):
+    """One run of a comparison, as the task that makes it needs it."""
+
+    label: str
+    """The controller's name, or the agent's."""
+    observation: str | None
+    """The field env's observation mode of the run (``None`` on ``DrillString-v0``)."""
+    is_agent: bool
+    """Whether the run is the agent's."""
+    case: Any
+    """The :class:`experiments.compare.Case` of the run."""
+    noise: float
+    """Measurement noise on the speeds, rad/s."""
+
+    @property
+    def run_label(self) -> str:
+        """``label``, with the observation mode in brackets on the field string."""
+        return run_label({"controller": self.label, "observation": self.observation})
+
+    @property
+    def item(self) -> str:
+        """The item key of the run."""
+        return compare_item(self.run_label, self.case.name, self.noise)
+
+
+def compare_runs_task(
+    runs: Sequence[CompareJob],
+    duration_s: float,
+    seed: int,
+    reading: str,
+    gains: str,
+    agent: Any,
+    keep_traces: bool,
+    env_id: str = PAPER_ENV,
+) -> TaskResult:
+    """Runs of the comparison, each one :func:`experiments.compare.run_comparison` of one
+    controller (or the agent), with one observation mode, on one case and one noise level;
+    records by :attr:`CompareJob.item`, extras: the light traces by ``(run label, case,
+    noise)``."""
+
+    records: dict[str, dict[str, Any]] = {}
+    traces: dict[tuple[str, str, float], Any] = {}
+    for job in runs:
+        rows, run_traces = run_comparison(
+            [] if job.is_agent else [job.label], [job.case.name], [job.noise],
+            duration_s=duration_s, seed=seed, reading=reading, gains=gains,
+            agent=agent if job.is_agent else None, keep_traces=keep_traces, progress=False,
+            env_id=env_id, cases=[job.case],
+            observations=OBSERVATIONS if job.observation is None else [job.observation],
+        )  # fmt: skip
+        assert len(rows) == 1, f"{job.item} made {len(rows)} rows"
+        records[job.item] = rows[0]
+        traces.update(run_traces)
+    return TaskResult(records, traces or None)
+
+
+def compare_item(label: str, condition: str, noise: float) -> str:
+    """The item key of one comparison run (``label``: the run label, with the observation
+    mode on the field string; ``condition``: the case's name)."""
+    return f"{label}/{condition}/noise={float(noise)!r}"
+
+
+@dataclass(frozen=True)
+class CompareStudy:
+    """The comparison (:func:`experiments.compare.run_comparison`) on the sweep runner: an
+    item is one run (controller or agent, observation mode, case, noise), a task
+    ``task_runs`` of them.
+
+    Attributes: as :func:`experiments.compare.run_comparison` and
+    :func:`experiments.compare.comparison_cases` (``conditions`` are the paper's Table 3
+    conditions on ``DrillString-v0``, the field conditions on ``DrillStringField-v0``;
+    ``depths_m``, ``controller_model`` and ``observations`` are the field string's), plus
+    ``task_runs``, the runs per task (does not change the numbers). The agent runs only on its
+    own env (its ``env_id``, ``DrillString-v0`` when it has none).
+    """
+
+    controllers: tuple[str, ...]
+    conditions: tuple[str, ...]
+    noises: tuple[float, ...]
+    duration_s: float
+    seed: int = 0
+    reading: str = "plant"
+    gains: str = "paper"
+    agent: Any = field(default=None, compare=False)
+    keep_traces: bool = False
+    task_runs: int = COMPARE_TASK_RUNS
+    name: str = "compare"
+    env_id: str = PAPER_ENV
+    depths_m: tuple[float, ...] = COMPARE_DEPTHS_M
+    controller_model: str = "nominal"
+    observations: tuple[str, ...] = OBSERVATIONS
+
+    def __post_init__(self) -> None:
+        check_controllers(self.controllers)
+        for label, values in (("conditions", self.conditions), ("noises", self.noises)):
+            if not values:
+                raise ValueError(f"{label} = [] is empty: the comparison needs at least one")
+        if self.gains not in GAIN_PRESETS:
+            raise ValueError(f"gains = {self.gains!r}: allowed {', '.join(GAIN_PRESETS)}")
+        decision_period(self.duration_s)
+        check_task_size("task_runs", self.task_runs)
+        if is_field(self.env_id):
+            check_observations(self.observations)
+            if not self.depths_m:
+                raise ValueError("depths_m = [] is empty: the comparison needs at least one")
+        for case in self.cases():  # unknown conditions, bad depths
+            if case.field is not None:
+                case.field.nominal_string()
+
+    def cases(self) -> list[Any]:
+        """The cases (:func:`experiments.compare.comparison_cases`), in table order."""
+
+        return comparison_cases(
+            self.env_id,
+            list(self.conditions),
+            reading=self.reading,
+            depths_m=[float(d) for d in self.depths_m],
+            controller_model=self.controller_model,
+        )
+
+    def jobs(self) -> list[CompareJob]:
+        """The runs in table order, as :func:`experiments.compare.run_comparison` makes them:
+        each controller with each observation mode it can use (the agent last, on its own env
+        only), on each case, at each noise level."""
+        field_env = is_field(self.env_id)
+        labels: list[tuple[str, str | None, bool]] = []
+        for c in self.controllers:
+            modes = observations_of(c, self.observations) if field_env else (None,)
+            labels += [(c, o, False) for o in modes]
+        if self.agent_runs:
+            own = dict(self.agent.env_kwargs).get("observation", "surface") if field_env else None
+            labels.append((str(self.agent.name), own, True))
+        cases = self.cases()
+        return [
+            CompareJob(label, obs, is_agent, case, float(n))
+            for label, obs, is_agent in labels
+            for case in cases
+            for n in self.noises
+        ]
+
+    @property
+    def agent_runs(self) -> bool:
+        """Whether the agent runs (there is one, and it is for this env)."""
+        return self.agent is not None and getattr(self.agent, "env_id", PAPER_ENV) == self.env_id
+
+    def spec(self) -> dict[str, Any]:
+        """The comparison's settings (not the task size, nor whether traces are kept)."""
+        return {
+            "env_id": self.env_id,
+            "jobs": [
+                [j.label, j.observation, j.is_agent, j.case.name, j.noise] for j in self.jobs()
+            ],
+            "cases": [[c.name, c.head, c.tail] for c in self.cases()],
+            "duration_s": float(self.duration_s),
+            "seed": int(self.seed),
+            "reading": self.reading,
+            "gains": self.gains,
+            "agent": agent_fingerprint(self.agent) if self.agent_runs else None,
+        }
+
+    def items(self) -> list[str]:
+        """One item per run."""
+        return [j.item for j in self.jobs()]
+
+    @functools.cached_property
+    def _job_of_item(self) -> dict[str, CompareJob]:
+        return {j.item: j for j in self.jobs()}
+
+    def record_schema(self, item: str) -> Schema:
+        """A run's row: the run's controller (or agent), observation mode, case and noise,
+        the metrics (numbers, ``None``: not defined), ``diverged`` and the settings, each
+        setting this study's."""
+        job = self._job_of_item[item]
+        head: dict[str, Any] = {"controller": job.label}
+        if job.observation is not None:
+            head["observation"] = job.observation
+        head.update(job.case.head)
+        head["noise_std_rad_s"] = float(job.noise)
+        return Fields(
+            {
+                **exactly(head),
+                **{key: Number() for key in (*METRIC_KEYS, "static_error_rad_s")},
+                "diverged": Flag(),
+                "gains": Name(),
+                **exactly(job.case.tail),
+                "seed": Exactly(int(self.seed)),
+                "duration_s": Exactly(float(self.duration_s)),
+            }
+        )
+
+    def tasks(self, missing: Sequence[str]) -> list[Task]:
+        """``task_runs`` missing runs per task."""
+        wanted = set(missing)
+        jobs = [j for j in self.jobs() if j.item in wanted]
+        return [
+            Task(
+                key="/".join(j.item for j in block),
+                function=compare_runs_task,
+                kwargs={
+                    "runs": block,
+                    "duration_s": self.duration_s,
+                    "seed": self.seed,
+                    "reading": self.reading,
+                    "gains": self.gains,
+                    "agent": self.agent if any(j.is_agent for j in block) else None,
+                    "keep_traces": self.keep_traces,
+                    "env_id": self.env_id,
+                },
+                items=tuple(j.item for j in block),
+            )
+            for block in chunks(jobs, self.task_runs)
+        ]
+
+    def results(
+        self, outcome: SweepOutcome
+    ) -> tuple[list[dict[str, Any]], dict[tuple[str, str, float], Any]]:
+        """The rows in table order and the traces of the runs made this time."""
+        rows = [outcome.records[k] for k in self.items()]
+        traces: dict[tuple[str, str, float], Any] = {}
+        for extras in outcome.extras.values():
+            traces.update(extras)
+        return rows, traces
+
+
+def run_compare_sweep(
+    args: Any,
+    controllers: Sequence[str],
+    conditions: Sequence[str],
+    noises: Sequence[float],
+    agent: Any,
+    keep_traces: bool,
+) -> tuple[list[dict[str, Any]], dict[tuple[str, str, float], Any], bool]:
+    """``drill-gym compare`` on the sweep runner (on ``args.env``): the rows, the traces and
+    whether every run has its traces (not when some were read from the results file)."""
+
+    study = CompareStudy(
+        tuple(controllers),
+        tuple(conditions),
+        tuple(float(n) for n in noises),
+        duration_s=args.duration,
+        seed=args.seed,
+        reading=args.reading,
+        gains=args.gains,
+        agent=agent,
+        keep_traces=keep_traces,
+        task_runs=args.task_size or COMPARE_TASK_RUNS,
+        env_id=args.env,
+        depths_m=tuple(dict.fromkeys(float(d) for d in args.depths)),
+        controller_model=args.controller_model,
+        observations=tuple(dict.fromkeys(args.observations)),
+    )
+    backend = backend_from_args(args)
+    path = results_path_from_args(args, Path(args.out) / "compare.sqlite")
+    outcome = run_sweep(
+        study, backend, path, args.resume, not args.no_progress, overwrite=args.overwrite
+    )
+    report_outcome(study.name, outcome, backend)
+    rows, traces = study.results(outcome)
+    return rows, traces, outcome.loaded == 0

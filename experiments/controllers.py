@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from drill_env.control import controller_names, register_controller
+from experiments.sweep import backend_from_args
 
 __all__ = [
     "CONTROLLERS_HELP",
@@ -277,7 +278,6 @@ def refuse_on_ray(
 ) -> None:
     """``fail("--controllers", message)`` when a user's class is to run on Ray: it is
     registered in this process only, and Ray's workers are other processes."""
-    from experiments.sweep import backend_from_args
 
     mine = user_controllers(names)
     if mine and backend_from_args(args).distributed:

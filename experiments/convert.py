@@ -7,6 +7,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Final
 
+from agents.convert import convert_model
+from agents.policy import PICKLE_RISK
 from experiments.arguments import ArgumentParser
 
 __all__ = ["DESCRIPTION", "main"]
@@ -31,8 +33,6 @@ examples:
 
 
 def _parser() -> ArgumentParser:
-    from agents.policy import PICKLE_RISK
-
     parser = ArgumentParser(prog="drill-gym convert", description=DESCRIPTION)
     parser.add_argument(
         "old", metavar="OLD", help="the old model folder, or a Stable-Baselines3 .zip file"
@@ -55,7 +55,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             holds other files.
         FileNotFoundError: OLD or one of its files does not exist.
     """
-    from agents.policy import PICKLE_RISK
 
     parser = _parser()
     args = parser.parse_args(list(argv) if argv is not None else None)
@@ -68,7 +67,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"OLD = {args.old!r} does not exist: expected a model folder or a Stable-Baselines3 "
             ".zip file"
         )
-    from agents.convert import convert_model
 
     policy = convert_model(args.old, args.new, trust_pickle=args.trust_pickle)
     print(f"converted {policy.name} from {args.old} to {args.new}")

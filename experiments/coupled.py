@@ -40,6 +40,7 @@ from drill_env.coupled import (
     stability_map,
 )
 from experiments.arguments import ArgumentParser, number_type
+from experiments.plots import save_figure
 from experiments.tables import Column, markdown_table, write_json
 
 __all__ = ["FEATURE_COLUMNS", "main", "stability_figure"]
@@ -340,8 +341,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     written = [write_json(result, out / "coupled.json", indent=2)]
     if not args.no_map and not args.no_plots:
-        from experiments.plots import save_figure
-
         fig = stability_figure(
             forces_n,
             args.speeds,

@@ -34,6 +34,7 @@ import math
 import sys
 import time
 from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
@@ -48,6 +49,7 @@ from agents.policy import (
     is_model_folder,
     load_policy,
 )
+from baselines.registry import REFERENCE_CONTROLLER, rig_loops
 from drill_env.control import controller_names
 from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
@@ -74,7 +76,32 @@ from experiments.heldout import (
     held_out_set,
 )
 from experiments.paths import output_file
-from experiments.sweep import EVALUATE_TASK_SCENARIOS, add_sweep_options, sweep_requested
+from experiments.plots import (
+    downsample,
+    envelope,
+    metric_bars_figure,
+    panels_figure,
+    save_figure,
+    speed_torque_figure,
+)
+from experiments.results_db import Fields, Flag, Name, Number, Schema, Text, Values, exactly
+from experiments.sweep import (
+    EVALUATE_TASK_SCENARIOS,
+    SweepOutcome,
+    Task,
+    TaskResult,
+    add_sweep_options,
+    agent_fingerprint,
+    backend_from_args,
+    check_controllers,
+    check_observations,
+    check_task_size,
+    chunks,
+    report_outcome,
+    results_path_from_args,
+    run_sweep,
+    sweep_requested,
+)
 from experiments.tables import write_csv, write_json
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -82,23 +109,26 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "BASE_CONTROLLER",
-    "RIG_LOOPS",
     "EPISODE_S",
     "FIELD_HELD_OUT",
     "HELD_OUT",
+    "RIG_LOOPS",
+    "EvaluateStudy",
     "HeldOutScenario",
     "evaluate",
+    "evaluate_scenarios_task",
+    "goal_report",
     "heldout_figures",
     "main",
+    "run_evaluate_sweep",
     "run_scenario",
-    "goal_report",
     "summarize",
     "write_figures",
 ]
 
-BASE_CONTROLLER: Final = "proposed"
+BASE_CONTROLLER: Final = REFERENCE_CONTROLLER[PAPER_ENV]
 """The controller the goal is measured against."""
-RIG_LOOPS: Final = ("soft_speed", "z_torque", "soft_speed_tuned", "z_torque_tuned")
+RIG_LOOPS: Final = rig_loops()
 """The industry speed loops an agent of the field string is compared with (on surface signals,
 as on a rig), those of them that are registered: :func:`versus_rig_loops`."""
 
@@ -487,13 +517,6 @@ def heldout_figures(
     """The held-out figures as (file name, figure): bit speed and torque (base controller
     against the agents) of each of :data:`FIGURE_SCENARIOS`, small multiples of the bit speed
     and of the torque of every scenario, and IAE and severity per scenario."""
-    from experiments.plots import (
-        downsample,
-        envelope,
-        metric_bars_figure,
-        panels_figure,
-        speed_torque_figure,
-    )
 
     first_row = {r["scenario"]: r for r in reversed(rows)}
     scenario_ids = list(dict.fromkeys(r["scenario"] for r in rows))
@@ -556,7 +579,6 @@ def write_figures(
     out: Path,
 ) -> list[Path]:
     """Write :func:`heldout_figures` as PNG files into ``out``; returns their paths."""
-    from experiments.plots import save_figure
 
     return [
         save_figure(fig, output_file(out, name))
@@ -767,8 +789,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     keep = [*bases, *agent_labels]
     figures = not args.no_plots
     if sweep_requested(args):  # on the sweep runner: Ray, a results database, a resume
-        from experiments.sweep_studies import run_evaluate_sweep
-
         rows, traces, figures = run_evaluate_sweep(args, agents, controllers, scenarios, keep)
         if not args.no_plots and not figures:
             print("no figures: runs read from the results file keep no traces (rerun without "
@@ -820,3 +840,157 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"wrote {len(written)} files to {out}/"
     )
     return 0
+
+
+# ------------------------------------------------------------------- sweep adapter
+# ----------------------------------------------------------------------------- evaluate
+def evaluate_scenarios_task(
+    scenarios: Sequence[Any],
+    agents: Sequence[Any],
+    controllers: Sequence[str] | None,
+    keep_traces: Sequence[str],
+    env_id: str = PAPER_ENV,
+    observations: Sequence[str] = OBSERVATIONS,
+) -> TaskResult:
+    """Held-out scenarios, each run by every controller (with each observation mode it can use
+    on the field string) and agent (:func:`experiments.evaluate.evaluate` on ``env_id``); one
+    record per scenario id (``rows``: its rows in table order), extras: the kept traces by
+    ``(scenario id, run label)``."""
+
+    rows, traces = evaluate(
+        list(agents),
+        controllers,
+        list(scenarios),
+        keep_traces=keep_traces,
+        env_id=env_id,
+        observations=list(observations),
+    )
+    records = {s.id: {"rows": [r for r in rows if r["scenario"] == s.id]} for s in scenarios}
+    return TaskResult(records, traces or None)
+
+
+@dataclass(frozen=True)
+class EvaluateStudy:
+    """The held-out evaluation (:func:`experiments.evaluate.evaluate`) on the sweep runner: an
+    item is one held-out scenario run by every controller and agent (the controllers run with
+    the first agent's decision period, so a scenario is the unit), a task ``task_scenarios`` of
+    them.
+
+    Attributes: as :func:`experiments.evaluate.evaluate` (``env_id``, and on the field string
+    ``observations``: the modes the controllers run with), plus ``task_scenarios`` (does not
+    change the numbers).
+    """
+
+    agents: tuple[Any, ...]
+    controllers: tuple[str, ...] | None
+    scenarios: tuple[Any, ...]
+    keep_traces: tuple[str, ...] = ()
+    task_scenarios: int = EVALUATE_TASK_SCENARIOS
+    name: str = "evaluate"
+    env_id: str = PAPER_ENV
+    observations: tuple[str, ...] = OBSERVATIONS
+
+    def __post_init__(self) -> None:
+        if self.controllers is not None:
+            check_controllers(self.controllers)
+        if not self.scenarios:
+            raise ValueError("scenarios = [] is empty: the evaluation needs at least one")
+        check_task_size("task_scenarios", self.task_scenarios)
+        field_env = is_field(self.env_id)
+        if field_env:
+            check_observations(self.observations)
+        for s in self.scenarios:
+            if (s.field is not None) != field_env:
+                raise ValueError(
+                    f"scenario {s.id!r} is not a held-out scenario of {self.env_id}: "
+                    f"{'f01-f16' if field_env else 'h01-h20'} are"
+                )
+        ids = [s.id for s in self.scenarios]
+        if len(set(ids)) != len(ids):
+            raise ValueError(f"scenarios = {ids!r}: each held-out scenario at most once")
+
+    def spec(self) -> dict[str, Any]:
+        """The evaluation's settings (not the task size, nor which traces are kept)."""
+        return {
+            "env_id": self.env_id,
+            "scenarios": [s.row() for s in self.scenarios],
+            "controllers": None if self.controllers is None else list(self.controllers),
+            "observations": list(self.observations) if is_field(self.env_id) else None,
+            "agents": [agent_fingerprint(a) for a in self.agents],
+        }
+
+    def items(self) -> list[str]:
+        """One item per held-out scenario."""
+        return [s.id for s in self.scenarios]
+
+    def record_schema(self, item: str) -> Schema:
+        """A scenario's rows, one per controller and agent: the scenario's own columns, the
+        run's name (and observation mode), the metrics (numbers, ``None``: not defined),
+        ``diverged`` and, on the field string, a note."""
+        scenario = next(s for s in self.scenarios if s.id == item)
+        row = Fields(
+            {**exactly(scenario.row()), "controller": Name(), "diverged": Flag()},
+            optional={"observation": Name(), "note": Text()},
+            rest=Number(),
+        )
+        return Fields({"rows": Values(row)})
+
+    def tasks(self, missing: Sequence[str]) -> list[Task]:
+        """``task_scenarios`` missing scenarios per task."""
+        wanted = set(missing)
+        chosen = [s for s in self.scenarios if s.id in wanted]
+        return [
+            Task(
+                key="/".join(s.id for s in block),
+                function=evaluate_scenarios_task,
+                kwargs={
+                    "scenarios": block,
+                    "agents": list(self.agents),
+                    "controllers": None if self.controllers is None else list(self.controllers),
+                    "keep_traces": list(self.keep_traces),
+                    "env_id": self.env_id,
+                    "observations": list(self.observations),
+                },
+                items=tuple(s.id for s in block),
+            )
+            for block in chunks(chosen, self.task_scenarios)
+        ]
+
+    def results(
+        self, outcome: SweepOutcome
+    ) -> tuple[list[dict[str, Any]], dict[tuple[str, str], Any]]:
+        """The rows in table order and the kept traces of the runs made this time."""
+        rows = [row for k in self.items() for row in outcome.records[k]["rows"]]
+        traces: dict[tuple[str, str], Any] = {}
+        for extras in outcome.extras.values():
+            traces.update(extras)
+        return rows, traces
+
+
+def run_evaluate_sweep(
+    args: Any,
+    agents: Sequence[Any],
+    controllers: Sequence[str] | None,
+    scenarios: Sequence[Any],
+    keep: Sequence[str],
+) -> tuple[list[dict[str, Any]], dict[tuple[str, str], Any], bool]:
+    """``drill-gym evaluate`` on the sweep runner (on ``args.env``): the rows, the kept traces
+    and whether every run has its trace (not when some were read from the results file)."""
+
+    study = EvaluateStudy(
+        tuple(agents),
+        None if controllers is None else tuple(controllers),
+        tuple(scenarios),
+        keep_traces=tuple(keep) if not args.no_plots else (),
+        task_scenarios=args.task_size or EVALUATE_TASK_SCENARIOS,
+        env_id=args.env,
+        observations=tuple(dict.fromkeys(args.observations)),
+    )
+    backend = backend_from_args(args)
+    path = results_path_from_args(args, Path(args.out) / "heldout.sqlite")
+    outcome = run_sweep(
+        study, backend, path, args.resume, not args.no_progress, overwrite=args.overwrite
+    )
+    report_outcome(study.name, outcome, backend)
+    rows, traces = study.results(outcome)
+    return rows, traces, outcome.loaded == 0

@@ -24,12 +24,14 @@ from typing import Any, Final
 
 import gymnasium as gym
 
+from baselines.registry import BUILT_IN, needs_full_state
 from drill_env.distributed import (
     DISTRIBUTED_PRESETS,
     DistributedStringParameters,
     with_measured_depth,
 )
 from drill_env.evaluation import Policy, Trace, rollout
+from drill_env.ids import ENV_ID, FIELD_ENV_ID
 from drill_env.scenarios import RPM, FieldRandomization, Scenario, SpeedProfile, WobProfile
 
 __all__ = [
@@ -61,16 +63,16 @@ __all__ = [
     "run_on",
 ]
 
-PAPER_ENV: Final = "DrillString-v0"
+PAPER_ENV: Final = ENV_ID
 """The paper's 4-DOF string (the studies' default)."""
-FIELD_ENV: Final = "DrillStringField-v0"
+FIELD_ENV: Final = FIELD_ENV_ID
 """The distributed field string with surface sensors, telemetry and a realistic actuator."""
 ENV_IDS: Final = (PAPER_ENV, FIELD_ENV)
 """The envs the studies run on."""
 
 OBSERVATIONS: Final = ("state", "surface")
 """The field env's observation modes a controller can run with."""
-STATE_ONLY: Final = ("csmc", "msmc", "asmc", "proposed")
+STATE_ONLY: Final = tuple(name for name in BUILT_IN if needs_full_state(name))
 """Controllers that need the whole measured state (the paper's sliding-mode controllers:
 their law is written on the 4-DOF state, read at the field string's probe nodes)."""
 CONTROLLER_MODELS: Final = ("nominal", "exact")

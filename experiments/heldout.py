@@ -21,7 +21,14 @@ from dataclasses import dataclass
 from typing import Any, Final
 
 from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, WobProfile
-from experiments.field import HELD_OUT_CASES, HELD_OUT_EPISODE_S, FieldCase, is_field
+from experiments.field import (
+    FIELD_ENV,
+    HELD_OUT_CASES,
+    HELD_OUT_EPISODE_S,
+    PAPER_ENV,
+    FieldCase,
+    is_field,
+)
 from experiments.field import prone as field_prone
 
 __all__ = [
@@ -216,8 +223,8 @@ FIELD_HELD_OUT: Final[tuple[HeldOutScenario, ...]] = tuple(
 knowing the nominal string."""
 
 SCENARIO_SETS: Final[dict[str, dict[str, tuple[HeldOutScenario, ...]]]] = {
-    "DrillString-v0": {"heldout": HELD_OUT, "corners": CORNERS},
-    "DrillStringField-v0": {"heldout": FIELD_HELD_OUT},
+    PAPER_ENV: {"heldout": HELD_OUT, "corners": CORNERS},
+    FIELD_ENV: {"heldout": FIELD_HELD_OUT},
 }
 """The held-out sets of each env, by name (the first is the default)."""
 
@@ -228,7 +235,7 @@ def held_out_set(env_id: str, name: str = "heldout") -> tuple[HeldOutScenario, .
     Raises:
         ValueError: for a set the env does not have.
     """
-    sets = SCENARIO_SETS["DrillStringField-v0" if is_field(env_id) else "DrillString-v0"]
+    sets = SCENARIO_SETS[FIELD_ENV if is_field(env_id) else PAPER_ENV]
     if name not in sets:
         raise ValueError(
             f"scenario set = {name!r} is not a held-out set of {env_id}: allowed {list(sets)}"

@@ -1,5 +1,9 @@
-"""The studies' figures: episode traces and metric tables (comparison, held-out evaluation),
-stick-slip maps, and training learning curves.
+"""The figure kit every study draws with: the palette (:func:`color_of`), the labels of the
+metrics and row keys, the blank figure (:func:`new_figure`), the text-overlap check, episode
+trace figures, metric bar charts, the realism panels and training learning curves. A study's
+own figures live in the study's module (the maps in :mod:`experiments.stick_slip_map`, the
+probability map in :mod:`experiments.probability_map`, the string's waves in
+:mod:`experiments.waves`), built on this kit; this module imports no study.
 
 Every ``*_figure`` function builds one :class:`~matplotlib.figure.Figure` with matplotlib's
 object-oriented API on the Agg canvas (no ``pyplot``, no global state, safe in worker processes)
@@ -27,25 +31,22 @@ import math
 import textwrap
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Final, NamedTuple
+from typing import Any, Final, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 from matplotlib.text import Text
 
+from baselines.registry import BUILT_IN
 from drill_env.evaluation import Trace
+from drill_env.metrics import METRIC_LABELS as CORE_METRIC_LABELS
+from drill_env.metrics import STICK_SLIP_SEVERITY
 from drill_env.validation import printable
-
-if TYPE_CHECKING:  # pragma: no cover
-    from experiments.probability_map import ProbabilityMap
-    from experiments.stick_slip_map import StickSlipMap
-    from experiments.waves import StringHistory
 
 __all__ = [
     "DPI",
@@ -54,23 +55,22 @@ __all__ = [
     "SEVERITY_LIMIT",
     "Envelope",
     "adaptive_gains_figure",
+    "cell_edges",
     "color_of",
     "downsample",
     "envelope",
     "key_label",
     "learning_curves_figure",
-    "map_figure",
-    "maps_figure",
+    "legend_columns",
     "metric_bars_figure",
+    "new_figure",
     "panels_figure",
     "plot_learning_curves",
-    "probability_figure",
     "read_csv_columns",
     "realism_figure",
     "save_figure",
-    "space_time_figure",
     "speed_torque_figure",
-    "string_response_figure",
+    "suptitle",
     "text_outside",
     "text_overlaps",
     "text_problems",
@@ -80,18 +80,11 @@ __all__ = [
 ]
 
 METRIC_LABELS: Final[dict[str, str]] = {
-    "ise": "ISE (rad$^2$/s)",
-    "iae": "IAE (rad)",
-    "rmse": "RMSE (rad/s)",
-    "rmsd_nm": "RMSD of the torque (N m)",
-    "overshoot_pct": "overshoot (%)",
-    "settling_time_s": "settling time (s)",
-    "chattering_nm_per_s": "chattering (N m/s)",
-    "stick_slip_severity": "stick-slip severity",
-    "stuck_fraction": "stuck fraction",
+    **CORE_METRIC_LABELS,
     "static_error_rad_s": "static error (rad/s)",
 }
-"""Axis label (with unit) of each metric key of :mod:`drill_env.metrics`."""
+"""Axis label (with unit) of each metric key of :mod:`drill_env.metrics` (its
+:data:`~drill_env.metrics.METRIC_LABELS`) and of the comparison's static error."""
 
 KEY_LABELS: Final[dict[str, str]] = {
     "controller": "controller",
@@ -118,15 +111,24 @@ _PALETTE: Final = (
     "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd",
     "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf",
 )  # fmt: skip
+_PALETTE_LIGHT: Final = (
+    "#aec7e8", "#ffbb78", "#98df8a", "#ff9896", "#c5b0d5",
+    "#c49c94", "#f7b6d2", "#c7c7c7", "#dbdb8d", "#9edae5",
+)  # fmt: skip
+"""The lighter partner of each colour of :data:`_PALETTE` (matplotlib's tab20 pairs)."""
+_AGENTS: Final = ("residual_ppo", "direct_ppo")
+"""The shipped agents, coloured after the built-in controllers."""
+_DEFAULT_LOOPS: Final = [name for name, cls in BUILT_IN.items() if not hasattr(cls, "base_name")]
 _NAMED_COLORS: Final[dict[str, str]] = {
-    name: _PALETTE[k]
-    for k, name in enumerate(
-        (
-            "csmc", "msmc", "asmc", "proposed", "stiff_pi",
-            "soft_speed", "z_torque", "residual_ppo", "direct_ppo",
-        )
-    )
-}  # fmt: skip
+    **{name: _PALETTE[k] for k, name in enumerate((*_DEFAULT_LOOPS, *_AGENTS))},
+    **{
+        name: _PALETTE_LIGHT[_DEFAULT_LOOPS.index(cls.base_name)]
+        for name, cls in BUILT_IN.items()
+        if hasattr(cls, "base_name")
+    },
+}
+"""Every built-in controller's colour and the agents': the registry's order; a ``*_tuned``
+loop in the lighter shade of its default loop."""
 _DASHES: Final = (("-", 2.6), ("--", 1.8), (":", 2.2), ("-.", 1.2), ((0, (5, 1, 1, 1)), 1.0))
 """Line style and width of the k-th line of a panel: overlapping lines stay visible."""
 _CONDITION_STYLES: Final[dict[str, Any]] = {
@@ -287,7 +289,7 @@ def _series(
 
 
 # ------------------------------------------------------------------- figure plumbing
-def _figure(width_in: float, height_in: float) -> Figure:
+def new_figure(width_in: float, height_in: float) -> Figure:
     """An empty figure on the Agg canvas with constrained layout (no text collisions)."""
     fig = Figure(figsize=(width_in, height_in), dpi=DPI, layout="constrained")
     FigureCanvasAgg(fig)
@@ -301,7 +303,7 @@ def _wrap(text: str, width_in: float, fontsize: float = 12.0) -> str:
     return "\n".join(textwrap.wrap(text, chars, break_on_hyphens=False)) if text else text
 
 
-def _legend_columns(fig: Figure, labels: Sequence[str], fontsize: float, most: int = 6) -> int:
+def legend_columns(fig: Figure, labels: Sequence[str], fontsize: float, most: int = 6) -> int:
     """Columns of a legend under the axes: at most ``most``, and few enough that a row of the
     longest label fits the figure's width."""
     char_in = 0.55 * fontsize / 72.0
@@ -309,7 +311,7 @@ def _legend_columns(fig: Figure, labels: Sequence[str], fontsize: float, most: i
     return max(1, min(len(labels), most, int(fig.get_figwidth() / entry_in)))
 
 
-def _suptitle(fig: Figure, text: str) -> None:
+def suptitle(fig: Figure, text: str) -> None:
     """The figure title, wrapped to the figure's width."""
     if text:
         fig.suptitle(_wrap(text, fig.get_figwidth() - 0.3))
@@ -614,7 +616,7 @@ def speed_torque_figure(
         raise ValueError(f"column(s) {', '.join(map(repr, empty))} have no traces")
     bands = envelopes or {}
     n = len(columns)
-    fig = _figure(4.6 * n + 0.9 if n > 1 else 8.5, 6.4)
+    fig = new_figure(4.6 * n + 0.9 if n > 1 else 8.5, 6.4)
     axes = np.asarray(fig.subplots(2, n, squeeze=False, sharex=True))
     for col in range(1, n):
         axes[0, col].sharey(axes[0, 0])
@@ -679,7 +681,7 @@ def speed_torque_figure(
             ax_w.tick_params(labelleft=False)
     if title:
         note = "; each column has its own torque axis" if n > 1 else ""
-        _suptitle(fig, title + note)
+        suptitle(fig, title + note)
     return fig
 
 
@@ -744,7 +746,7 @@ def panels_figure(
     ylabel, factor = _QUANTITIES[quantity]
     ncols = max(1, min(ncols, len(panels)))
     nrows = math.ceil(len(panels) / ncols)
-    fig = _figure(3.7 * ncols + 0.6, 2.35 * nrows + 1.3)
+    fig = new_figure(3.7 * ncols + 0.6, 2.35 * nrows + 1.3)
     grid = np.asarray(fig.subplots(nrows, ncols, squeeze=False, sharex=True, sharey=sharey))
     axes = grid.ravel()
     labels = list(dict.fromkeys(label for traces in panels.values() for label in traces))
@@ -808,7 +810,7 @@ def panels_figure(
     fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 6), fontsize=10)
     if title:
         note = "" if sharey or len(panels) == 1 else " (each panel has its own value axis)"
-        _suptitle(fig, title + note)
+        suptitle(fig, title + note)
     return fig
 
 
@@ -825,7 +827,7 @@ def adaptive_gains_figure(traces: Mapping[tuple[str, str], Trace], title: str = 
     Returns:
         The figure.
     """
-    fig = _figure(9.0, 4.6)
+    fig = new_figure(9.0, 4.6)
     ax = fig.subplots()
     controllers: dict[str, str] = {}
     conditions: dict[str, Any] = {}
@@ -895,7 +897,8 @@ def metric_bars_figure(
     """A metric of a table of runs per group and hue, one panel per metric.
 
     Groups with long names (controllers) are listed down the value axis (horizontal bars),
-    many short ones (scenarios) along it, one panel per metric stacked. With ``zoom`` the values
+    many short ones (scenarios) along it, one panel per metric stacked; more than 12 long names
+    (the field comparison's controllers and observation modes) stand upright along it. With ``zoom`` the values
     are drawn as dots on an axis fitted to them (not from zero), each group labelled with the
     change of its last hue against its first, so differences of a few percent show.
 
@@ -920,23 +923,28 @@ def metric_bars_figure(
     metrics = [metric] if isinstance(metric, str) else list(metric)
     groups = list(dict.fromkeys(r[group] for r in rows))
     hues = list(dict.fromkeys(r[hue] for r in rows))
-    horizontal = max(len(str(g)) for g in groups) > 4 and len(groups) <= 12
+    long_names = max(len(str(g)) for g in groups) > 4
+    horizontal = long_names and len(groups) <= 12
     colors = {
         h: (color_of(str(h), k) if hue == "controller" else _PALETTE[k % len(_PALETTE)])
         for k, h in enumerate(hues)
     }
     if horizontal:
         height = max(3.4, 0.17 * len(groups) * max(len(hues), 1.5) + 1.9)
-        fig = _figure(4.4 * len(metrics) + 2.8, height)
+        fig = new_figure(4.4 * len(metrics) + 2.8, height)
         axes = fig.subplots(1, len(metrics), squeeze=False, sharey=True)[0]
     else:
-        fig = _figure(
-            max(8.0, 0.45 * len(groups) * max(len(hues), 2) / 2 + 2.5), 2.9 * len(metrics) + 1.0
+        upright = 0.09 * max(len(str(g)) for g in groups) if long_names else 0.0
+        fig = new_figure(
+            max(8.0, 0.45 * len(groups) * max(len(hues), 2) / 2 + 2.5),
+            2.9 * len(metrics) + 1.0 + upright,
         )
         axes = fig.subplots(len(metrics), 1, squeeze=False, sharex=True)[:, 0]
     for ax, m in zip(axes, metrics, strict=True):
         _, _, value = _grouped(rows, m, group, hue)
         _draw_metric(ax, groups, hues, value, colors, horizontal, log, zoom)
+        if long_names and not horizontal:  # many long names along the axis: stand them up
+            ax.tick_params(axis="x", labelrotation=90)
         label = METRIC_LABELS.get(m, key_label(m))
         if log:
             label += ", log scale"
@@ -964,11 +972,11 @@ def metric_bars_figure(
             handles=handles,
             title=key_label(hue),
             loc="outside lower center",
-            ncol=_legend_columns(fig, [value_label(hue, h) for h in hues], 10.0),
+            ncol=legend_columns(fig, [value_label(hue, h) for h in hues], 10.0),
             fontsize=10,
             title_fontsize=10,
         )
-    _suptitle(fig, title)
+    suptitle(fig, title)
     return fig
 
 
@@ -1041,8 +1049,7 @@ def _label_changes(
             ax.text(p, top, text, va="bottom", ha="center", fontsize=9)
 
 
-# ------------------------------------------------------------------- stick-slip maps
-def _edges(values: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+def cell_edges(values: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     """Cell edges around grid centres (a unit-wide cell around a single value)."""
     if values.size == 1:
         half = 0.05 * values[0]
@@ -1051,122 +1058,11 @@ def _edges(values: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     return np.concatenate(([2 * values[0] - mid[0]], mid, [2 * values[-1] - mid[-1]]))
 
 
-SEVERITY_LABEL: Final = "stick-slip severity (max - min) / (2 mean)"
-"""Colour-bar label of the severity: the bit speed's over the analysis window."""
-STUCK_LABEL: Final = "stuck fraction of the window"
-"""Colour-bar label of the stuck fraction."""
-BOUNDARY_LABEL: Final = "boundary of stick-slip: the bit sticks, or severity > 0.5"
-"""Legend entry of the white line of the maps."""
-
-
-def _heatmap(ax: Axes, result: StickSlipMap, quantity: str, title: str) -> Any:
-    if quantity == "severity":
-        data, norm, cmap = result.severity, Normalize(0.0, SEVERITY_LIMIT), "magma"
-    else:
-        data, norm, cmap = result.stuck_fraction, Normalize(0.0, 1.0), "viridis"
-    mesh = ax.pcolormesh(
-        _edges(result.reference_speed_rad_s),
-        _edges(result.wob_n) / 1e3,
-        np.ma.masked_invalid(data),
-        cmap=cmap,
-        norm=norm,
-        shading="flat",
-    )
-    unstable = result.unstable()
-    if unstable.any() and not unstable.all() and min(data.shape) > 1:
-        ax.contour(
-            result.reference_speed_rad_s,
-            result.wob_n / 1e3,
-            unstable.astype(float),
-            levels=[0.5],
-            colors="white",
-            linewidths=1.6,
-        )
-    ax.set_title(title)
-    ax.set_xlabel("reference bit speed (rad/s)")
-    ax.set_ylabel("WOB (kN)")
-    return mesh
-
-
-def _boundary_legend(fig: Figure) -> None:
-    handle = Line2D([], [], color="white", lw=2.0, label=BOUNDARY_LABEL)
-    legend = fig.legend(handles=[handle], loc="outside lower center", fontsize=10, frameon=True)
-    legend.get_frame().set_facecolor("0.45")
-    for text in legend.get_texts():
-        text.set_color("white")
-
-
-def map_figure(result: StickSlipMap) -> Figure:
-    """Severity and stuck-fraction heatmaps of one map, side by side, with labelled colour bars
-    and the stick-slip boundary explained."""
-    fig = _figure(11.0, 4.9)
-    axes = fig.subplots(1, 2)
-    for ax, quantity, label in (
-        (axes[0], "severity", f"severity, capped at {SEVERITY_LIMIT:g}"),
-        (axes[1], "stuck", "stuck fraction"),
-    ):
-        mesh = _heatmap(ax, result, quantity, f"{result.label}: {label}")
-        fig.colorbar(
-            mesh,
-            ax=ax,
-            extend="max" if quantity == "severity" else "neither",
-            label=SEVERITY_LABEL if quantity == "severity" else STUCK_LABEL,
-        )
-    fig.suptitle(_caption(result))
-    _boundary_legend(fig)
-    return fig
-
-
-def maps_figure(results: Sequence[StickSlipMap]) -> Figure:
-    """All maps side by side: one column per controller, severity above stuck fraction.
-
-    Raises:
-        ValueError: if ``results`` is empty.
-    """
-    if not results:
-        raise ValueError("maps_figure needs at least one map")
-    n = len(results)
-    fig = _figure(3.1 * n + 1.9, 7.0)
-    axes = np.asarray(fig.subplots(2, n, squeeze=False, sharex=True, sharey=True))
-    severity: list[Any] = []
-    stuck: list[Any] = []
-    for col, result in enumerate(results):
-        severity.append(_heatmap(axes[0, col], result, "severity", result.label))
-        stuck.append(_heatmap(axes[1, col], result, "stuck", result.label))
-        if col:
-            axes[0, col].set_ylabel("")
-            axes[1, col].set_ylabel("")
-        axes[0, col].set_xlabel("")
-    fig.colorbar(severity[-1], ax=list(axes[0]), extend="max", label=SEVERITY_LABEL)
-    fig.colorbar(stuck[-1], ax=list(axes[1]), label=STUCK_LABEL)
-    fig.suptitle(
-        f"stick-slip severity (top, colours capped at {SEVERITY_LIMIT:g}) and stuck fraction "
-        f"(bottom)\n{_caption(results[0])}"
-    )
-    _boundary_legend(fig)
-    return fig
-
-
-def _caption(result: StickSlipMap) -> str:
-    noise = "no noise" if result.noise_std_rad_s == 0 else f"noise {result.noise_std_rad_s:g} rad/s"
-    plant = f"plant {result.parameters}"
-    if result.measured_depth_m is not None:
-        plant += f" at {result.measured_depth_m:,.0f} m"
-    return (
-        f"{plant}, runs of {result.duration_s:g} s from rest, last "
-        f"{result.window_s:g} s analysed, {noise}"
-    )
-
-
 # ------------------------------------------------------------------------ realism study
 REALISM_METRICS: Final = ("iae", "stick_slip_severity", "stuck_fraction", "torque_at_limit")
 """The metrics of each row of :func:`realism_figure`."""
-_REALISM_TITLES: Final = {
-    "iae": "IAE (rad)",
-    "stick_slip_severity": "stick-slip severity",
-    "stuck_fraction": "stuck fraction",
-    "torque_at_limit": "share at a torque limit",
-}
+_REALISM_TITLES: Final = {"torque_at_limit": "share at a torque limit"}
+"""Panel titles of the realism figure's own quantities (the metrics take their labels)."""
 
 
 def realism_figure(
@@ -1176,7 +1072,7 @@ def realism_figure(
     title: str = "",
     *,
     breaks: Mapping[tuple[str, str], int] | None = None,
-    severity_limit: float = 0.5,
+    severity_limit: float = STICK_SLIP_SEVERITY,
     metrics: Sequence[str] = REALISM_METRICS,
 ) -> Figure:
     """Metrics of the controllers against the values of one factor: one row of panels per
@@ -1206,7 +1102,7 @@ def realism_figure(
     if empty:
         raise ValueError(f"row(s) {', '.join(map(repr, empty))} have no controller")
     n_rows, n_cols = len(panels), len(metrics)
-    fig = _figure(4.0 * n_cols + 0.6, 3.1 * n_rows + 1.9)
+    fig = new_figure(4.0 * n_cols + 0.6, 3.1 * n_rows + 1.9)
     axes = np.asarray(fig.subplots(n_rows, n_cols, squeeze=False, sharex=True))
     ticks = ["\n".join(textwrap.wrap(str(v), 14)) for v in value_labels]
     position = np.arange(len(value_labels), dtype=float)
@@ -1261,86 +1157,14 @@ def realism_figure(
         handles=[handles[k] for k in labels],
         labels=labels,
         loc="outside lower center",
-        ncol=_legend_columns(fig, labels, 10.0, most=5),
+        ncol=legend_columns(fig, labels, 10.0, most=5),
         fontsize=10,
     )
-    _suptitle(fig, title)
+    suptitle(fig, title)
     return fig
 
 
 # ------------------------------------------------------------ the field string's waves
-def string_response_figure(
-    histories: Mapping[str, StringHistory], title: str = "", *, ncols: int = 5
-) -> Figure:
-    """Bit speed (with the reference), top-drive speed and surface torque against time, one
-    column of three panels per run, up to ``ncols`` runs per row; one speed axis for every
-    speed panel and one torque axis for every torque panel, so the runs compare at a glance.
-
-    Args:
-        histories: Run label -> node history (:class:`experiments.waves.StringHistory`).
-        title: Figure title.
-        ncols: Runs per row.
-
-    Raises:
-        ValueError: if ``histories`` is empty.
-    """
-    if not histories:
-        raise ValueError("histories is empty: nothing to plot")
-    n = len(histories)
-    ncols = max(1, min(ncols, n))
-    groups = math.ceil(n / ncols)
-    fig = _figure(3.3 * ncols + 1.0, 5.6 * groups + 1.0)
-    grid = np.asarray(fig.subplots(3 * groups, ncols, squeeze=False, sharex=True))
-    speed_axes: list[Axes] = []
-    torque_axes: list[Axes] = []
-    rows = (
-        ("bit speed (rad/s)", "bit"),
-        ("top-drive speed (rad/s)", "top"),
-        ("surface torque (kN m)", "torque"),
-    )
-    for k, (label, history) in enumerate(histories.items()):
-        g, col = divmod(k, ncols)
-        color = color_of(label, k)
-        for r, (ylabel, what) in enumerate(rows):
-            ax = grid[3 * g + r, col]
-            t = history.time_s
-            if what == "bit":
-                ax.plot(t, history.reference_rad_s, color="k", ls=(0, (4, 2)), lw=1.0)
-                ax.plot(t, history.bit_speed_rad_s, color=color, lw=1.3)
-                ax.set_title(label, fontsize=10)
-            elif what == "top":
-                ax.plot(t, history.reference_rad_s, color="k", ls=(0, (4, 2)), lw=1.0)
-                ax.plot(t, history.top_drive_speed_rad_s, color=color, lw=1.3)
-            else:
-                ax.plot(t, history.surface_torque_nm / 1e3, color=color, lw=1.3)
-            (torque_axes if what == "torque" else speed_axes).append(ax)
-            ax.grid(True, alpha=0.3)
-            ax.ticklabel_format(axis="x", useOffset=False)
-            if col == 0:
-                ax.set_ylabel(ylabel, fontsize=9)
-            if r == 2:
-                ax.tick_params(labelbottom=True)
-                ax.set_xlabel("time (s)", fontsize=9)
-    for group in (speed_axes, torque_axes):
-        lows = [a.get_ylim()[0] for a in group]
-        highs = [a.get_ylim()[1] for a in group]
-        for a in group:
-            a.set_ylim(min(lows), max(highs))
-    for ax in grid.ravel()[3 * n :]:
-        ax.set_visible(False)
-    for k in range(n, groups * ncols):
-        g, col = divmod(k, ncols)
-        for r in range(3):
-            grid[3 * g + r, col].set_visible(False)
-    fig.legend(
-        handles=[Line2D([], [], color="k", ls=(0, (4, 2)), lw=1.0, label="reference bit speed")],
-        loc="outside lower center",
-        fontsize=10,
-    )
-    _suptitle(fig, title)
-    return fig
-
-
 def trace_response_figure(
     traces: Mapping[str, Trace],
     title: str = "",
@@ -1364,7 +1188,7 @@ def trace_response_figure(
     """
     if not traces:
         raise ValueError("traces is empty: nothing to plot")
-    fig = _figure(8.5, 7.4)
+    fig = new_figure(8.5, 7.4)
     ax_bit, ax_top, ax_torque = fig.subplots(3, 1, sharex=True)
     handles: list[Line2D] = [
         Line2D([], [], color="k", ls=(0, (4, 2)), lw=1.0, label="reference bit speed")
@@ -1396,96 +1220,10 @@ def trace_response_figure(
     fig.legend(
         handles=handles,
         loc="outside lower center",
-        ncol=_legend_columns(fig, [str(x) for x in labels], 10.0, most=4),
+        ncol=legend_columns(fig, [str(x) for x in labels], 10.0, most=4),
         fontsize=10,
     )
-    _suptitle(fig, title)
-    return fig
-
-
-def _slip_onsets(history: StringHistory, threshold_rad_s: float = 0.05) -> npt.NDArray[np.float64]:
-    """Times at which the bit starts to turn again after sticking, s (at most one per travel
-    time of a wave from the bit to the surface)."""
-    moving = history.bit_speed_rad_s > threshold_rad_s
-    starts = history.time_s[np.flatnonzero(moving[1:] & ~moving[:-1]) + 1]
-    gap = float(history.node_depth_m[-1]) / history.wave_speed_m_s
-    kept: list[float] = []
-    for t in starts:  # one per cycle: a release within one travel time of the last is the same
-        if not kept or t - kept[-1] > gap:
-            kept.append(float(t))
-    return np.array(kept)
-
-
-def space_time_figure(history: StringHistory, title: str = "") -> Figure:
-    """The torsional waves along the string: node speed (top) and the torque each element
-    carries (bottom) as colour maps over time (x) and depth (y, the surface at the top).
-
-    The dashed white line is the top of the BHA. Each dotted line starts at the bit when it
-    breaks free and climbs at the pipe's wave speed ``c``: where the colours change along it,
-    the release wave is travelling up the string; it reaches the top drive ``D / c`` later.
-
-    Args:
-        history: The node history of one run (:class:`experiments.waves.StringHistory`),
-            typically its last stick-slip cycles.
-        title: Figure title.
-
-    Raises:
-        ValueError: if the history has fewer than two samples.
-    """
-    if history.time_s.size < 2:
-        raise ValueError("history has fewer than two samples: nothing to plot")
-    fig = _figure(10.0, 7.6)
-    ax_w, ax_t = fig.subplots(2, 1, sharex=True, sharey=True)
-    t = history.time_s
-    depth = history.node_depth_m
-    mid = 0.5 * (depth[1:] + depth[:-1])
-    speed_high = max(float(np.percentile(history.speed_rad_s, 99.5)), 1e-3)
-    mesh_w = ax_w.pcolormesh(
-        t, depth, history.speed_rad_s.T, shading="nearest", cmap="viridis",
-        norm=Normalize(0.0, speed_high), rasterized=True,
-    )  # fmt: skip
-    torque = history.torque_nm.T / 1e3
-    mesh_t = ax_t.pcolormesh(
-        t, mid, torque, shading="nearest", cmap="magma",
-        norm=Normalize(float(np.percentile(torque, 0.5)), float(np.percentile(torque, 99.5))),
-        rasterized=True,
-    )  # fmt: skip
-    bottom = float(depth[-1])
-    handles: list[Any] = [
-        Line2D([], [], color="white", ls="--", lw=1.4, label="top of the BHA"),
-    ]
-    onsets = _slip_onsets(history)
-    travel = bottom / history.wave_speed_m_s
-    for ax in (ax_w, ax_t):
-        ax.axhline(history.pipe_length_m, color="white", ls="--", lw=1.4)
-        for t0 in onsets:
-            ax.plot([t0, t0 + travel], [bottom, 0.0], color="white", ls=":", lw=1.6)
-        ax.set_xlim(float(t[0]), float(t[-1]))
-        ax.set_ylim(bottom, 0.0)
-        ax.set_ylabel("depth (m)")
-    if onsets.size:
-        handles.append(
-            Line2D(
-                [],
-                [],
-                color="white",
-                ls=":",
-                lw=1.6,
-                label=f"from the bit's release at c = {history.wave_speed_m_s:,.0f} m/s: "
-                f"at the surface {travel:.2f} s later",
-            )  # fmt: skip
-        )
-    ax_w.set_title("node speed")
-    ax_t.set_title("torque carried by the string")
-    ax_t.set_xlabel("time (s)")
-    ax_t.ticklabel_format(axis="x", useOffset=False)
-    fig.colorbar(mesh_w, ax=ax_w, label="speed (rad/s)", extend="max")
-    fig.colorbar(mesh_t, ax=ax_t, label="torque (kN m)", extend="both")
-    legend = fig.legend(handles=handles, loc="outside lower center", ncol=len(handles), fontsize=10)
-    legend.get_frame().set_facecolor("0.45")
-    for text in legend.get_texts():
-        text.set_color("white")
-    _suptitle(fig, title)
+    suptitle(fig, title)
     return fig
 
 
@@ -1525,7 +1263,7 @@ def learning_curves_figure(
     Returns:
         The figure.
     """
-    fig = _figure(8.0, 8.2 if severity else 6.4)
+    fig = new_figure(8.0, 8.2 if severity else 6.4)
     axes = fig.subplots(4 if severity else 3, 1, sharex=True)
     ax_iae, ax_rmsd = axes[0], axes[1]
     ax_sev = axes[2] if severity else None
@@ -1566,7 +1304,7 @@ def learning_curves_figure(
     for ax in axes:
         ax.grid(True, alpha=0.3)
     fig.legend(*ax_iae.get_legend_handles_labels(), loc="outside right upper", fontsize=10)
-    _suptitle(fig, title)
+    suptitle(fig, title)
     return fig
 
 
@@ -1576,63 +1314,3 @@ def plot_learning_curves(
     """:func:`learning_curves_figure` (with its keyword ``options``) written as PNG to
     ``path``; returns the path."""
     return save_figure(learning_curves_figure(runs, title, **options), path)
-
-
-# ------------------------------------------------------------- probability of stick-slip
-PROBABILITY_LEVELS: Final = (0.1, 0.5, 0.9)
-"""Contour lines of the probability maps."""
-PROBABILITY_LABEL: Final = "probability of stick-slip (share of the draws)"
-"""Colour-bar label of the probability maps."""
-_ROW_LABELS: Final = {"wob": ("WOB (kN)", 1e-3), "depth": ("measured depth (m)", 1.0)}
-
-
-def probability_figure(result: ProbabilityMap) -> Figure:
-    """The probability of stick-slip of one controller as a heatmap over (WOB or depth) x
-    reference speed, with contour lines at :data:`PROBABILITY_LEVELS` (labelled) and a
-    labelled colour bar."""
-    fig = _figure(8.0, 5.6)
-    ax = fig.subplots()
-    label, scale = _ROW_LABELS[result.row_axis]
-    probability = result.probability
-    mesh = ax.pcolormesh(
-        _edges(result.reference_speed_rad_s),
-        _edges(result.rows) * scale,
-        probability,
-        cmap="YlOrRd",
-        norm=Normalize(0.0, 1.0),
-        shading="flat",
-    )
-    fig.colorbar(mesh, ax=ax, label=PROBABILITY_LABEL)
-    drawn = [v for v in PROBABILITY_LEVELS if probability.min() < v < probability.max()]
-    if drawn and min(probability.shape) > 1:
-        styles = {0.1: ":", 0.5: "-", 0.9: "--"}
-        lines = ax.contour(
-            result.reference_speed_rad_s,
-            result.rows * scale,
-            probability,
-            levels=drawn,
-            colors="black",
-            linestyles=[styles.get(v, "-") for v in drawn],
-            linewidths=1.6,
-        )
-        ax.clabel(lines, fmt="%.1f", fontsize=9, inline=True)
-        handles = [
-            Line2D([], [], color="black", ls=styles.get(v, "-"), lw=1.6, label=f"p = {v:g}")
-            for v in drawn
-        ]
-        fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=10)
-    ax.set_xlabel("reference bit speed (rad/s)")
-    ax.set_ylabel(label)
-    ax.set_title(f"{result.controller} on {result.env_id}")
-    fixed = ""
-    if result.wob_n is not None:
-        fixed = f", WOB {result.wob_n / 1e3:g} kN"
-    elif result.depth_m is not None:
-        fixed = f", measured depth {result.depth_m:g} m"
-    noise = "no noise" if result.noise_std_rad_s == 0 else f"noise {result.noise_std_rad_s:g} rad/s"
-    _suptitle(
-        fig,
-        f"plant {result.parameters}{fixed}; {result.draws} draws per cell ({result.uncertainty}); "
-        f"runs of {result.duration_s:g} s from rest, last {result.window_s:g} s analysed, {noise}",
-    )
-    return fig

@@ -52,6 +52,9 @@ from typing import Any, Final
 import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
+from matplotlib.colors import Normalize
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 
 import baselines  # noqa: F401  (registers the built-in controllers, in their order)
 import drill_env
@@ -71,6 +74,7 @@ from experiments.arguments import (
     seed_option,
 )
 from experiments.paths import output_path
+from experiments.plots import cell_edges, new_figure, save_figure, suptitle
 from experiments.results_db import Fields, Number, Schema, Values
 from experiments.stick_slip_map import DEFAULT_WINDOW_S, grid_values, stick_slip
 from experiments.sweep import (
@@ -93,6 +97,7 @@ __all__ = [
     "ProbabilityStudy",
     "main",
     "probability_cells_task",
+    "probability_figure",
     "write_probability_csv",
 ]
 
@@ -768,8 +773,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         csv_path = output_path(args.out, stem, suffix=".csv")
         written = [write_probability_csv(result, csv_path)]
         if not args.no_plots:
-            from experiments.plots import probability_figure, save_figure
-
             figure = probability_figure(result)
             written.append(save_figure(figure, output_path(args.out, stem, suffix=".png")))
         p = result.probability
@@ -783,3 +786,63 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 if __name__ == "__main__":  # pragma: no cover
     raise SystemExit(main())
+
+
+# ------------------------------------------------------------- probability of stick-slip
+PROBABILITY_LEVELS: Final = (0.1, 0.5, 0.9)
+"""Contour lines of the probability maps."""
+PROBABILITY_LABEL: Final = "probability of stick-slip (share of the draws)"
+"""Colour-bar label of the probability maps."""
+_ROW_LABELS: Final = {"wob": ("WOB (kN)", 1e-3), "depth": ("measured depth (m)", 1.0)}
+
+
+def probability_figure(result: ProbabilityMap) -> Figure:
+    """The probability of stick-slip of one controller as a heatmap over (WOB or depth) x
+    reference speed, with contour lines at :data:`PROBABILITY_LEVELS` (labelled) and a
+    labelled colour bar."""
+    fig = new_figure(8.0, 5.6)
+    ax = fig.subplots()
+    label, scale = _ROW_LABELS[result.row_axis]
+    probability = result.probability
+    mesh = ax.pcolormesh(
+        cell_edges(result.reference_speed_rad_s),
+        cell_edges(result.rows) * scale,
+        probability,
+        cmap="YlOrRd",
+        norm=Normalize(0.0, 1.0),
+        shading="flat",
+    )
+    fig.colorbar(mesh, ax=ax, label=PROBABILITY_LABEL)
+    drawn = [v for v in PROBABILITY_LEVELS if probability.min() < v < probability.max()]
+    if drawn and min(probability.shape) > 1:
+        styles = {0.1: ":", 0.5: "-", 0.9: "--"}
+        lines = ax.contour(
+            result.reference_speed_rad_s,
+            result.rows * scale,
+            probability,
+            levels=drawn,
+            colors="black",
+            linestyles=[styles.get(v, "-") for v in drawn],
+            linewidths=1.6,
+        )
+        ax.clabel(lines, fmt="%.1f", fontsize=9, inline=True)
+        handles = [
+            Line2D([], [], color="black", ls=styles.get(v, "-"), lw=1.6, label=f"p = {v:g}")
+            for v in drawn
+        ]
+        fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=10)
+    ax.set_xlabel("reference bit speed (rad/s)")
+    ax.set_ylabel(label)
+    ax.set_title(f"{result.controller} on {result.env_id}")
+    fixed = ""
+    if result.wob_n is not None:
+        fixed = f", WOB {result.wob_n / 1e3:g} kN"
+    elif result.depth_m is not None:
+        fixed = f", measured depth {result.depth_m:g} m"
+    noise = "no noise" if result.noise_std_rad_s == 0 else f"noise {result.noise_std_rad_s:g} rad/s"
+    suptitle(
+        fig,
+        f"plant {result.parameters}{fixed}; {result.draws} draws per cell ({result.uncertainty}); "
+        f"runs of {result.duration_s:g} s from rest, last {result.window_s:g} s analysed, {noise}",
+    )
+    return fig

@@ -59,10 +59,13 @@ import numpy as np
 import numpy.typing as npt
 
 import baselines  # noqa: F401  (registers the built-in controllers, in their order)
-from drill_env.control import controller_names
+from baselines.observer import ObserverGains, design_observer
+from drill_env.control import controller_names, make_controller
 from drill_env.distributed import Chain, chain_from_parameters
 from drill_env.evaluation import ZeroAction, episode_metrics
+from drill_env.metrics import STICK_SLIP_SEVERITY
 from drill_env.options import REALISM_KEYWORDS, EnvConfig, FieldEnvConfig, realism_keywords
+from drill_env.parameters import PLANT_DT_S, PRESETS
 from experiments.arguments import (
     ArgumentParser,
     names_type,
@@ -73,6 +76,7 @@ from experiments.arguments import (
 from experiments.evaluate import FIELD_HELD_OUT, HELD_OUT, HeldOutScenario
 from experiments.field import ENV_IDS, FIELD_ENV, PAPER_ENV, run_on
 from experiments.paths import output_file
+from experiments.plots import realism_figure, save_figure
 from experiments.results_db import Fields, Flag, Number, Schema
 from experiments.sweep import (
     Task,
@@ -97,14 +101,14 @@ __all__ = [
     "IDEAL",
     "LIMIT_BAND",
     "LIMIT_RISE",
-    "LoopMargins",
     "MEAN_KEYS",
     "PRONE",
     "SCENARIOS",
-    "SPEED_LOOPS",
     "SEVERITY_LIMIT",
+    "SPEED_LOOPS",
     "SURFACE",
     "Factor",
+    "LoopMargins",
     "RealismStudy",
     "Setting",
     "Step",
@@ -122,7 +126,7 @@ __all__ = [
 
 IAE_RATIO: Final = 1.5
 """A controller breaks when its mean IAE exceeds this many times its own ideal mean IAE."""
-SEVERITY_LIMIT: Final = 0.5
+SEVERITY_LIMIT: Final = STICK_SLIP_SEVERITY
 """A controller breaks when its mean stick-slip severity exceeds this where the ideal one did
 not (the stick-slip threshold of the maps, docs/specification.md section 14)."""
 LIMIT_RISE: Final = 0.1
@@ -751,9 +755,6 @@ def loop_numbers(
     ``field_2500m`` at 2,500 m) with the bit sliding, and the memory of the sliding-mode
     controllers' observer on the surface setting (:data:`SURFACE`): the slowest time constant
     of its one-step transition ``F``, s (the same in every row of an env)."""
-    from baselines.observer import ObserverGains, design_observer
-    from drill_env.control import make_controller
-    from drill_env.parameters import PLANT_DT_S, PRESETS
 
     rows = []
     for env_id in envs:
@@ -848,7 +849,6 @@ def realism_figures(
     """One figure per factor of the ``means`` rows: IAE, severity and stuck fraction against
     the factor's value, one line per controller, one row of panels per env, each break point
     (:func:`break_points`) ringed (file name, figure)."""
-    from experiments.plots import realism_figure
 
     factors = {f.name: f for f in FACTORS}
     runs = sorted({int(r["runs"]) for r in means})
@@ -1077,8 +1077,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     summary["loops"] = loops
     written = write_outputs(means, runs, breaks, summary, out)
     if not args.no_plots:
-        from experiments.plots import save_figure
-
         written += [
             save_figure(fig, output_file(out / "figures", name))
             for name, fig in realism_figures(means, breaks)

@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final, Protocol
 
+from drill_env import __version__
 from experiments.tables import json_clean
 
 __all__ = [
@@ -94,7 +95,6 @@ _SIDE_FILES: Final = ("-wal", "-shm", "-journal")
 
 def package_version() -> str:
     """The version of drill-string-gym that writes and reads the results."""
-    from drill_env import __version__
 
     return str(__version__)
 

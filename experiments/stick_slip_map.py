@@ -30,24 +30,32 @@ controllers also ``stick_slip_maps.png`` with all of them side by side.
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import functools
+import inspect
 import math
 import time
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Final, NamedTuple, Protocol
+from typing import Any, Final, NamedTuple, Protocol, TypeAlias
 
 import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
+from matplotlib.axes import Axes
+from matplotlib.colors import Normalize
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 from tqdm import tqdm
 
 import baselines  # noqa: F401  (registers the built-in controllers, in their order)
+from agents.policy import load_policy
 from drill_env.control import controller_names
 from drill_env.distributed import DISTRIBUTED_PRESETS, with_measured_depth
 from drill_env.evaluation import reset_each
 from drill_env.limits import MAX_REFERENCE_RAD_S, MAX_WOB_N
-from drill_env.metrics import WindowStatistics
+from drill_env.metrics import STICK_SLIP_SEVERITY, WindowStatistics
 from drill_env.options import REALISM_LEVELS, realism_keywords
 from drill_env.parameters import PLANT_DT_S, PRESETS
 from drill_env.scenarios import RPM
@@ -68,19 +76,47 @@ from experiments.field import (
     observations_of,
 )
 from experiments.paths import output_path
-from experiments.plots import map_figure, maps_figure, save_figure
-from experiments.sweep import MAP_TASK_CELLS, add_sweep_options, sweep_requested
+from experiments.plots import (
+    SEVERITY_LIMIT,
+    cell_edges,
+    new_figure,
+    save_figure,
+)
+from experiments.results_db import Fields, Near, Number, Schema, Values, exactly
+from experiments.sweep import (
+    MAP_TASK_CELLS,
+    SweepOutcome,
+    Task,
+    TaskResult,
+    add_sweep_options,
+    backend_from_args,
+    check_controllers,
+    check_observations,
+    check_task_size,
+    chunks,
+    report_outcome,
+    results_path_from_args,
+    run_sweep,
+    sweep_requested,
+)
 from experiments.tables import write_csv
 
 __all__ = [
     "CSV_COLUMNS",
     "DEFAULT_REALISM",
     "MapPolicy",
+    "MapRun",
+    "MapStudy",
     "StickSlipMap",
     "compute_map",
     "grid_values",
     "main",
+    "map_figure",
+    "map_key",
     "map_realism",
+    "map_rows_task",
+    "maps_figure",
+    "run_map_sweep",
     "stick_slip",
     "write_map_csv",
 ]
@@ -95,7 +131,7 @@ FIELD_WINDOW_S: Final = 50.0
 (4-11 s at 1.5-5 km)."""
 MAX_CHUNK_STEPS: Final = 1000
 """Plant steps per compiled call (1 s): bounds the memory of the per-step records."""
-UNSTABLE_SEVERITY: Final = 0.5
+UNSTABLE_SEVERITY: Final = STICK_SLIP_SEVERITY
 """A cell counts as stick-slipping when its severity exceeds this or its bit ever sticks."""
 DEFAULT_REALISM: Final[dict[str, str | None]] = {PAPER_ENV: "ideal", FIELD_ENV: None}
 """The level of realism (``drill_env.options.REALISM_LEVELS``) a map runs at by default:
@@ -766,7 +802,6 @@ def main(argv: Sequence[str] | None = None) -> int:
                 "maps of models run serially: without --workers, --ray, "
                 "--address, --results, --resume and --overwrite",
             )
-        from agents.policy import load_policy
 
         for path in args.models:
             try:
@@ -798,8 +833,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         runs += [(policy, None, None) for policy in policies]
     computed: Iterable[tuple[StickSlipMap, float | None]]
     if sweep_requested(args):  # on the sweep runner: Ray, a results database, a resume
-        from experiments.sweep_studies import run_map_sweep
-
         named = [(name, obs, depth) for name, obs, depth in runs if isinstance(name, str)]
         computed = ((m, m.measured_depth_m) for m in run_map_sweep(args, named, wobs, speeds))
     else:
@@ -852,3 +885,462 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 if __name__ == "__main__":  # pragma: no cover
     raise SystemExit(main())
+
+
+# ------------------------------------------------------------------- sweep adapter
+MapRun: TypeAlias = tuple[str, str | None, float | None]
+"""One map of a study: (controller, observation mode, measured depth in m); the last two are
+``None`` on ``DrillString-v0``."""
+
+_ARRAY_FIELDS: Final = ("wob_n", "reference_speed_rad_s", "severity", "stuck_fraction")
+"""The fields of a :class:`StickSlipMap` that are its grid and its cells (not its settings)."""
+_STUDY_KEYWORDS: Final = (
+    "controller", "wob_n", "reference_speed_rad_s", "duration_s", "window_s", "noise_std_rad_s",
+    "seed", "parameters", "progress", "env_id", "observation", "measured_depth_m",
+)  # fmt: skip
+"""The :func:`compute_map` arguments a :class:`MapStudy` sets itself (not in its ``keywords``)."""
+
+
+def map_key(controller: str, observation: str | None = None, depth_m: float | None = None) -> str:
+    """The item prefix of one map: ``stiff_pi`` on ``DrillString-v0``, ``stiff_pi/surface/
+    1500.0m`` on the field string (the depth as its exact ``repr``)."""
+    if observation is None or depth_m is None:
+        return controller
+    return f"{controller}/{observation}/{float(depth_m)!r}m"
+
+
+def map_rows_task(
+    controller: str,
+    rows: Sequence[int],
+    wob_n: Sequence[float],
+    reference_speed_rad_s: Sequence[float],
+    duration_s: float,
+    window_s: float,
+    noise_std_rad_s: float,
+    seed: int,
+    parameters: str,
+    env_id: str = PAPER_ENV,
+    observation: str | None = None,
+    measured_depth_m: float | None = None,
+    keywords: Mapping[str, Any] | None = None,
+) -> TaskResult:
+    """The WOB rows ``rows`` (consecutive indices into the whole grid; ``wob_n`` their WOB
+    values) of one map: one :func:`compute_map` over them (on ``env_id``, with ``observation``,
+    ``measured_depth_m`` and the further compute_map ``keywords``), cell ``i`` of the grid
+    reset with ``seed + i``. Records ``{map_key}/row{r}``: ``severity`` and ``stuck_fraction``
+    per reference speed (``None``: diverged) and ``map``, the map's settings as compute_map
+    reports them (every field of :class:`StickSlipMap` but its arrays and wall time)."""
+    first = int(rows[0])
+    assert list(rows) == list(range(first, first + len(rows))), "rows must be consecutive"
+    result = compute_map(
+        controller,
+        list(wob_n),
+        list(reference_speed_rad_s),
+        duration_s=duration_s,
+        window_s=window_s,
+        noise_std_rad_s=noise_std_rad_s,
+        seed=seed + first * len(reference_speed_rad_s),
+        parameters=parameters,
+        progress=False,
+        env_id=env_id,
+        observation=observation,
+        measured_depth_m=measured_depth_m,
+        **dict(keywords or {}),
+    )
+    settings = {
+        f.name: getattr(result, f.name)
+        for f in dataclasses.fields(result)
+        if f.name not in (*_ARRAY_FIELDS, "wall_time_s")
+    }
+    settings["seed"] = int(seed)  # the map's cell 0, not this block's
+    prefix = map_key(controller, observation, measured_depth_m)
+    records = {
+        f"{prefix}/row{r}": {
+            "severity": result.severity[k].tolist(),
+            "stuck_fraction": result.stuck_fraction[k].tolist(),
+            "map": settings,
+        }
+        for k, r in enumerate(rows)
+    }
+    return TaskResult(records)
+
+
+def _floats(values: Sequence[Any]) -> np.ndarray:
+    """A record's list of numbers with ``None`` (a non-finite value in JSON) as NaN."""
+    return np.array([math.nan if v is None else float(v) for v in values], dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class MapStudy:
+    """Stick-slip maps of ``controllers`` over the same grid on the sweep runner.
+
+    On ``DrillString-v0`` one map per controller; on ``DrillStringField-v0`` one per
+    controller, measured depth and observation mode it can use (:meth:`runs`, the order of
+    ``drill-gym map``). Each map equals the one :func:`compute_map` computes over the whole
+    grid, in every field but its wall time.
+
+    Attributes:
+        controllers: Registered controller names.
+        wob_n: WOB of each grid row, N.
+        reference_speed_rad_s: Reference bit speed of each grid column, rad/s.
+        duration_s, window_s, noise_std_rad_s, seed: As
+            :func:`experiments.stick_slip_map.compute_map`.
+        parameters: Plant preset of ``env_id`` (``None``: the env's default, ``zribi2024`` or
+            ``field_2500m``).
+        task_cells: Cells per task (rounded down to whole rows, at least one row); does not
+            change the numbers.
+        name: Name of the sweep.
+        env_id: The env of the cells (:data:`experiments.field.ENV_IDS`).
+        observations: On the field string, the observation modes to map each controller with
+            (each with those it can use, :func:`experiments.field.observations_of`); not used
+            on ``DrillString-v0``.
+        depths_m: On the field string, the measured depths, m, one map each (empty: the
+            preset's); none on ``DrillString-v0``.
+        keywords: Further keywords of :func:`compute_map`, the same for every map (any it
+            accepts but those the study sets itself); passed to every call and part of the
+            spec.
+    """
+
+    controllers: tuple[str, ...]
+    wob_n: tuple[float, ...]
+    reference_speed_rad_s: tuple[float, ...]
+    duration_s: float = 100.0
+    window_s: float = DEFAULT_WINDOW_S
+    noise_std_rad_s: float = 0.0
+    seed: int = 0
+    parameters: str | None = None
+    task_cells: int = MAP_TASK_CELLS
+    name: str = "map"
+    env_id: str = PAPER_ENV
+    observations: tuple[str, ...] = OBSERVATIONS
+    depths_m: tuple[float, ...] = ()
+    keywords: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        check_controllers(self.controllers)
+        for label, values in (
+            ("wob_n", self.wob_n),
+            ("reference_speed_rad_s", self.reference_speed_rad_s),
+        ):
+            if not values:
+                raise ValueError(f"{label} = [] is empty: the grid needs at least one value")
+        check_task_size("task_cells", self.task_cells)
+        steps = self.duration_s / 0.1
+        if not (math.isfinite(steps) and 0 < steps <= 1e5 and abs(steps - round(steps)) < 1e-6):
+            raise ValueError(
+                f"duration_s = {self.duration_s!r} is out of range: allowed (0, 10000], a "
+                "multiple of 0.1 s"
+            )
+        if not (math.isfinite(self.window_s) and 0 < self.window_s <= self.duration_s):
+            raise ValueError(
+                f"window_s = {self.window_s!r} is out of range: allowed (0, duration_s = "
+                f"{self.duration_s:g}]"
+            )
+        presets = DISTRIBUTED_PRESETS if self.field else PRESETS
+        if self.preset not in presets:
+            raise ValueError(
+                f"parameters = {self.preset!r} is not a preset of {self.env_id}: allowed "
+                f"{', '.join(sorted(presets))}"
+            )
+        if self.field:
+            check_observations(self.observations)
+            for depth in self.depths_m:
+                with_measured_depth(self.preset, depth)  # a depth the string cannot have
+        elif self.depths_m:
+            raise ValueError(
+                f"depths_m = {list(self.depths_m)!r}: measured depths are a setting of the field "
+                f"string ({FIELD_ENV}), not of {self.env_id}"
+            )
+        accepted = set(inspect.signature(compute_map).parameters) - set(_STUDY_KEYWORDS)
+        for key in self.keywords:
+            if key not in accepted:
+                raise ValueError(
+                    f"keywords: {key!r} is not a further keyword of compute_map: allowed "
+                    f"{', '.join(sorted(accepted)) or 'none'}"
+                )
+
+    @property
+    def field(self) -> bool:
+        """Whether the maps are of the field string (raises for an unknown env)."""
+        return is_field(self.env_id)
+
+    @property
+    def preset(self) -> str:
+        """The plant preset of the maps."""
+        if self.parameters is not None:
+            return self.parameters
+        return str(DEFAULTS[self.env_id].parameters)
+
+    def runs(self) -> list[MapRun]:
+        """The maps, in the order of ``drill-gym map``: each controller, then (on the field
+        string) each depth, then each observation mode the controller can use (with a level
+        of realism in :attr:`keywords`, the level's observation for every controller)."""
+        if not self.field:
+            return list(dict.fromkeys((c, None, None) for c in self.controllers))
+        depths = self.depths_m or (DISTRIBUTED_PRESETS[self.preset].measured_depth_m,)
+        level = map_realism(self.env_id, self.keywords.get("realism"))
+        fixed = None if level is None else (str(realism_keywords(level)["observation"]),)
+        return list(
+            dict.fromkeys(
+                (c, o, float(d))
+                for c in self.controllers
+                for d in depths
+                for o in (fixed or observations_of(c, self.observations))
+            )
+        )
+
+    def spec(self) -> dict[str, Any]:
+        """The map's settings (not the task size)."""
+        return {
+            "env_id": self.env_id,
+            "maps": [list(run) for run in self.runs()],
+            "wob_n": [float(w) for w in self.wob_n],
+            "reference_speed_rad_s": [float(v) for v in self.reference_speed_rad_s],
+            "duration_s": float(self.duration_s),
+            "window_s": float(self.window_s),
+            "noise_std_rad_s": float(self.noise_std_rad_s),
+            "seed": int(self.seed),
+            "parameters": self.preset,
+            "keywords": dict(self.keywords),
+        }
+
+    def items(self) -> list[str]:
+        """One item per (map, WOB row)."""
+        return [f"{map_key(*run)}/row{r}" for run in self.runs() for r in range(len(self.wob_n))]
+
+    @functools.cached_property
+    def _run_of_prefix(self) -> dict[str, MapRun]:
+        return {map_key(*run): run for run in self.runs()}
+
+    def record_schema(self, item: str) -> Schema:
+        """A WOB row: the severity (>= 0) and the stuck fraction (in [0, 1]) at each reference
+        speed (``None``: diverged), and the map's settings, which must be this study's."""
+        controller, observation, depth = self._run_of_prefix[item.rpartition("/row")[0]]
+        speeds = len(self.reference_speed_rad_s)
+        settings = {
+            "controller": controller,
+            "noise_std_rad_s": float(self.noise_std_rad_s),
+            "seed": int(self.seed),
+            "parameters": self.preset,
+            "env_id": self.env_id,
+            "observation": observation,
+            "measured_depth_m": depth,
+            "realism": map_realism(self.env_id, self.keywords.get("realism")),
+        }
+        return Fields(
+            {
+                "severity": Values(Number(low=0.0), speeds),
+                "stuck_fraction": Values(Number(low=0.0, high=1.0), speeds),
+                "map": Fields(
+                    {
+                        **exactly(settings),  # the run's duration and window in whole steps
+                        "duration_s": Near(float(self.duration_s)),
+                        "window_s": Near(float(self.window_s)),
+                    }
+                ),
+            }
+        )
+
+    def tasks(self, missing: Sequence[str]) -> list[Task]:
+        """Blocks of consecutive missing rows of one map, ``task_cells`` cells each."""
+        per_task = max(1, self.task_cells // len(self.reference_speed_rad_s))
+        wanted = set(missing)
+        tasks: list[Task] = []
+        for controller, observation, depth in self.runs():
+            prefix = map_key(controller, observation, depth)
+            rows = [r for r in range(len(self.wob_n)) if f"{prefix}/row{r}" in wanted]
+            blocks: list[list[int]] = []
+            for r in rows:  # consecutive runs, then blocks of per_task rows
+                if blocks and blocks[-1][-1] == r - 1:
+                    blocks[-1].append(r)
+                else:
+                    blocks.append([r])
+            for run in blocks:
+                for block in chunks(run, per_task):
+                    tasks.append(
+                        Task(
+                            key=f"{prefix}/rows{block[0]}-{block[-1]}",
+                            function=map_rows_task,
+                            kwargs={
+                                "controller": controller,
+                                "rows": block,
+                                "wob_n": [self.wob_n[r] for r in block],
+                                "reference_speed_rad_s": list(self.reference_speed_rad_s),
+                                "duration_s": self.duration_s,
+                                "window_s": self.window_s,
+                                "noise_std_rad_s": self.noise_std_rad_s,
+                                "seed": self.seed,
+                                "parameters": self.preset,
+                                "env_id": self.env_id,
+                                "observation": observation,
+                                "measured_depth_m": depth,
+                                "keywords": dict(self.keywords),
+                            },
+                            items=tuple(f"{prefix}/row{r}" for r in block),
+                        )
+                    )
+        return tasks
+
+    def maps(self, outcome: SweepOutcome) -> list[StickSlipMap]:
+        """The maps, in the order of :meth:`runs`, from the sweep's records (their wall time:
+        the sweep's)."""
+        maps = []
+        for run in self.runs():
+            prefix = map_key(*run)
+            records = [outcome.records[f"{prefix}/row{r}"] for r in range(len(self.wob_n))]
+            maps.append(
+                StickSlipMap(
+                    wob_n=np.asarray(self.wob_n, dtype=np.float64),
+                    reference_speed_rad_s=np.asarray(self.reference_speed_rad_s, dtype=np.float64),
+                    severity=np.stack([_floats(r["severity"]) for r in records]),
+                    stuck_fraction=np.stack([_floats(r["stuck_fraction"]) for r in records]),
+                    wall_time_s=outcome.wall_time_s,
+                    **records[0]["map"],
+                )
+            )
+        return maps
+
+
+def run_map_sweep(
+    args: Any, runs: Sequence[MapRun], wobs: Iterable[float], speeds: Iterable[float]
+) -> list[StickSlipMap]:
+    """``drill-gym map`` on the sweep runner (its parsed options ``args``): the maps of
+    ``runs`` (controller, observation mode, depth; in this order), on ``args.env``."""
+
+    # Further compute_map keywords of the command line: one entry per option (none for the
+    # default map, so that its spec, and the results files written for it, stay as they were).
+    level = map_realism(args.env, args.realism)
+    keywords: dict[str, Any] = {} if level is None else {"realism": level}
+    study = MapStudy(
+        tuple(dict.fromkeys(run[0] for run in runs)),
+        tuple(float(w) for w in wobs),
+        tuple(float(v) for v in speeds),
+        duration_s=args.duration,
+        window_s=args.window,
+        noise_std_rad_s=args.noise,
+        seed=args.seed,
+        parameters=args.parameters,
+        task_cells=args.task_size or MAP_TASK_CELLS,
+        env_id=args.env,
+        observations=tuple(dict.fromkeys(args.observations)),
+        depths_m=tuple(dict.fromkeys(float(run[2]) for run in runs if run[2] is not None)),
+        keywords=keywords,
+    )
+    assert study.runs() == [tuple(run) for run in runs], "the maps of drill-gym map, in order"
+    backend = backend_from_args(args)
+    path = results_path_from_args(args, Path(args.out) / "stick_slip_map.sqlite")
+    outcome = run_sweep(
+        study, backend, path, args.resume, not args.no_progress, overwrite=args.overwrite
+    )
+    report_outcome(study.name, outcome, backend)
+    return study.maps(outcome)
+
+
+# ------------------------------------------------------------------- stick-slip maps
+SEVERITY_LABEL: Final = "stick-slip severity (max - min) / (2 mean)"
+"""Colour-bar label of the severity: the bit speed's over the analysis window."""
+STUCK_LABEL: Final = "stuck fraction of the window"
+"""Colour-bar label of the stuck fraction."""
+BOUNDARY_LABEL: Final = (
+    f"boundary of stick-slip: the bit sticks, or severity > {STICK_SLIP_SEVERITY:g}"
+)
+"""Legend entry of the white line of the maps."""
+
+
+def _heatmap(ax: Axes, result: StickSlipMap, quantity: str, title: str) -> Any:
+    if quantity == "severity":
+        data, norm, cmap = result.severity, Normalize(0.0, SEVERITY_LIMIT), "magma"
+    else:
+        data, norm, cmap = result.stuck_fraction, Normalize(0.0, 1.0), "viridis"
+    mesh = ax.pcolormesh(
+        cell_edges(result.reference_speed_rad_s),
+        cell_edges(result.wob_n) / 1e3,
+        np.ma.masked_invalid(data),
+        cmap=cmap,
+        norm=norm,
+        shading="flat",
+    )
+    unstable = result.unstable()
+    if unstable.any() and not unstable.all() and min(data.shape) > 1:
+        ax.contour(
+            result.reference_speed_rad_s,
+            result.wob_n / 1e3,
+            unstable.astype(float),
+            levels=[0.5],
+            colors="white",
+            linewidths=1.6,
+        )
+    ax.set_title(title)
+    ax.set_xlabel("reference bit speed (rad/s)")
+    ax.set_ylabel("WOB (kN)")
+    return mesh
+
+
+def _boundary_legend(fig: Figure) -> None:
+    handle = Line2D([], [], color="white", lw=2.0, label=BOUNDARY_LABEL)
+    legend = fig.legend(handles=[handle], loc="outside lower center", fontsize=10, frameon=True)
+    legend.get_frame().set_facecolor("0.45")
+    for text in legend.get_texts():
+        text.set_color("white")
+
+
+def map_figure(result: StickSlipMap) -> Figure:
+    """Severity and stuck-fraction heatmaps of one map, side by side, with labelled colour bars
+    and the stick-slip boundary explained."""
+    fig = new_figure(11.0, 4.9)
+    axes = fig.subplots(1, 2)
+    for ax, quantity, label in (
+        (axes[0], "severity", f"severity, capped at {SEVERITY_LIMIT:g}"),
+        (axes[1], "stuck", "stuck fraction"),
+    ):
+        mesh = _heatmap(ax, result, quantity, f"{result.label}: {label}")
+        fig.colorbar(
+            mesh,
+            ax=ax,
+            extend="max" if quantity == "severity" else "neither",
+            label=SEVERITY_LABEL if quantity == "severity" else STUCK_LABEL,
+        )
+    fig.suptitle(_caption(result))
+    _boundary_legend(fig)
+    return fig
+
+
+def maps_figure(results: Sequence[StickSlipMap]) -> Figure:
+    """All maps side by side: one column per controller, severity above stuck fraction.
+
+    Raises:
+        ValueError: if ``results`` is empty.
+    """
+    if not results:
+        raise ValueError("maps_figure needs at least one map")
+    n = len(results)
+    fig = new_figure(3.1 * n + 1.9, 7.0)
+    axes = np.asarray(fig.subplots(2, n, squeeze=False, sharex=True, sharey=True))
+    severity: list[Any] = []
+    stuck: list[Any] = []
+    for col, result in enumerate(results):
+        severity.append(_heatmap(axes[0, col], result, "severity", result.label))
+        stuck.append(_heatmap(axes[1, col], result, "stuck", result.label))
+        if col:
+            axes[0, col].set_ylabel("")
+            axes[1, col].set_ylabel("")
+        axes[0, col].set_xlabel("")
+    fig.colorbar(severity[-1], ax=list(axes[0]), extend="max", label=SEVERITY_LABEL)
+    fig.colorbar(stuck[-1], ax=list(axes[1]), label=STUCK_LABEL)
+    fig.suptitle(
+        f"stick-slip severity (top, colours capped at {SEVERITY_LIMIT:g}) and stuck fraction "
+        f"(bottom)\n{_caption(results[0])}"
+    )
+    _boundary_legend(fig)
+    return fig
+
+
+def _caption(result: StickSlipMap) -> str:
+    noise = "no noise" if result.noise_std_rad_s == 0 else f"noise {result.noise_std_rad_s:g} rad/s"
+    plant = f"plant {result.parameters}"
+    if result.measured_depth_m is not None:
+        plant += f" at {result.measured_depth_m:,.0f} m"
+    return (
+        f"{plant}, runs of {result.duration_s:g} s from rest, last "
+        f"{result.window_s:g} s analysed, {noise}"
+    )

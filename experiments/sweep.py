@@ -53,7 +53,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final, NamedTuple, Protocol
 
+import numpy as np
+
+from drill_env.control import controller_names
 from experiments.arguments import number_type
+from experiments.field import OBSERVATIONS
 from experiments.results_db import ResultsDatabase, Schema, SchemaError, as_json
 from experiments.tables import json_clean
 
@@ -74,10 +78,15 @@ __all__ = [
     "Task",
     "TaskResult",
     "add_sweep_options",
+    "agent_fingerprint",
     "backend_from_args",
+    "check_controllers",
+    "check_observations",
+    "check_task_size",
     "chunks",
     "ray_session",
     "read_results",
+    "report_outcome",
     "results_path_from_args",
     "run_sweep",
     "spec_hash",
@@ -538,3 +547,58 @@ def results_path_from_args(args: argparse.Namespace, default: Path) -> Path | No
     if args.resume or args.overwrite or backend_from_args(args).distributed:
         return default
     return None
+
+
+# ------------------------------------------------------------- checks of the studies
+def check_controllers(names: Sequence[str]) -> None:
+    valid = controller_names()
+    if not names:
+        raise ValueError(f"controllers = [] is empty: allowed one or more of {', '.join(valid)}")
+    for name in names:
+        if name not in valid:
+            raise ValueError(f"unknown controller {name!r}: valid names are {', '.join(valid)}")
+
+
+def check_task_size(name: str, value: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ValueError(f"{name} = {value!r} is out of range: allowed an integer >= 1")
+
+
+def check_observations(modes: Sequence[str]) -> None:
+    if not modes:
+        raise ValueError(
+            f"observations = [] is empty: allowed one or more of {', '.join(OBSERVATIONS)}"
+        )
+    for mode in modes:
+        if mode not in OBSERVATIONS:
+            raise ValueError(
+                f"observation = {mode!r} is not valid: allowed {', '.join(OBSERVATIONS)}"
+            )
+
+
+def agent_fingerprint(agent: Any) -> dict[str, Any] | None:
+    """What identifies an agent in a sweep's spec: its name, its env keywords and a SHA-256 of
+    its weights and normalisation (when it has them); ``None`` for no agent."""
+    if agent is None:
+        return None
+    digest = hashlib.sha256()
+    weights = getattr(agent, "weights", None)
+    if isinstance(weights, Mapping):
+        for key in sorted(weights):
+            digest.update(key.encode())
+            digest.update(np.ascontiguousarray(weights[key], dtype=np.float64).tobytes())
+    for name in ("obs_mean", "obs_std"):
+        value = getattr(agent, name, None)
+        if value is not None:
+            digest.update(np.ascontiguousarray(value, dtype=np.float64).tobytes())
+    env_kwargs = {k: str(v) for k, v in dict(getattr(agent, "env_kwargs", {}) or {}).items()}
+    return {"name": str(agent.name), "env_kwargs": env_kwargs, "sha256": digest.hexdigest()}
+
+
+def report_outcome(study_name: str, outcome: SweepOutcome, backend: Any) -> None:
+    where = f"; results in {outcome.results_path}" if outcome.results_path else ""
+    loaded = f", {outcome.loaded} items read from the results database" if outcome.loaded else ""
+    print(
+        f"sweep {study_name} on {backend.describe()}: {len(outcome.ran)} tasks run in "
+        f"{outcome.wall_time_s:.1f} s{loaded}{where}"
+    )

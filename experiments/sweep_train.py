@@ -50,6 +50,11 @@ from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final
 
+from agents import train as training
+from agents.config import TrainConfig
+from agents.policy import is_model_folder, load_policy
+from agents.train import planned_timesteps, train
+from baselines.registry import REFERENCE_CONTROLLER
 from experiments.arguments import (
     ArgumentParser,
     names_type,
@@ -57,6 +62,14 @@ from experiments.arguments import (
     output_folder,
     seed_type,
 )
+from experiments.evaluate import (
+    FIELD_HELD_OUT,
+    HELD_OUT,
+    evaluate,
+    held_out_set,
+    summarize,
+)
+from experiments.field import ENV_IDS, FIELD_ENV, PAPER_ENV, is_field, run_label
 from experiments.paths import output_path
 from experiments.sweep import ADDRESS_VARIABLE, Backend, ray_session
 from experiments.tables import Column, markdown_table, write_csv, write_json
@@ -115,7 +128,6 @@ defaults of ``drill-gym train``."""
 
 def _fields() -> dict[str, Any]:
     """Field name -> type of :class:`agents.config.TrainConfig` that a sweep may set."""
-    from agents.config import TrainConfig
 
     hints = typing.get_type_hints(TrainConfig)
     return {
@@ -224,7 +236,7 @@ class SweepSpec:
     scheduler: str
     settings: Mapping[str, Any]
     grace_period: int = 2
-    env_id: str = "DrillString-v0"
+    env_id: str = PAPER_ENV
 
     def __post_init__(self) -> None:
         if not self.seeds:
@@ -256,7 +268,6 @@ class SweepSpec:
     def corner_configs(self) -> Iterator[Any]:
         """Training configurations at every grid value and at the ends of every sample range
         (building them validates the values)."""
-        from agents.config import TrainConfig
 
         def build(**values: Any) -> Any:
             return TrainConfig.for_env(
@@ -275,8 +286,6 @@ class SweepSpec:
 
     def validations(self) -> int:
         """Validations each trial reports (the last one after the final rollout)."""
-        from agents.config import TrainConfig
-        from agents.train import planned_timesteps
 
         config = TrainConfig.for_env(self.env_id, **{**self.settings, "seed": self.seeds[0]})
         if not config.validate_every:
@@ -310,8 +319,6 @@ def _report_validations() -> Iterator[None]:
     ratios as the run's ``validation.csv`` records them)."""
     from ray import tune
 
-    from agents import train as training
-
     original = training._Validation.run
 
     def run(self: Any, model: Any, venv: Any) -> float:
@@ -340,9 +347,6 @@ def train_trial(config: dict[str, Any]) -> None:
     run folder ``config["runs_dir"]/TRIAL__seedS``, its validations reported to Tune."""
     from ray import tune
 
-    from agents.config import TrainConfig
-    from agents.train import train
-
     settings = dict(config["settings"])
     keys = ("settings", "runs_dir", "seed", "env_id")
     chosen = {k: v for k, v in config.items() if k not in keys}
@@ -351,7 +355,7 @@ def train_trial(config: dict[str, Any]) -> None:
     trial = tune.get_context().get_trial_id()
     run_dir = output_path(config["runs_dir"], f"{trial}__seed{seed}")
     train_config = TrainConfig.for_env(
-        config.get("env_id", "DrillString-v0"),
+        config.get("env_id", PAPER_ENV),
         **{**settings, **chosen, "seed": seed, "run_dir": str(run_dir)},
     )
     with _report_validations():
@@ -411,7 +415,6 @@ def _trial_row(result: Any, spec: SweepSpec, runs_dir: Path) -> dict[str, Any]:
 def _model_folder(run_dir: Path) -> Path | None:
     """The model of a run: ``model/`` (the best on validation) or, for a run stopped early,
     ``best/``."""
-    from agents.policy import is_model_folder
 
     for name in ("model", "best"):
         if is_model_folder(run_dir / name):
@@ -423,13 +426,10 @@ def _heldout(model: Path, scenario_ids: Sequence[str] | None) -> dict[str, Any]:
     """Held-out ratios of the model to its base controller on the held-out set of its env
     (:mod:`experiments.evaluate`; on the field string the base controller with the agent's
     observation mode)."""
-    from agents.policy import load_policy
-    from experiments.evaluate import BASE_CONTROLLER, evaluate, held_out_set, summarize
-    from experiments.field import is_field, run_label
 
     agent = load_policy(model)
     field = is_field(agent.env_id)
-    fallback = "soft_speed" if field else BASE_CONTROLLER
+    fallback = REFERENCE_CONTROLLER[FIELD_ENV if field else PAPER_ENV]
     base = agent.env_kwargs.get("base_controller") or fallback
     observation = agent.env_kwargs.get("observation", "surface") if field else None
     held_out = held_out_set(agent.env_id)
@@ -506,8 +506,6 @@ def run_training_sweep(
     best = min(scored, key=lambda r: r["best_iae_ratio"]) if scored else None
     summary: dict[str, Any] = {"trials": rows, "best": None, "metric": METRIC}
     if best is not None:
-        from agents.policy import load_policy
-
         model = _model_folder(Path(best["run_dir"]))
         if model is not None:
             policy = load_policy(model)
@@ -638,8 +636,8 @@ def _parser() -> ArgumentParser:
     )
     p.add_argument(
         "--env",
-        choices=("DrillString-v0", "DrillStringField-v0"),
-        default="DrillString-v0",
+        choices=ENV_IDS,
+        default=PAPER_ENV,
         help="the env of every trial; the settings not given take its drill-gym train "
         "defaults (DrillStringField-v0: the field agent's)",
     )
@@ -656,7 +654,6 @@ def _parser() -> ArgumentParser:
         default="best",
         help="score the best trial's model, every trial's or none on the held-out scenarios",
     )
-    from experiments.evaluate import FIELD_HELD_OUT, HELD_OUT
 
     ids = [s.id for s in HELD_OUT]
     field_ids = [s.id for s in FIELD_HELD_OUT]
@@ -707,8 +704,6 @@ def spec_from_args(parser: ArgumentParser, args: Any) -> SweepSpec:
         settings = {k: v for k, v in budget.items() if k not in (*grid, *samples)}
         settings.update(explicit)
         if args.heldout_scenarios:
-            from experiments.evaluate import held_out_set
-
             allowed = [s.id for s in held_out_set(args.env)]
             wrong = [i for i in args.heldout_scenarios if i not in allowed]
             if wrong:

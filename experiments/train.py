@@ -13,6 +13,8 @@ import json
 from collections.abc import Sequence
 from typing import Final
 
+from agents.config import config_from_namespace, config_parser
+from agents.train import train
 from experiments.arguments import ArgumentParser
 
 __all__ = ["DESCRIPTION", "main"]
@@ -50,8 +52,6 @@ examples:
 
 
 def _parser() -> argparse.ArgumentParser:
-    from agents.config import config_parser
-
     parser = config_parser("drill-gym train", DESCRIPTION, parser_class=ArgumentParser)
     parser.add_argument(
         "--out",
@@ -78,11 +78,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             option; ``drill-gym`` prints it and exits with 2).
         FileNotFoundError: ``--resume`` without a checkpoint.
     """
-    from agents.config import config_from_namespace
 
     args = _parser().parse_args(list(argv) if argv is not None else None)
     config = config_from_namespace(args)
-    from agents.train import train
 
     out = train(config, progress=not args.no_progress)
     record = json.loads((out / "config.json").read_text())

@@ -57,6 +57,7 @@ import drill_env
 from agents.config import TrainConfig
 from agents.train import validation_scenarios, validation_score
 from baselines.base import resolve_model
+from baselines.registry import REFERENCE_CONTROLLER
 from baselines.tuned import (
     KIND_ENVS,
     TUNABLE,
@@ -103,7 +104,7 @@ __all__ = [
 
 ENVS: Final = (drill_env.ENV_ID, drill_env.FIELD_ENV_ID)
 """The envs a search runs on."""
-REFERENCE: Final = "proposed"
+REFERENCE: Final = REFERENCE_CONTROLLER[drill_env.ENV_ID]
 """The controller every score is relative to (the agent's base controller)."""
 NOMINAL_PRESETS: Final = {drill_env.ENV_ID: "zribi2024", drill_env.FIELD_ENV_ID: "field_2500m"}
 """The nominal string of each env, on which the derived gains are reported."""

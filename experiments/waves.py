@@ -35,7 +35,7 @@ import dataclasses
 import math
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
@@ -43,13 +43,22 @@ from typing import Any, Final
 import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
+from matplotlib.axes import Axes
+from matplotlib.colors import Normalize
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 
 import baselines  # noqa: F401  (registers the built-in controllers, in their order)
+from baselines.registry import family_members, needs_full_state
 from baselines.string_modes import reflection_coefficient, string_modes, top_drive_impedance
 from drill_env.control import controller_names, make_controller
-from drill_env.distributed import DISTRIBUTED_PRESETS, DistributedStringParameters
-from drill_env.evaluation import ZeroAction
-from drill_env.metrics import episode_metrics_from_samples
+from drill_env.distributed import (
+    DISTRIBUTED_PRESETS,
+    DistributedStringParameters,
+    with_measured_depth,
+)
+from drill_env.evaluation import ZeroAction, rollout
+from drill_env.metrics import STEADY_SEVERITY, episode_metrics_from_samples, stick_slip_severity
 from drill_env.modes import (
     lumped_equivalent,
     natural_frequencies_hz,
@@ -66,6 +75,7 @@ from experiments.arguments import (
     seed_option,
 )
 from experiments.field import (
+    COMPARE_POINTS,
     FIELD_CONDITIONS,
     FIELD_ENV,
     OBSERVATIONS,
@@ -76,6 +86,7 @@ from experiments.field import (
     run_label,
 )
 from experiments.paths import output_file
+from experiments.plots import color_of, new_figure, save_figure, suptitle
 from experiments.tables import Column, markdown_table, write_json
 
 __all__ = [
@@ -87,6 +98,8 @@ __all__ = [
     "main",
     "record_run",
     "reflection_table",
+    "space_time_figure",
+    "string_response_figure",
     "string_table",
 ]
 
@@ -99,8 +112,6 @@ WINDOW_S: Final = 50.0
 """Analysis window at the end of each run, s (as ``drill-gym map`` on the field string)."""
 SPACE_TIME_S: Final = 12.0
 """Length of the space-time figures, s (two stick-slip cycles at 2,500 m)."""
-STEADY_SEVERITY: Final = 0.1
-"""Below this severity a run turns steadily and table 4 gives no cycle period."""
 RESPONSE_S: Final = 30.0
 """Length of the response figure, s."""
 ACTUATOR: Final = {
@@ -311,7 +322,7 @@ def record_run(
     w = np.concatenate(bit)
     late = history.window(start)
     metrics = {
-        "stick_slip_severity": float((w.max() - w.min()) / (2.0 * max(w.mean(), 1e-9))),
+        "stick_slip_severity": stick_slip_severity(float(w.max()), float(w.min()), float(w.mean())),
         "stuck_fraction": float(window["stuck_fraction"]),
         "rmse": float(window["rmse"]),
         "mean_bit_speed_rad_s": float(w.mean()),
@@ -367,7 +378,6 @@ def string_table(depths_m: Sequence[float]) -> list[dict[str, Any]]:
     bit free (the first is the stick-slip period) and of the lowest with the bit stuck (s), and
     the second clamped-top, free-bit period and the stuck-bit period of the 4-DOF equivalent
     (:func:`drill_env.modes.lumped_equivalent`; for ``zribi2024`` its own)."""
-    from drill_env.distributed import with_measured_depth
 
     rows = [
         _string_row(f"field_2500m at {d:,.0f} m", with_measured_depth("field_2500m", d))
@@ -386,7 +396,7 @@ def reflection_table(string: DistributedStringParameters) -> list[dict[str, Any]
     ``dT / z`` behind the high-pass of its running mean, ``Z_td = z (1 + 1 / (i w tau))``.
     """
     rows = []
-    for name in ("stiff_pi", "soft_speed", "z_torque"):
+    for name in family_members("speed_loop", tuned=False):
         try:
             tuning = make_controller(name).tuning(string)  # type: ignore[attr-defined]
         except ValueError as err:
@@ -437,7 +447,6 @@ def equivalent_table(
     functions of the same numbers: only the plant differs. (The speed loops are tuned from their
     model's modes, which differ between the two: this is a test of the SMCs.)
     """
-    from drill_env.evaluation import rollout
 
     rows = []
     for case in cases:
@@ -483,7 +492,7 @@ def equivalent_table(
                     env.close()
                 late = trace.time_s >= duration_s - window_s
                 w = trace.bit_speed_rad_s[late]
-                severity = float((w.max() - w.min()) / (2 * max(w.mean(), 1e-9)))
+                severity = stick_slip_severity(float(w.max()), float(w.min()), float(w.mean()))
                 out[f"{key}_severity"] = severity
                 out[f"{key}_stuck_fraction"] = float(trace.bit_stuck[late].mean())
                 # the cycle of a run that turns steadily is that of its ripples: left out
@@ -693,10 +702,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             )
     run_rows = [{"label": r.label, **r.metrics} for r in runs]
     equivalent: list[dict[str, Any]] = []
-    smcs = [n for n in names if n in ("csmc", "msmc", "asmc", "proposed")]
+    smcs = [n for n in names if needs_full_state(n)]
     if not args.no_equivalent and smcs:
-        from experiments.field import COMPARE_POINTS
-
         cases = [
             _case(d, w * 1e3, r, args.condition) for w, r in COMPARE_POINTS for d in args.depths
         ]
@@ -744,7 +751,6 @@ def write_figures(
     runs: Sequence[RunRecord], case: FieldCase, folder: Path, duration_s: float
 ) -> list[Path]:
     """``field_response.png`` and one ``field_space_time_<run>.png`` per run."""
-    from experiments.plots import save_figure, space_time_figure, string_response_figure
 
     title = (
         f"{case.measured_depth_m:,.0f} m of field_2500m, WOB {case.wob.initial_n / 1e3:g} kN, "
@@ -766,3 +772,162 @@ def write_figures(
 
 if __name__ == "__main__":  # pragma: no cover
     raise SystemExit(main())
+
+
+# ------------------------------------------------------------ the field string's waves
+def string_response_figure(
+    histories: Mapping[str, StringHistory], title: str = "", *, ncols: int = 5
+) -> Figure:
+    """Bit speed (with the reference), top-drive speed and surface torque against time, one
+    column of three panels per run, up to ``ncols`` runs per row; one speed axis for every
+    speed panel and one torque axis for every torque panel, so the runs compare at a glance.
+
+    Args:
+        histories: Run label -> node history (:class:`experiments.waves.StringHistory`).
+        title: Figure title.
+        ncols: Runs per row.
+
+    Raises:
+        ValueError: if ``histories`` is empty.
+    """
+    if not histories:
+        raise ValueError("histories is empty: nothing to plot")
+    n = len(histories)
+    ncols = max(1, min(ncols, n))
+    groups = math.ceil(n / ncols)
+    fig = new_figure(3.3 * ncols + 1.0, 5.6 * groups + 1.0)
+    grid = np.asarray(fig.subplots(3 * groups, ncols, squeeze=False, sharex=True))
+    speed_axes: list[Axes] = []
+    torque_axes: list[Axes] = []
+    rows = (
+        ("bit speed (rad/s)", "bit"),
+        ("top-drive speed (rad/s)", "top"),
+        ("surface torque (kN m)", "torque"),
+    )
+    for k, (label, history) in enumerate(histories.items()):
+        g, col = divmod(k, ncols)
+        color = color_of(label, k)
+        for r, (ylabel, what) in enumerate(rows):
+            ax = grid[3 * g + r, col]
+            t = history.time_s
+            if what == "bit":
+                ax.plot(t, history.reference_rad_s, color="k", ls=(0, (4, 2)), lw=1.0)
+                ax.plot(t, history.bit_speed_rad_s, color=color, lw=1.3)
+                ax.set_title(label, fontsize=10)
+            elif what == "top":
+                ax.plot(t, history.reference_rad_s, color="k", ls=(0, (4, 2)), lw=1.0)
+                ax.plot(t, history.top_drive_speed_rad_s, color=color, lw=1.3)
+            else:
+                ax.plot(t, history.surface_torque_nm / 1e3, color=color, lw=1.3)
+            (torque_axes if what == "torque" else speed_axes).append(ax)
+            ax.grid(True, alpha=0.3)
+            ax.ticklabel_format(axis="x", useOffset=False)
+            if col == 0:
+                ax.set_ylabel(ylabel, fontsize=9)
+            if r == 2:
+                ax.tick_params(labelbottom=True)
+                ax.set_xlabel("time (s)", fontsize=9)
+    for group in (speed_axes, torque_axes):
+        lows = [a.get_ylim()[0] for a in group]
+        highs = [a.get_ylim()[1] for a in group]
+        for a in group:
+            a.set_ylim(min(lows), max(highs))
+    for ax in grid.ravel()[3 * n :]:
+        ax.set_visible(False)
+    for k in range(n, groups * ncols):
+        g, col = divmod(k, ncols)
+        for r in range(3):
+            grid[3 * g + r, col].set_visible(False)
+    fig.legend(
+        handles=[Line2D([], [], color="k", ls=(0, (4, 2)), lw=1.0, label="reference bit speed")],
+        loc="outside lower center",
+        fontsize=10,
+    )
+    suptitle(fig, title)
+    return fig
+
+
+def _slip_onsets(history: StringHistory, threshold_rad_s: float = 0.05) -> npt.NDArray[np.float64]:
+    """Times at which the bit starts to turn again after sticking, s (at most one per travel
+    time of a wave from the bit to the surface)."""
+    moving = history.bit_speed_rad_s > threshold_rad_s
+    starts = history.time_s[np.flatnonzero(moving[1:] & ~moving[:-1]) + 1]
+    gap = float(history.node_depth_m[-1]) / history.wave_speed_m_s
+    kept: list[float] = []
+    for t in starts:  # one per cycle: a release within one travel time of the last is the same
+        if not kept or t - kept[-1] > gap:
+            kept.append(float(t))
+    return np.array(kept)
+
+
+def space_time_figure(history: StringHistory, title: str = "") -> Figure:
+    """The torsional waves along the string: node speed (top) and the torque each element
+    carries (bottom) as colour maps over time (x) and depth (y, the surface at the top).
+
+    The dashed white line is the top of the BHA. Each dotted line starts at the bit when it
+    breaks free and climbs at the pipe's wave speed ``c``: where the colours change along it,
+    the release wave is travelling up the string; it reaches the top drive ``D / c`` later.
+
+    Args:
+        history: The node history of one run (:class:`experiments.waves.StringHistory`),
+            typically its last stick-slip cycles.
+        title: Figure title.
+
+    Raises:
+        ValueError: if the history has fewer than two samples.
+    """
+    if history.time_s.size < 2:
+        raise ValueError("history has fewer than two samples: nothing to plot")
+    fig = new_figure(10.0, 7.6)
+    ax_w, ax_t = fig.subplots(2, 1, sharex=True, sharey=True)
+    t = history.time_s
+    depth = history.node_depth_m
+    mid = 0.5 * (depth[1:] + depth[:-1])
+    speed_high = max(float(np.percentile(history.speed_rad_s, 99.5)), 1e-3)
+    mesh_w = ax_w.pcolormesh(
+        t, depth, history.speed_rad_s.T, shading="nearest", cmap="viridis",
+        norm=Normalize(0.0, speed_high), rasterized=True,
+    )  # fmt: skip
+    torque = history.torque_nm.T / 1e3
+    mesh_t = ax_t.pcolormesh(
+        t, mid, torque, shading="nearest", cmap="magma",
+        norm=Normalize(float(np.percentile(torque, 0.5)), float(np.percentile(torque, 99.5))),
+        rasterized=True,
+    )  # fmt: skip
+    bottom = float(depth[-1])
+    handles: list[Any] = [
+        Line2D([], [], color="white", ls="--", lw=1.4, label="top of the BHA"),
+    ]
+    onsets = _slip_onsets(history)
+    travel = bottom / history.wave_speed_m_s
+    for ax in (ax_w, ax_t):
+        ax.axhline(history.pipe_length_m, color="white", ls="--", lw=1.4)
+        for t0 in onsets:
+            ax.plot([t0, t0 + travel], [bottom, 0.0], color="white", ls=":", lw=1.6)
+        ax.set_xlim(float(t[0]), float(t[-1]))
+        ax.set_ylim(bottom, 0.0)
+        ax.set_ylabel("depth (m)")
+    if onsets.size:
+        handles.append(
+            Line2D(
+                [],
+                [],
+                color="white",
+                ls=":",
+                lw=1.6,
+                label=f"from the bit's release at c = {history.wave_speed_m_s:,.0f} m/s: "
+                f"at the surface {travel:.2f} s later",
+            )  # fmt: skip
+        )
+    ax_w.set_title("node speed")
+    ax_t.set_title("torque carried by the string")
+    ax_t.set_xlabel("time (s)")
+    ax_t.ticklabel_format(axis="x", useOffset=False)
+    fig.colorbar(mesh_w, ax=ax_w, label="speed (rad/s)", extend="max")
+    fig.colorbar(mesh_t, ax=ax_t, label="torque (kN m)", extend="both")
+    legend = fig.legend(handles=handles, loc="outside lower center", ncol=len(handles), fontsize=10)
+    legend.get_frame().set_facecolor("0.45")
+    for text in legend.get_texts():
+        text.set_color("white")
+    suptitle(fig, title)
+    return fig

@@ -18,7 +18,8 @@ from drill_env.evaluation import ZeroAction, episode_metrics, rollout
 from drill_env.metrics import METRIC_KEYS
 from drill_env.modes import natural_frequencies_hz
 from experiments import compare, evaluate, field, stick_slip_map, waves
-from experiments.plots import space_time_figure, string_response_figure, text_problems
+from experiments.plots import text_problems
+from experiments.waves import space_time_figure, string_response_figure
 
 FIELD = field.FIELD_ENV
 

@@ -25,8 +25,7 @@ from experiments.plots import (
     downsample,
     envelope,
     learning_curves_figure,
-    map_figure,
-    maps_figure,
+    metric_bars_figure,
     panels_figure,
     speed_torque_figure,
     text_outside,
@@ -34,7 +33,7 @@ from experiments.plots import (
     text_problems,
     time_window,
 )
-from experiments.stick_slip_map import compute_map
+from experiments.stick_slip_map import compute_map, map_figure, maps_figure
 
 
 @pytest.fixture(scope="module")
@@ -350,3 +349,20 @@ def test_maps_explain_their_colours_and_line(map_figures: dict[str, Figure]) -> 
         colorbars = [ax for ax in fig.axes if ax.get_label() == "<colorbar>"]
         assert colorbars and all(ax.get_ylabel() for ax in colorbars)
         assert any("boundary of stick-slip" in t for t in _legend_texts(fig))
+
+
+def test_bars_of_many_long_names_have_readable_labels() -> None:
+    """The field comparison's bar charts: 17 runs labelled controller (observation), without and
+    with noise, on linear and log value axes, without overlapping or clipped labels."""
+    modes = ("state", "surface")
+    labels = [f"{c} ({m})" for c in compare.default_controllers() for m in modes][:17]
+    rng = np.random.default_rng(0)
+    rows = [
+        {"controller": c, "noise_std_rad_s": noise, "rmsd_nm": x, "chattering_nm_per_s": 3 * x}
+        for c in labels
+        for noise, x in zip((0.0, 0.05), rng.uniform(5e3, 4e4, 2), strict=True)
+    ]
+    assert len(labels) == 17
+    for metric, log in (("rmsd_nm", False), ("chattering_nm_per_s", True)):
+        fig = metric_bars_figure(rows, metric, hue="noise_std_rad_s", log=log)
+        assert not text_problems(fig), (metric, text_problems(fig))

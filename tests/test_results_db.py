@@ -30,8 +30,8 @@ from experiments.results_db import (
     Values,
     check_results_file,
 )
+from experiments.stick_slip_map import MapStudy
 from experiments.sweep import read_results, run_sweep
-from experiments.sweep_studies import MapStudy
 
 WOBS = (60e3, 110e3, 160e3)
 SPEEDS = (3.0, 7.0)

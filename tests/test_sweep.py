@@ -22,10 +22,11 @@ import pytest
 
 from drill_env import __version__
 from experiments.cli import main as cli_main
+from experiments.compare import CompareStudy
+from experiments.evaluate import EvaluateStudy
 from experiments.results_db import Fields, Flag, Number
-from experiments.stick_slip_map import compute_map
+from experiments.stick_slip_map import MapStudy, compute_map
 from experiments.sweep import Backend, Task, TaskResult, read_results, run_sweep, spec_hash
-from experiments.sweep_studies import CompareStudy, EvaluateStudy, MapStudy
 
 WOBS = (60e3, 110e3, 160e3)
 SPEEDS = (3.0, 7.0)
@@ -498,7 +499,7 @@ def test_ray_is_imported_only_when_a_sweep_runs_on_it() -> None:
             assert not [n for n in names if n.split(".")[0] in ("ray", "optuna")], path
     code = (
         "import sys\n"
-        "import experiments.cli, experiments.sweep, experiments.sweep_studies\n"
+        "import experiments.cli, experiments.sweep, experiments.compare, experiments.evaluate\n"
         "import experiments.probability_map, experiments.sweep_train, experiments.stick_slip_map\n"
         "from experiments.stick_slip_map import main\n"
         "main(['--wob-n', '1', '--speed-n', '1', '--duration', '1', '--window', '1', '--no-plots',"

@@ -17,12 +17,13 @@ from typing import Any
 import numpy as np
 import pytest
 
-from experiments import compare, evaluate, sweep_studies
+from experiments import compare, evaluate, stick_slip_map
 from experiments.cli import main as cli_main
+from experiments.compare import CompareStudy
+from experiments.evaluate import EvaluateStudy
 from experiments.field import FIELD_ENV, PAPER_ENV
-from experiments.stick_slip_map import StickSlipMap, compute_map
+from experiments.stick_slip_map import MapStudy, StickSlipMap, compute_map
 from experiments.sweep import read_results, run_sweep, spec_hash
-from experiments.sweep_studies import CompareStudy, EvaluateStudy, MapStudy
 
 WOBS = (60e3, 120e3, 180e3)
 SPEEDS = (6.0, 12.0)
@@ -152,7 +153,7 @@ def test_map_study_passes_further_compute_map_keywords_through(
         seen.append(level)
         return compute_map(*args, **kwargs)
 
-    monkeypatch.setattr(sweep_studies, "compute_map", with_level)
+    monkeypatch.setattr(stick_slip_map, "compute_map", with_level)
     study = field_map(keywords={"level": "rough"}, task_cells=6)
     assert study.spec()["keywords"] == {"level": "rough"}
     assert study.spec() != field_map(keywords={"level": "smooth"}).spec()

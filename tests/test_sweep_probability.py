@@ -14,8 +14,13 @@ import drill_env  # noqa: F401  (registers the envs)
 from drill_env.evaluation import ZeroAction, rollout
 from drill_env.scenarios import Randomization
 from experiments.cli import main as cli_main
-from experiments.plots import probability_figure, text_problems
-from experiments.probability_map import CSV_COLUMNS, ProbabilityStudy, probability_cells_task
+from experiments.plots import text_problems
+from experiments.probability_map import (
+    CSV_COLUMNS,
+    ProbabilityStudy,
+    probability_cells_task,
+    probability_figure,
+)
 from experiments.stick_slip_map import stick_slip
 from experiments.sweep import run_sweep
 

@@ -24,9 +24,14 @@ ray = pytest.importorskip("ray")
 from agents import load_default_policy  # noqa: E402
 from experiments import compare  # noqa: E402
 from experiments.cli import main as cli_main  # noqa: E402
-from experiments.evaluate import HELD_OUT, evaluate  # noqa: E402
+from experiments.compare import CompareStudy  # noqa: E402
+from experiments.evaluate import (  # noqa: E402
+    HELD_OUT,
+    EvaluateStudy,  # noqa: E402
+    evaluate,
+)
 from experiments.field import FIELD_ENV  # noqa: E402
-from experiments.stick_slip_map import compute_map  # noqa: E402
+from experiments.stick_slip_map import MapStudy, compute_map  # noqa: E402
 from experiments.sweep import (  # noqa: E402
     Backend,
     Task,
@@ -35,7 +40,6 @@ from experiments.sweep import (  # noqa: E402
     read_results,
     run_sweep,
 )
-from experiments.sweep_studies import CompareStudy, EvaluateStudy, MapStudy  # noqa: E402
 
 RAY = Backend(workers=2)
 
