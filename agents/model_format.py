@@ -47,6 +47,7 @@ from agents.inference import (
 )
 from agents.legacy_format import LEGACY_NORM_FILE, LEGACY_WEIGHTS_FILE, PREVIOUS_FORMAT, read_npz
 from drill_env import COUPLED_ENV_ID, ENV_ID, FIELD_ENV_ID
+from drill_env.coupled_env import CoupledEnvConfig
 from drill_env.layout import OBSERVATION_MODES
 from drill_env.options import EnvConfig, FieldEnvConfig
 
@@ -428,8 +429,6 @@ def validate_env_kwargs(data: Any, where: str) -> dict[str, Any]:
 
 def _coupled_env_kwargs(data: dict[str, Any], where: str) -> dict[str, Any]:
     """:func:`validate_env_kwargs` of a ``DrillStringCoupled-v0`` model."""
-    from drill_env.coupled_env import CoupledEnvConfig
-
     try:
         schema = _CoupledEnvKwargsSchema.model_validate(data)
     except ValidationError as err:

@@ -122,7 +122,7 @@ from drill_env.layout import (
 from drill_env.limits import MAX_SPEED_RAD_S, MAX_TWIST_RAD
 from drill_env.rewards import tracking_error
 from drill_env.scenarios import profile_value
-from drill_env.validation import check_choice, check_range, check_real, require
+from drill_env.validation import check_choice, check_range, check_real, require, shown
 
 __all__ = [
     "AXIAL_TOPS",
@@ -1373,7 +1373,7 @@ def check_bit_keywords(
             ("hook_stiffness_n_m", hook_stiffness_n_m, math.inf),
         ):  # fmt: skip
             if not (value is default or value == default):
-                raise ValueError(f"{name} = {value!r} applies only with bit='rgd'")
+                raise ValueError(f"{name} = {shown(value)} applies only with bit='rgd'")
         return None
     p = _resolve(rgd_parameters)  # type: ignore[arg-type]
     _check_top(axial_top, hook_speed_m_s, hook_stiffness_n_m)

@@ -384,9 +384,10 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
     ) -> tuple[npt.NDArray[np.float32], SupportsFloat, bool, bool, dict[str, Any]]:
         if not self._started:
             raise RuntimeError("call reset() before step()")
-        value = float(action[0]) if type(action) is np.ndarray and action.shape == (1,) else 2.0
+        common = type(action) is np.ndarray and action.shape == (1,) and action.dtype.kind == "f"
+        value = float(action[0]) if common else 2.0
         was_clipped = False
-        if not -1.0 <= value <= 1.0:  # anything but the common case (also NaN): checked
+        if not -1.0 <= value <= 1.0:  # anything but a float array in range (or NaN): checked
             a, clipped = validate_actions(action, 1)
             value, was_clipped = float(a[0]), bool(clipped[0])
         b = self._batch

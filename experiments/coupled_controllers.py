@@ -30,8 +30,10 @@ import numpy as np
 
 import baselines  # noqa: F401  (registers the controllers and the autodriller)
 import drill_env
+from agents import load_policy
 from drill_env.coupled_env import DrillStringCoupledEnv
 from experiments.arguments import ArgumentParser, number_type, output_folder
+from experiments.plots import save_figure
 from experiments.tables import Column, markdown_table, write_csv, write_json
 
 __all__ = ["AXIAL_LOOPS", "TORQUE_LOOPS", "main", "map_figure", "run_point"]
@@ -180,8 +182,6 @@ def evaluate_agent(model: Path, episodes: int) -> list[dict[str, Any]]:
     """A trained ``DrillStringCoupled-v0`` agent and its base loops alone (zero action) on the
     same randomised episodes (reset seeds ``AGENT_SEED + k``): the mean of each reward term
     per decision and the episode metrics, averaged over the episodes."""
-    from agents import load_policy
-
     policy = load_policy(model)
     if policy.env_id != drill_env.COUPLED_ENV_ID:
         raise ValueError(f"{str(model)!r} is a model for {policy.env_id}, not the coupled env")
@@ -421,8 +421,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         write_csv(rows, out / "coupled_controllers.csv", [c.key for c in ROW_COLUMNS]),
     ]
     if not args.no_plots:
-        from experiments.plots import save_figure
-
         fig = map_figure(rows, args.torque_loops, args.forces, args.speeds)
         written.append(save_figure(fig, out / "figures" / "coupled_controllers_map.png"))
     print(f"\nwrote {', '.join(str(w) for w in written)} ({wall:.1f} s wall for the runs)")

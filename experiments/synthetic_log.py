@@ -33,6 +33,7 @@ from drill_env.friction import STUCK
 from drill_env.integration import plant_step
 from drill_env.measured_log import MeasuredLog, write_log_csv
 from drill_env.parameters import PRESETS, plant_parameter_vector
+from experiments.arguments import ArgumentParser, run_command, seed_option
 
 __all__ = ["LAB_TRUTH", "LabRig", "field_log", "lab_log", "main"]
 
@@ -283,8 +284,6 @@ def field_log(
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Write ``OUT/lab_log.csv`` and ``OUT/field_log.csv``; refuses to replace existing ones."""
-    from experiments.arguments import ArgumentParser, run_command, seed_option
-
     parser = ArgumentParser(
         prog="python -m experiments.synthetic_log",
         description="Write the synthetic laboratory and field logs of docs/calibration.md.",

@@ -236,6 +236,7 @@ ENV_IDS_HOME: Final = "drill_env/ids.py"
 
 CONTROLLER_LISTS_ALLOWED: Final[dict[str, str]] = {
     "experiments/realism.py:SPEED_LOOPS": "the loops whose margins the study derives",
+    "experiments/coupled_controllers.py:TORQUE_LOOPS": "the study's default choice of loops",
 }
 """Literal tuples, lists or sets of built-in controller names allowed, ``path:name`` -> why
 (families, full-state needs, rig loops and reference controllers come from

@@ -17,6 +17,8 @@ LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)")
 """A markdown link or image: its target."""
 CODE = re.compile(r"```.*?```|`[^`\n]*`", re.DOTALL)
 """Fenced and inline code (a link-like text there is not a link)."""
+FENCED = re.compile(r"```.*?```", re.DOTALL)
+"""Fenced code (a line starting with ``#`` there is not a heading)."""
 
 
 def _id(path: Path) -> str:
@@ -26,7 +28,7 @@ def _id(path: Path) -> str:
 def _anchors(page: Path) -> set[str]:
     """The anchors of a page's headings, as GitHub makes them."""
     anchors = set()
-    for line in CODE.sub("", page.read_text()).splitlines():
+    for line in FENCED.sub("", page.read_text()).splitlines():
         if line.startswith("#"):
             title = line.lstrip("#").strip().lower()
             title = re.sub(r"[^\w\- ]", "", title)

@@ -137,7 +137,7 @@ def test_help_shows_the_field_defaults(capsys: pytest.CaptureFixture[str]) -> No
         parse_config(["--help"])
     flat = " ".join(capsys.readouterr().out.split())
     assert f"(default: 1; {FIELD}: {ENV_DEFAULTS[FIELD]['frame_stack']})" in flat
-    assert f"(default: proposed; {FIELD}: z_torque_tuned)" in flat
+    assert f"(default: proposed; {FIELD}: z_torque_tuned;" in flat
     assert f"(default: env; {FIELD}: wide)" in flat
 
 
