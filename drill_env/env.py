@@ -216,7 +216,7 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
 
     ``r = -(w_t T + w_c C + w_s S) / (w_t + w_c + w_s) - w_q Q - w_r R``, in ``[-2, 0]`` with
     the default weights ``RewardWeights(tracking=1, chattering=0.1, stuck=0,
-    chattering_scale_nm=50_000, torque=1, residual=0)``: the shipped agents' training recipe
+    chattering_scale_nm=50_000, torque=1, residual=0)``: the shipped agent's training recipe
     (``drill_env.rewards``). Each term is in ``[0, 1]``; ``info["reward_terms"]`` gives them
     all, weighted or not. A diverged step gets -1.
 
@@ -490,7 +490,9 @@ class DrillStringFieldEnv(DrillStringEnv):
     padded with zeros to the deepest string the env can draw.
 
     ## Rewards
-    Those of ``DrillString-v0`` (``drill_env.rewards``).
+    The terms of ``DrillString-v0`` (``drill_env.rewards``), with the shipped field agent's
+    weights by default (``FIELD_REWARD_WEIGHTS``: tracking 1, chattering 0.1 with a 50 kN m
+    scale, stuck 0.5, torque 2, residual 0.5), so the reward is in ``[-3.5, 0]``.
 
     ## Starting State
     At rest, bit stuck. With ``randomize=True`` each reset draws (``FieldRandomization``) the

@@ -39,7 +39,7 @@ from drill_env.parameters import (
     DrillStringParameters,
     resolve_parameters,
 )
-from drill_env.rewards import RewardWeights
+from drill_env.rewards import FIELD_REWARD_WEIGHTS, RewardWeights
 from drill_env.scenarios import (
     RPM,
     FieldRandomization,
@@ -444,6 +444,7 @@ class FieldEnvConfig(EnvConfig):
     episode_s: float = 100.0
     control_dt_s: float = 0.2  # the shipped field agent's (agents/models/field_agent)
     residual_scale_nm: float = 10_000.0  # the shipped field agent's
+    reward_weights: RewardWeights = field(default_factory=lambda: FIELD_REWARD_WEIGHTS)
     bit: str = "karnopp"
     rgd_parameters: str | RgdParameters = "rgd_a"
     axial_top: str = "force"

@@ -16,8 +16,10 @@ Total::
         - w_torque torque - w_residual residual
 
 in ``[-1 - w_torque - w_residual, 0]``: ``[-2, 0]`` with the default weights, which are the
-shipped agents' training recipe (``agents/models/residual_ppo``, ``agents/models/field_agent``):
-tracking 1, chattering 0.1 with a 50 kN m scale, stuck 0, torque 1, residual 0. The 50 kN m
+shipped agent's training recipe (``agents/models/residual_ppo``): tracking 1, chattering 0.1
+with a 50 kN m scale, stuck 0, torque 1, residual 0. ``DrillStringField-v0``'s defaults are its
+shipped agent's (``agents/models/field_agent``, :data:`FIELD_REWARD_WEIGHTS`): stuck 0.5,
+torque 2, residual 0.5, so its reward is in ``[-3.5, 0]``. The 50 kN m
 scale keeps the chattering term below its cap under the default 0.1 rad/s measurement noise
 (a 5 kN m scale was exceeded at every decision by a controller that reacts to the noise).
 """
@@ -26,7 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, TypeVar
+from typing import Any, Final, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -42,7 +44,14 @@ from drill_env.layout import (
 )
 from drill_env.validation import check_range, check_real, require
 
-__all__ = ["TERMS", "RewardWeights", "reward_terms", "total_reward", "tracking_error"]
+__all__ = [
+    "FIELD_REWARD_WEIGHTS",
+    "TERMS",
+    "RewardWeights",
+    "reward_terms",
+    "total_reward",
+    "tracking_error",
+]
 
 Term = TypeVar("Term", float, npt.NDArray[np.float64])
 
@@ -94,6 +103,12 @@ class RewardWeights:
             )
         s = check_real("chattering_scale_nm", self.chattering_scale_nm, "> 0 and finite")
         require("chattering_scale_nm", self.chattering_scale_nm, "> 0 and finite", 0 < s < np.inf)
+
+
+FIELD_REWARD_WEIGHTS: Final = RewardWeights(stuck=0.5, torque=2.0, residual=0.5)
+"""The default weights of ``DrillStringField-v0``: its shipped agent's recipe (the stuck term
+counts the time the bit sticks, the torque and residual terms hold the agent at no more RMS
+torque than its base loop)."""
 
 
 def reward_terms(

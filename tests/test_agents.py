@@ -636,7 +636,12 @@ def test_the_default_command_trains_the_shipped_agent() -> None:
     shipped = json.loads((DEFAULT_MODEL_DIR / "residual_ppo" / "config.json").read_text())
     output_only = {"run_dir", "save_dir", "checkpoint_every", "tensorboard", "progress_bar"}
     # settings added after the shipped run, with the value that run had (one env, no stacking)
-    later = {"env_id": "DrillString-v0", "observation": "", "frame_stack": 1}
+    later = {
+        "env_id": "DrillString-v0",
+        "observation": "",
+        "frame_stack": 1,
+        "training_ranges": "env",
+    }
     record = {**later, **shipped["train_config"]}
     defaults = dataclasses.asdict(TrainConfig())
     differ = {
