@@ -60,6 +60,7 @@ __all__ = [
     "RunFeatures",
     "SteadyState",
     "critical_speed_rad_s",
+    "illinois_update",
     "lumped_string",
     "rightmost_roots",
     "run_features",
@@ -658,6 +659,22 @@ def _switch(
     return switch_rule(regime, which, dn, f_rest, ts, v, om, p)
 
 
+@njit(cache=True, inline="always")
+def illinois_update(
+    a: float, b: float, fa: float, fb: float, side: int, c: float, fc: float
+) -> tuple[float, float, float, float, int]:
+    """One bracket update of the Illinois regula falsi: the new point ``c`` (value ``fc``,
+    non-zero) replaces the end of the bracket ``[a, b]`` with the same sign, and the value of
+    an end kept twice in a row is halved. Returns ``(a, b, fa, fb, side)``."""
+    if fc < 0.0:
+        if side == -1:
+            fa *= 0.5
+        return a, c, fa, fc, -1
+    if side == 1:
+        fb *= 0.5
+    return c, b, fc, fb, 1
+
+
 @njit(cache=True)
 def _locate(
     which: int,
@@ -693,20 +710,9 @@ def _locate(
         uc, vc, pc, oc = _rk4(regime, t, u, v, phi, om, c, p, ring_phi, ring_r, ring)
         _events(g, regime, t + c, uc, vc, pc, oc, p, ring_phi, ring_r, ring)
         fc = g[which]
-        if fc < 0.0:
-            b = c
-            fb = fc
-            if side == -1:
-                fa *= 0.5
-            side = -1
-        elif fc > 0.0:
-            a = c
-            fa = fc
-            if side == 1:
-                fb *= 0.5
-            side = 1
-        else:
+        if not (fc < 0.0 or fc > 0.0):
             return c
+        a, b, fa, fb, side = illinois_update(a, b, fa, fb, side, c, fc)
     return b
 
 

@@ -63,6 +63,7 @@ from drill_env.coupled import (
     _resolve,
     _surface,
     bit_load,
+    illinois_update,
     steady_state,
     stop_rule,
     switch_rule,
@@ -532,20 +533,9 @@ def _locate(
         _rk4(regime, y, c, trial, work, q, ring_phi, ring_r, ring)
         _events(g, regime, trial, q, ring_phi, ring_r, ring)
         fc = g[which]
-        if fc < 0.0:
-            b = c
-            fb = fc
-            if side == -1:
-                fa *= 0.5
-            side = -1
-        elif fc > 0.0:
-            a = c
-            fa = fc
-            if side == 1:
-                fb *= 0.5
-            side = 1
-        else:
+        if not (fc < 0.0 or fc > 0.0):
             return c
+        a, b, fa, fb, side = illinois_update(a, b, fa, fb, side, c, fc)
     return b
 
 
