@@ -943,7 +943,7 @@ def _parser() -> ArgumentParser:
         nargs="*",
         metavar="POLICY",
         help="what to score: registered controller names, model folders (config.json, "
-        "policy.npz, obs_norm.npz) "
+        "policy.safetensors, obs_norm.safetensors) "
         + CONTROLLERS_HELP
         + ". Default: every registered controller and every model in agents/models/; each "
         "suite's reference controller is always added",
