@@ -22,7 +22,7 @@ import numpy as np
 from experiments.stick_slip_map import compute_map
 
 TARGET_S = 60.0
-"""The issue's budget for the default 20 x 16 grid of 100 s runs on 2 cores, s."""
+"""The budget for the default 20 x 16 grid of 100 s runs on 2 cores, s."""
 
 
 def main() -> None:
