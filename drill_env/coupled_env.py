@@ -67,6 +67,7 @@ from drill_env.coupled import (
     switch_rule,
     switching_functions,
 )
+from drill_env.env import validate_actions
 from drill_env.layout import (
     M_APPLIED_TORQUE,
     M_STATE,
@@ -970,13 +971,8 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
         """Hold the inputs over one decision and advance the plant."""
         if not self._ready:
             raise RuntimeError("call reset() before step()")
-        a = np.asarray(action, dtype=np.float64).reshape(-1)
         size = 2 if self.config.action_mode == "both" else 1
-        if a.shape != (size,) or not np.all(np.isfinite(a)):
-            raise ValueError(
-                f"action = {action!r} is out of range: allowed {size} finite values in [-1, 1]"
-            )
-        a = np.clip(a, -1.0, 1.0)
+        a = validate_actions(action, 1, size=size)[0].reshape(size)
         c = self.config
         torque, command, base, residual = self._inputs(a)
         self._base, self._command = base, command
@@ -1261,12 +1257,9 @@ class DrillStringCoupledVectorEnv(VectorEnv):
         """Step every string with its row of ``actions`` ``(num_envs, k)``."""
         if not self._started:
             raise RuntimeError("call reset() before step()")
-        a = np.asarray(actions, dtype=np.float64)
         k = self.single_action_space.shape[0]  # type: ignore[index]
-        if a.shape != (self.num_envs, k):
-            raise ValueError(
-                f"actions have shape {a.shape}: allowed ({self.num_envs}, {k}) values in [-1, 1]"
-            )
+        a = validate_actions(actions, self.num_envs, batched=True, size=k)[0]
+        a = a.reshape(self.num_envs, k)
         observations, infos = [], []
         rewards = np.zeros(self.num_envs)
         terminated = np.zeros(self.num_envs, dtype=bool)

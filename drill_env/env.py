@@ -104,19 +104,23 @@ _TELEMETRY_COLUMNS: Final = (
 
 
 def validate_actions(
-    action: Any, num: int, batched: bool = False
+    action: Any, num: int, batched: bool = False, size: int = 1
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
-    """Check ``action`` (``num`` values in [-1, 1]) and clip it; returns (clipped, was_clipped).
+    """Check ``action`` (``num`` strings' ``size`` values each, in [-1, 1]) and clip it;
+    returns (clipped, was_clipped), shaped ``(num,)`` for one value per string, else
+    ``(num, size)``.
 
-    A single env takes shape ``(1,)`` (or a scalar); a vector env (``batched``) takes
-    ``(num, 1)`` (or ``(num,)``). Real numbers only: integers and floats (Python or numpy);
-    bools, complex numbers, strings, objects and masked arrays are refused.
+    A single env takes shape ``(size,)`` (or a scalar when ``size`` is 1); a vector env
+    (``batched``) takes ``(num, size)`` (or ``(num,)`` when ``size`` is 1). Real numbers only:
+    integers and floats (Python or numpy); bools, complex numbers, strings, objects and masked
+    arrays are refused.
 
     Raises:
         ValueError: naming ``action`` when it is not real, not finite or not of the right shape.
     """
     if (
         not batched
+        and size == 1
         and type(action) is np.ndarray
         and action.shape == (1,)
         and action.dtype.kind == "f"
@@ -124,7 +128,7 @@ def validate_actions(
         v = float(action[0])
         if -1.0 <= v <= 1.0:
             return np.array([v]), np.zeros(1, dtype=bool)
-    expected = "(1,)" if not batched else f"({num}, 1)"
+    expected = f"({size},)" if not batched else f"({num}, {size})"
     if type(action) is np.ndarray:  # a plain array (a masked array is a subclass)
         a = action
     elif isinstance(action, np.ma.MaskedArray):
@@ -142,15 +146,13 @@ def validate_actions(
             f"action must be numeric (real numbers) with shape {expected}, got {shown(action)} "
             f"(dtype {a.dtype})"
         )
-    if not batched:
-        if a.shape not in ((1,), ()):
-            raise ValueError(f"action must have shape (1,), got shape {a.shape}")
-    elif a.shape not in ((num, 1), (num,)):
-        raise ValueError(f"action must have shape ({num}, 1), got shape {a.shape}")
+    allowed = ((size,), ()) if not batched else ((num, size), (num,))
+    if a.shape not in allowed[: 2 if size == 1 else 1]:
+        raise ValueError(f"action must have shape {expected}, got shape {a.shape}")
     if a.dtype.itemsize > 8:  # long double: beyond float64 it becomes inf, refused below
         with np.errstate(over="ignore"):
             a = a.astype(np.float64)
-    a = np.asarray(a, dtype=np.float64).reshape(num)
+    a = np.asarray(a, dtype=np.float64).reshape((num,) if size == 1 else (num, size))
     if not np.all(np.isfinite(a)):
         raise ValueError(f"action must be finite, got {shown(action)}")
     clipped = (a < -1.0) | (a > 1.0)
