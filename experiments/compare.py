@@ -950,10 +950,7 @@ def _parser() -> ArgumentParser:
         "on DrillStringField-v0)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    add_sweep_options(
-        p,
-        f"runs per task on the sweep runner (default: {COMPARE_TASK_RUNS}); does not change the numbers",
-    )
+    add_sweep_options(p)
     return p
 
 

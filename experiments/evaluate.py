@@ -699,11 +699,7 @@ def _parser() -> ArgumentParser:
         help=f"also load the Stable-Baselines3 .zip files (older models) named as MODEL: "
         f"{PICKLE_RISK}; only for files you made yourself or got from a source you trust",
     )
-    add_sweep_options(
-        parser,
-        f"held-out scenarios per task on the sweep runner, each with every controller and agent "
-        f"(default: {EVALUATE_TASK_SCENARIOS}); does not change the numbers",
-    )
+    add_sweep_options(parser)
     return parser
 
 

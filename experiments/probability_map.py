@@ -685,11 +685,7 @@ def _parser() -> ArgumentParser:
     seed_option(p, "draw k of every cell is reset with seed + k", base=True)
     p.add_argument("--no-plots", action="store_true", help="write the CSV files only")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    add_sweep_options(
-        p,
-        f"cells per task, each --draws runs (default: {PROBABILITY_TASK_CELLS}); does not "
-        "change the numbers",
-    )
+    add_sweep_options(p)
     return p
 
 

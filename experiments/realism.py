@@ -1013,10 +1013,7 @@ def _parser() -> ArgumentParser:
     )
     parser.add_argument("--no-plots", action="store_true", help="write no figures")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    add_sweep_options(
-        parser,
-        f"runs per task on the sweep runner (default: {TASK_RUNS}); does not change the numbers",
-    )
+    add_sweep_options(parser)
     return parser
 
 

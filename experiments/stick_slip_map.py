@@ -748,11 +748,7 @@ def _parser() -> ArgumentParser:
     )
     parser.add_argument("--no-plots", action="store_true", help="write the CSV files only")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    add_sweep_options(
-        parser,
-        f"map cells per task on the sweep runner, rounded down to whole WOB rows (default: "
-        f"{MAP_TASK_CELLS}); does not change the numbers",
-    )
+    add_sweep_options(parser)
     return parser
 
 

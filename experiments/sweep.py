@@ -56,9 +56,9 @@ from typing import TYPE_CHECKING, Any, Final, NamedTuple, Protocol
 import numpy as np
 
 from drill_env.control import controller_names
-from experiments.arguments import number_type
 from experiments.field import OBSERVATIONS
 from experiments.results_db import ResultsDatabase, Schema, SchemaError, as_json
+from experiments.spec_cli import option, spec_from_args, spec_options
 from experiments.tables import json_clean
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -73,6 +73,7 @@ __all__ = [
     "PROBABILITY_TASK_CELLS",
     "WORKER_ENV",
     "Backend",
+    "RunnerSpec",
     "Study",
     "SweepOutcome",
     "Task",
@@ -89,6 +90,7 @@ __all__ = [
     "report_outcome",
     "results_path_from_args",
     "run_sweep",
+    "runner_from_args",
     "spec_hash",
     "sweep_requested",
 ]
@@ -457,96 +459,111 @@ def _run_on_ray(
 
 
 # ---------------------------------------------------------------------------- command line
-def add_sweep_options(parser: argparse.ArgumentParser, task_size_help: str) -> None:
-    """The options of a study on the runner: ``--workers``, ``--ray``, ``--address``,
-    ``--task-size``, ``--results``, ``--resume``, ``--overwrite``, ``--max-retries``."""
-    group = parser.add_argument_group("sweeps (Ray: the scale extra)")
-    group.add_argument(
-        "--workers",
-        type=number_type(1, 4096, integer=True),
-        default=1,
-        metavar="N",
-        help="tasks at a time: 1 runs serially in this process; N > 1 runs on Ray (a local "
-        "cluster of N CPUs, or at most N tasks in flight on the cluster of --address)",
-    )
-    group.add_argument(
-        "--ray", action="store_true", help="run on Ray even with --workers 1 (default: serial)"
-    )
-    group.add_argument(
-        "--address",
+SWEEP_GROUP: Final = "sweeps (Ray: the scale extra)"
+"""Help section of the runner's options."""
+
+
+@dataclass(frozen=True)
+class RunnerSpec:
+    """How a study runs: serially or on Ray, into which results database, resumed or not.
+
+    The same options in every study that runs on the runner (:func:`spec_parser` of
+    :mod:`experiments.spec_cli` after the study's own Spec). None of them changes the numbers.
+    """
+
+    workers: int = field(default=1, metadata=option(low=1, high=4096, group=SWEEP_GROUP))
+    """tasks at a time: 1 runs serially in this process; N > 1 runs on Ray (a local cluster of N
+    CPUs, or at most N tasks in flight on the cluster of ``address``)"""
+    ray: bool = field(default=False, metadata=option(group=SWEEP_GROUP))
+    """run on Ray even with ``workers`` 1 (default: serially)"""
+    address: str | None = field(
         default=None,
-        metavar="ADDR",
-        help=f"join the running Ray cluster at ADDR (host:port or 'auto'; default: "
-        f"${ADDRESS_VARIABLE}, else a local cluster is started)",
+        metadata=option(
+            metavar="ADDR",
+            group=SWEEP_GROUP,
+            default_text=f"${ADDRESS_VARIABLE}, else a local cluster",
+        ),
     )
-    group.add_argument(
-        "--task-size",
-        type=number_type(1, 10**6, integer=True),
+    """join the running Ray cluster at ADDR (host:port or 'auto')"""
+    task_size: int | None = field(
         default=None,
-        metavar="N",
-        help=task_size_help,
+        metadata=option(low=1, high=10**6, group=SWEEP_GROUP, default_text="the study's"),
     )
-    group.add_argument(
-        "--results",
-        type=Path,
+    """items per task on Ray (rows of a map, runs of a comparison)"""
+    results: Path | None = field(
         default=None,
-        metavar="FILE",
-        help="SQLite results database each finished task is written to; several studies may "
-        "share one (default: a file in --out when the sweep runs on Ray or with --resume or "
-        "--overwrite; none for a plain serial run)",
+        metadata=option(
+            metavar="FILE",
+            group=SWEEP_GROUP,
+            default_text="a file in --out on Ray or with --resume/--overwrite, else none",
+        ),
     )
-    group.add_argument(
-        "--resume",
-        action="store_true",
-        help="keep the items of the same settings already in the results database and run "
-        "only the missing ones",
+    """SQLite results database each finished task is written to; several studies may share one"""
+    resume: bool = field(default=False, metadata=option(group=SWEEP_GROUP))
+    """keep the items of the same settings already in the results database; run the others"""
+    overwrite: bool = field(default=False, metadata=option(group=SWEEP_GROUP))
+    """delete this study's results of the same settings from the database and run them again
+    (without it or ``resume`` such results are an error; other rows stay)"""
+    max_retries: int = field(
+        default=DEFAULT_MAX_RETRIES, metadata=option(low=0, high=100, group=SWEEP_GROUP)
     )
-    group.add_argument(
-        "--overwrite",
-        action="store_true",
-        help="delete the results of the same settings from the results database and run them "
-        "again (without it and --resume, such results are an error; other rows stay)",
-    )
-    group.add_argument(
-        "--max-retries",
-        type=number_type(0, 100, integer=True),
-        default=DEFAULT_MAX_RETRIES,
-        metavar="N",
-        help="times a task is run again when its worker process dies",
-    )
+    """times a task is run again when its worker process dies"""
+
+    @property
+    def requested(self) -> bool:
+        """Whether anything beyond a plain serial run is asked for (Ray, a database, a resume)."""
+        return bool(
+            self.workers > 1
+            or self.ray
+            or self.address
+            or self.results is not None
+            or self.resume
+            or self.overwrite
+            or self.task_size is not None
+        )
+
+    def backend(self) -> Backend:
+        """The :class:`Backend` these options ask for."""
+        return Backend(
+            workers=self.workers,
+            use_ray=self.ray,
+            address=self.address or None,
+            max_retries=self.max_retries,
+        )
+
+    def results_path(self, default: Path) -> Path | None:
+        """The results database: ``results``, else ``default`` when the sweep is on Ray,
+        resumes or overwrites, else ``None``."""
+        if self.results is not None:
+            return Path(self.results)
+        if self.resume or self.overwrite or self.backend().distributed:
+            return default
+        return None
+
+
+def add_sweep_options(parser: argparse.ArgumentParser) -> None:
+    """Add the runner's options (the fields of :class:`RunnerSpec`) to ``parser``."""
+    spec_options(parser, RunnerSpec)
+
+
+def runner_from_args(args: argparse.Namespace) -> RunnerSpec:
+    """The :class:`RunnerSpec` of parsed options."""
+    return spec_from_args(RunnerSpec, args)
 
 
 def sweep_requested(args: argparse.Namespace) -> bool:
     """Whether the options ask for the sweep runner (Ray, a results database, a resume)."""
-    return bool(
-        args.workers > 1
-        or args.ray
-        or args.address
-        or args.results is not None
-        or args.resume
-        or args.overwrite
-        or args.task_size is not None
-    )
+    return runner_from_args(args).requested
 
 
 def backend_from_args(args: argparse.Namespace) -> Backend:
-    """The :class:`Backend` of parsed :func:`add_sweep_options` options."""
-    return Backend(
-        workers=int(args.workers),
-        use_ray=bool(args.ray),
-        address=args.address or None,
-        max_retries=int(args.max_retries),
-    )
+    """The :class:`Backend` of parsed runner options."""
+    return runner_from_args(args).backend()
 
 
 def results_path_from_args(args: argparse.Namespace, default: Path) -> Path | None:
-    """The results database: ``--results``, else ``default`` when the sweep is on Ray, resumes
-    or overwrites, else ``None``."""
-    if args.results is not None:
-        return Path(args.results)
-    if args.resume or args.overwrite or backend_from_args(args).distributed:
-        return default
-    return None
+    """The results database of parsed runner options (:meth:`RunnerSpec.results_path`)."""
+    return runner_from_args(args).results_path(default)
 
 
 # ------------------------------------------------------------- checks of the studies

@@ -903,11 +903,7 @@ def _parser() -> ArgumentParser:
         help="the tuned gains file --write updates",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
-    add_sweep_options(
-        p,
-        "candidates per task (default: 1); does not change the numbers. The results always go "
-        "to --out/tune.sqlite (or to --results)",
-    )
+    add_sweep_options(p)
     return p
 
 
