@@ -51,7 +51,7 @@ import functools
 import math
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final, NamedTuple
 
@@ -66,27 +66,14 @@ from drill_env.evaluation import ZeroAction, episode_metrics
 from drill_env.metrics import STICK_SLIP_SEVERITY
 from drill_env.options import REALISM_KEYWORDS, EnvConfig, FieldEnvConfig, realism_keywords
 from drill_env.parameters import PLANT_DT_S, PRESETS
-from experiments.arguments import (
-    ArgumentParser,
-    names_type,
-    number_type,
-    output_folder,
-    seed_option,
-)
+from experiments.arguments import BASE_SEED_HIGH, ArgumentParser, names_type, output_folder
 from experiments.evaluate import FIELD_HELD_OUT, HELD_OUT, HeldOutScenario
 from experiments.field import ENV_IDS, FIELD_ENV, PAPER_ENV, run_on
 from experiments.paths import output_file
 from experiments.plots import realism_figure, save_figure
 from experiments.results_db import Fields, Flag, Number, Schema
-from experiments.sweep import (
-    Task,
-    TaskResult,
-    add_sweep_options,
-    backend_from_args,
-    chunks,
-    results_path_from_args,
-    run_sweep,
-)
+from experiments.spec_cli import option, spec_from_args, spec_parser
+from experiments.sweep import RunnerSpec, Task, TaskResult, chunks, run_sweep
 from experiments.tables import Column, markdown_table, write_csv, write_json
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -109,6 +96,7 @@ __all__ = [
     "SURFACE",
     "Factor",
     "LoopMargins",
+    "RealismSpec",
     "RealismStudy",
     "Setting",
     "Step",
@@ -121,6 +109,7 @@ __all__ = [
     "main",
     "mean_rows",
     "run_realism",
+    "run_study",
     "study_settings",
 ]
 
@@ -926,134 +915,127 @@ def run_realism(
 
 
 # ---------------------------------------------------------------------------- command line
+def _every_scenario() -> list[str]:
+    return [s.id for s in (*HELD_OUT, *FIELD_HELD_OUT)]
+
+
+@dataclass(frozen=True)
+class RealismSpec:
+    """Settings of ``drill-gym realism`` (each field is the option of the same name)."""
+
+    envs: tuple[str, ...] = field(
+        default=ENV_IDS,
+        metadata=option(parse=names_type(lambda: ENV_IDS, "env"), metavar="ENV", flag="--env"),
+    )
+    """envs of the study"""
+    controllers: tuple[str, ...] = field(
+        default=(),
+        metadata=option(
+            parse=names_type(controller_names, "controller"), metavar="NAME", default_text="all"
+        ),
+    )
+    """controllers, by registered name"""
+    factors: tuple[str, ...] = field(
+        default=FACTOR_NAMES,
+        metadata=option(parse=names_type(lambda: FACTOR_NAMES, "factor"), metavar="FACTOR"),
+    )
+    """factors to move (the ideal and field levels always run)"""
+    scenarios: tuple[str, ...] = field(
+        default=(),
+        metadata=option(
+            parse=names_type(_every_scenario, "scenario"),
+            metavar="ID",
+            default_text="six of each env",
+        ),
+    )
+    """held-out scenarios (h01-h20: DrillString-v0, f01-f16: DrillStringField-v0)"""
+    duration_s: float = field(
+        default=EPISODE_S,
+        metadata=option(
+            low=0.0, high=1e4, open_low=True, unit="s", metavar="S", aliases=("--episode",)
+        ),
+    )
+    """length of every run, s (a whole number of seconds)"""
+    seed: int = field(default=0, metadata=option(low=0, high=BASE_SEED_HIGH))
+    """added to every scenario's own reset seed (it drives the noise)"""
+    out: Path = field(
+        default=Path("results/realism"), metadata=option(parse=output_folder, metavar="DIR")
+    )
+    """output folder"""
+    no_plots: bool = False
+    """write no figures"""
+    no_progress: bool = False
+    """no progress bar"""
+
+    def __post_init__(self) -> None:
+        if abs(self.duration_s - round(self.duration_s)) > 1e-9:
+            raise ValueError(f"--duration-s: {self.duration_s:g} is not a whole number of seconds")
+        self.scenarios_of()
+
+    def scenarios_of(self) -> dict[str, tuple[str, ...]]:
+        """The scenario ids each env runs."""
+        chosen = {e: SCENARIOS[e] for e in dict.fromkeys(self.envs)}
+        if self.scenarios:
+            for env_id in chosen:
+                own = {s.id for s in (FIELD_HELD_OUT if env_id == FIELD_ENV else HELD_OUT)}
+                chosen[env_id] = tuple(dict.fromkeys(i for i in self.scenarios if i in own))
+                if not chosen[env_id]:
+                    raise ValueError(
+                        f"--scenarios: none of {', '.join(self.scenarios)} is a held-out "
+                        f"scenario of {env_id}"
+                    )
+        return chosen
+
+    def study(self, task_runs: int | None = None) -> RealismStudy:
+        """The study on the sweep runner (``task_runs``: runs per task, default
+        :data:`TASK_RUNS`)."""
+        return RealismStudy(
+            envs=tuple(dict.fromkeys(self.envs)),
+            controllers=tuple(dict.fromkeys(self.controllers or controller_names())),
+            settings=tuple(study_settings(self.factors)),
+            scenarios=self.scenarios_of(),
+            episode_s=float(round(self.duration_s)),
+            seed_offset=int(self.seed),
+            task_runs=int(task_runs or TASK_RUNS),
+        )
+
+
 DESCRIPTION: Final = """\
-Who survives realism: every controller judged on what it could really see and do, on the
-paper's 4-DOF string and on the distributed field string.
+Who survives realism: from the ideal level (whole state at every 1 ms step, ideal top drive)
+one factor at a time moves toward and beyond the field's defaults, and each controller's break
+point is found on both envs. Writes realism.csv/json, runs.csv, breakpoints.csv/json,
+summary.json and figures/ into --out; prints the tables. The factors, their levels and the
+break criterion: docs/reports/realism.md.
 
-From the ideal level (the whole state measured at every 1 ms step, an ideal top drive) one
-factor at a time moves toward and beyond the field's defaults:
-  observation       full state; surface signals at 1 kHz, exact; at 100 Hz with the field's
-                    noise (the sliding-mode controllers then run their state observer)
-  telemetry_period  none, 0.05, 1, 5, 10, 20 s, on the surface signals, no delay
-  telemetry_delay   0, 1, 5, 10, 20 s, a value every 5 s (mud pulse), on the surface signals
-  telemetry_delay_fast
-                    0, 0.05, 0.2, 0.5, 1, 2 s, a value every 0.05 s, on the surface signals
-  dead_time         actuator dead time 0, 10, 20, 50, 100, 200 ms
-  lag               actuator first-order lag 0, 10, 20, 50, 100, 200 ms
-  rate_limit        torque rate limit none, 1e6, 3e5, 1e5, 3e4, 1e4 N m/s
-and the full field level is one more row. Each setting runs six held-out scenarios per env
-(h01 h03 h07 h12 h14 h16 on the 4-DOF string; f01 f03 f05 f07 f08 f16 on the field string),
-100 s from rest, every controller with a zero residual.
-
-A controller breaks at a setting when its mean IAE over the scenarios exceeds 1.5 times its
-own ideal one, or its mean stick-slip severity exceeds 0.5 where the ideal one did not, or its
-top drive spends a share of the run at a torque limit more than 0.1 above the ideal share (a
-torque limit cycle), or a run diverges; its break point on a factor is the first value where
-it breaks.
-
-Writes realism.csv and realism.json (means per env, setting and controller), runs.csv,
-breakpoints.csv, breakpoints.json, summary.json and figures/realism_FACTOR.png into --out, and
-prints the tables.
-
-examples:
-  drill-gym realism                                    # the whole study, both envs
-  drill-gym realism --env DrillString-v0 --factors dead_time rate_limit
-  drill-gym realism --controllers proposed soft_speed --scenarios h14 f03 --episode 30
+example: drill-gym realism --env DrillString-v0 --factors dead_time rate_limit
 """
 
 
 def _parser() -> ArgumentParser:
-    parser = ArgumentParser(prog="drill-gym realism", description=DESCRIPTION)
-    parser.add_argument(
-        "--env",
-        nargs="+",
-        choices=ENV_IDS,
-        default=list(ENV_IDS),
-        metavar="ENV",
-        help=f"envs of the study: {', '.join(ENV_IDS)}",
-    )
-    parser.add_argument(
-        "--controllers",
-        nargs="+",
-        default=None,
-        metavar="NAME",
-        type=names_type(controller_names, "controller"),
-        help="controllers, by registered name: "
-        + ", ".join(controller_names())
-        + " (default: all)",
-    )
-    parser.add_argument(
-        "--factors",
-        nargs="+",
-        choices=FACTOR_NAMES,
-        default=list(FACTOR_NAMES),
-        metavar="FACTOR",
-        help=f"factors to move: {', '.join(FACTOR_NAMES)} (the ideal and field levels always run)",
-    )
-    every = [s.id for s in (*HELD_OUT, *FIELD_HELD_OUT)]
-    parser.add_argument(
-        "--scenarios",
-        nargs="+",
-        default=None,
-        metavar="ID",
-        type=names_type(lambda: every, "scenario"),
-        help="held-out scenarios instead of the six of each env (h01-h20 on DrillString-v0, "
-        "f01-f16 on DrillStringField-v0; each env runs those of its own set)",
-    )
-    parser.add_argument(
-        "--episode",
-        type=number_type(0.0, 1e4, open_low=True, unit="s"),
-        default=EPISODE_S,
-        metavar="S",
-        help="length of every run, s (a whole number of seconds)",
-    )
-    seed_option(parser, "added to every scenario's own reset seed (it drives the noise)", base=True)
-    parser.add_argument(
-        "--out", type=output_folder, default="results/realism", metavar="DIR", help="output folder"
-    )
-    parser.add_argument("--no-plots", action="store_true", help="write no figures")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    add_sweep_options(parser)
-    return parser
+    return spec_parser("drill-gym realism", DESCRIPTION, RealismSpec, RunnerSpec)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``drill-gym realism``; returns the exit code (see ``--help``)."""
-    parser = _parser()
-    args = parser.parse_args(list(argv) if argv is not None else None)
-    envs = tuple(dict.fromkeys(args.env))
-    if abs(args.episode - round(args.episode)) > 1e-9:
-        parser.fail("--episode", f"{args.episode:g} is not a whole number of seconds")
-    scenarios = {e: SCENARIOS[e] for e in envs}
-    if args.scenarios:
-        for env_id in envs:
-            own = {s.id for s in (FIELD_HELD_OUT if env_id == FIELD_ENV else HELD_OUT)}
-            chosen = tuple(dict.fromkeys(i for i in args.scenarios if i in own))
-            if not chosen:
-                parser.fail(
-                    "--scenarios",
-                    f"none of {', '.join(args.scenarios)} is a held-out scenario of {env_id}",
-                )
-            scenarios[env_id] = chosen
-    controllers = tuple(dict.fromkeys(args.controllers or controller_names()))
-    study = RealismStudy(
-        envs=envs,
-        controllers=controllers,
-        settings=tuple(study_settings(args.factors)),
-        scenarios=scenarios,
-        episode_s=float(round(args.episode)),
-        seed_offset=int(args.seed),
-        task_runs=int(args.task_size or TASK_RUNS),
-    )
-    out: Path = args.out
+    args = _parser().parse_args(list(argv) if argv is not None else None)
+    return run_study(spec_from_args(RealismSpec, args), spec_from_args(RunnerSpec, args))
+
+
+def run_study(spec: RealismSpec, runner: RunnerSpec | None = None) -> int:
+    """Run the study of ``spec`` on ``runner`` (default: serially), write its outputs and
+    print its tables; returns the exit code."""
+    runner = runner or RunnerSpec()
+    study = spec.study(runner.task_size)
+    envs, scenarios, controllers = study.envs, study.scenarios, study.controllers
+    out = spec.out
     t0, cpu0 = time.perf_counter(), time.process_time()
     means, runs, breaks, seconds = run_realism(
         study,
-        progress=not args.no_progress,
-        backend=backend_from_args(args),
-        results_path=results_path_from_args(args, out / "realism.sqlite"),
-        resume=bool(args.resume),
-        overwrite=bool(args.overwrite),
+        progress=not spec.no_progress,
+        backend=runner.backend(),
+        results_path=runner.results_path(out / "realism.sqlite"),
+        resume=runner.resume,
+        overwrite=runner.overwrite,
     )
     summary = {
         "seconds": round(seconds, 1),
@@ -1073,7 +1055,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     loops = loop_numbers(envs)
     summary["loops"] = loops
     written = write_outputs(means, runs, breaks, summary, out)
-    if not args.no_plots:
+    if not spec.no_plots:
         written += [
             save_figure(fig, output_file(out / "figures", name))
             for name, fig in realism_figures(means, breaks)

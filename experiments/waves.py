@@ -36,7 +36,7 @@ import math
 import sys
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
@@ -67,13 +67,7 @@ from drill_env.modes import (
 )
 from drill_env.parameters import PLANT_DT_S, PRESETS, DrillStringParameters
 from drill_env.scenarios import WobProfile
-from experiments.arguments import (
-    ArgumentParser,
-    names_type,
-    number_type,
-    output_folder,
-    seed_option,
-)
+from experiments.arguments import SEED_HIGH, ArgumentParser, names_type, output_folder
 from experiments.field import (
     COMPARE_POINTS,
     FIELD_CONDITIONS,
@@ -87,17 +81,20 @@ from experiments.field import (
 )
 from experiments.paths import output_file
 from experiments.plots import color_of, new_figure, save_figure, suptitle
+from experiments.spec_cli import option, spec_from_args, spec_parser
 from experiments.tables import Column, markdown_table, write_json
 
 __all__ = [
     "RECORD_DT_S",
     "RunRecord",
     "StringHistory",
+    "WavesSpec",
     "cycle_period_s",
     "equivalent_table",
     "main",
     "record_run",
     "reflection_table",
+    "run_waves",
     "space_time_figure",
     "string_response_figure",
     "string_table",
@@ -550,131 +547,114 @@ EQUIVALENT_COLUMNS: Final = (
 
 
 # ---------------------------------------------------------------------------- command line
+def _depth_option(**kwargs: Any) -> dict[str, Any]:
+    return option(low=300.0, high=10_000.0, unit="m", metavar="M", **kwargs)
+
+
+@dataclass(frozen=True)
+class WavesSpec:
+    """Settings of ``drill-gym waves`` (each field is the option of the same name)."""
+
+    controllers: tuple[str, ...] = field(
+        default=(),
+        metadata=option(
+            parse=names_type(controller_names, "controller"), metavar="NAME", default_text="all"
+        ),
+    )
+    """controllers to run, by registered name"""
+    observations: tuple[str, ...] = field(
+        default=OBSERVATIONS, metadata=option(choices=OBSERVATIONS)
+    )
+    """observation modes of the speed loops (the paper's controllers: state only)"""
+    depth_m: float = field(default=2_500.0, metadata=_depth_option(flag="--depth"))
+    """depth of the runs, m"""
+    depths_m: tuple[float, ...] = field(
+        default=DEFAULT_DEPTHS_M, metadata=_depth_option(flag="--depths")
+    )
+    """depths of the string table and the 4-DOF comparison, m"""
+    wob_n: float = field(
+        default=150e3,
+        metadata=option(low=0.0, high=1e6, open_low=True, unit="N", metavar="N", flag="--wob"),
+    )
+    """weight on bit of the runs, N"""
+    rpm: float = field(
+        default=60.0, metadata=option(low=0.0, high=500.0, open_low=True, unit="rpm", metavar="RPM")
+    )
+    """reference bit speed of the runs, rpm"""
+    condition: str = field(default="nominal", metadata=option(choices=tuple(FIELD_CONDITIONS)))
+    """friction and mud damping of the string"""
+    duration_s: float = field(
+        default=100.0,
+        metadata=option(low=1.0, high=1e4, unit="s", metavar="S", aliases=("--duration",)),
+    )
+    """length of each run from rest, s (a multiple of 0.02 s)"""
+    window_s: float = field(
+        default=WINDOW_S,
+        metadata=option(low=0.0, high=1e4, open_low=True, unit="s", metavar="S", flag="--window"),
+    )
+    """analysis window at the end of each run, s"""
+    seed: int = field(default=0, metadata=option(low=0, high=SEED_HIGH))
+    """reset seed of every run (it drives the noise)"""
+    out: Path = field(
+        default=Path("results/waves"), metadata=option(parse=output_folder, metavar="DIR")
+    )
+    """output folder"""
+    no_equivalent: bool = False
+    """skip table 4 (the paper's controllers on their 4-DOF equivalent)"""
+    no_plots: bool = False
+    """write no figures"""
+    no_progress: bool = False
+    """no progress lines"""
+
+    def __post_init__(self) -> None:
+        if self.window_s > self.duration_s:
+            raise ValueError(
+                f"--window: {self.window_s:g} is out of range: allowed <= --duration-s"
+            )
+        steps = self.duration_s / RECORD_DT_S
+        if abs(steps - round(steps)) > 1e-6:
+            raise ValueError(
+                f"--duration-s: {self.duration_s:g} is not a multiple of {RECORD_DT_S:g} s"
+            )
+        bha = DISTRIBUTED_PRESETS["field_2500m"].bha_length_m
+        for d in (self.depth_m, *self.depths_m):
+            if d <= bha:
+                raise ValueError(f"--depth: {d:g} is out of range: allowed > BHA length {bha} m")
+
+
 DESCRIPTION: Final = f"""\
 The torsional waves of the field string ({FIELD_ENV}) and what each controller does with
-them. Prints four tables and writes waves.json and figures/ into --out:
+them: 1. the strings (travel times, impedance, mode periods, per --depths); 2. the speed loops'
+top drive as a wave sees it (reflection coefficient); 3. every controller at --depth, --wob,
+--rpm and --condition (severity, cycles, fastest node); 4. the paper's controllers on their
+4-DOF equivalent against the string. Prints the tables; writes waves.json and figures/ into
+--out. Tables and figures explained: docs/reports/field-string.md.
 
-  1. the strings: per depth of field_2500m (--depths), and deep_5000m and the paper's 4-DOF
-     plant for comparison, the wave's travel times L/c and 2L/c along the pipe, the pipe
-     impedance Z, the periods T1 (the stick-slip period) and T2 of the lowest two modes with
-     the top drive held and the bit free, the period with the bit stuck, the same for the 4-DOF
-     equivalent, and the cycle the stiff speed loop shows at --wob and --rpm;
-  2. the speed loops' top drive as a wave sees it at the stick-slip frequency: its impedance
-     and reflection coefficient |r| (1: a wave goes back down whole; 0: absorbed);
-  3. every controller, with each observation mode it can use (the paper's sliding-mode
-     controllers: the whole state), at --depth, --wob, --rpm and --condition: stick-slip
-     severity, stuck fraction, RMSE and mean bit speed over the last --window seconds, the
-     cycle periods of the bit and of the top drive, the top drive's range of speed and the
-     fastest node with its depth;
-  4. the paper's controllers on their own 4-DOF equivalent against the string it stands for,
-     at the two operating points of drill-gym compare and each depth (same model, gains,
-     actuator and noise: only the plant differs).
-
-Figures: field_response.png (bit speed with the reference, top-drive speed and surface torque
-of every run over its last 30 s) and field_space_time_RUN.png (node speed and element torque
-along the depth against time, over the last 12 s: the torsional waves travelling up and down).
-
-examples:
-  drill-gym waves
-  drill-gym waves --controllers stiff_pi soft_speed --depth 4000 --out results/waves-4km
+example: drill-gym waves --controllers stiff_pi soft_speed --depth 4000 --out results/waves-4km
 """
 
 
 def _parser() -> ArgumentParser:
-    p = ArgumentParser(prog="drill-gym waves", description=DESCRIPTION)
-    p.add_argument(
-        "--controllers",
-        nargs="+",
-        metavar="NAME",
-        type=names_type(controller_names, "controller"),
-        help="controllers to run, by registered name: "
-        + ", ".join(controller_names())
-        + " (default: all)",
-    )
-    p.add_argument(
-        "--observations",
-        nargs="+",
-        choices=OBSERVATIONS,
-        default=list(OBSERVATIONS),
-        help="observation modes of the speed loops (the paper's controllers: state only)",
-    )
-    depth = number_type(300.0, 10_000.0, unit="m")
-    p.add_argument("--depth", type=depth, default=2_500.0, metavar="M", help="depth of the runs, m")
-    p.add_argument(
-        "--depths",
-        nargs="+",
-        type=depth,
-        default=list(DEFAULT_DEPTHS_M),
-        metavar="M",
-        help="depths of the string table and the 4-DOF comparison, m",
-    )
-    p.add_argument(
-        "--wob",
-        type=number_type(0.0, 1e6, open_low=True, unit="N"),
-        default=150e3,
-        metavar="NEWTONS",
-        help="weight on bit of the runs, N",
-    )
-    p.add_argument(
-        "--rpm",
-        type=number_type(0.0, 500.0, open_low=True, unit="rpm"),
-        default=60.0,
-        metavar="RPM",
-        help="reference bit speed of the runs, rpm",
-    )
-    p.add_argument(
-        "--condition",
-        choices=tuple(FIELD_CONDITIONS),
-        default="nominal",
-        help="friction and mud damping of the string",
-    )
-    p.add_argument(
-        "--duration",
-        type=number_type(1.0, 1e4, unit="s"),
-        default=100.0,
-        metavar="S",
-        help="length of each run from rest, s (a multiple of the 20 ms recording period)",
-    )
-    p.add_argument(
-        "--window",
-        type=number_type(0.0, 1e4, open_low=True, unit="s"),
-        default=WINDOW_S,
-        metavar="S",
-        help="analysis window at the end of each run, s",
-    )
-    seed_option(p, "reset seed of every run (it drives the noise)")
-    p.add_argument(
-        "--out", type=output_folder, default="results/waves", metavar="DIR", help="output folder"
-    )
-    p.add_argument("--no-equivalent", action="store_true", help="skip table 4")
-    p.add_argument("--no-plots", action="store_true", help="write no figures")
-    p.add_argument("--no-progress", action="store_true", help="no progress lines")
-    return p
+    return spec_parser("drill-gym waves", DESCRIPTION, WavesSpec)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``drill-gym waves``: run, print the tables, write ``waves.json`` and the figures."""
-    parser = _parser()
-    args = parser.parse_args(argv)
-    if args.window > args.duration:
-        parser.fail("--window", f"{args.window:g} is out of range: allowed <= --duration")
-    steps = args.duration / RECORD_DT_S
-    if abs(steps - round(steps)) > 1e-6:
-        parser.fail("--duration", f"{args.duration:g} is not a multiple of {RECORD_DT_S:g} s")
-    bha = DISTRIBUTED_PRESETS["field_2500m"].bha_length_m
-    for d in (args.depth, *args.depths):
-        if d <= bha:
-            parser.fail("--depth", f"{d:g} is out of range: allowed > BHA length {bha} m")
-    names = list(dict.fromkeys(args.controllers or controller_names()))
+    return run_waves(spec_from_args(WavesSpec, _parser().parse_args(argv)))
+
+
+def run_waves(spec: WavesSpec) -> int:
+    """Run the study of ``spec``, print the tables, write ``waves.json`` and the figures."""
+    names = list(dict.fromkeys(spec.controllers or controller_names()))
     start = time.perf_counter()
-    case = _case(args.depth, args.wob, args.rpm, args.condition)
+    case = _case(spec.depth_m, spec.wob_n, spec.rpm, spec.condition)
 
     def note(text: str) -> None:
-        if not args.no_progress:
+        if not spec.no_progress:
             print(f"waves: {text}", file=sys.stderr)
 
-    strings = string_table(args.depths)
-    prone = [_case(d, args.wob, args.rpm, args.condition) for d in args.depths]
+    strings = string_table(spec.depths_m)
+    prone = [_case(d, spec.wob_n, spec.rpm, spec.condition) for d in spec.depths_m]
     deep = DISTRIBUTED_PRESETS["deep_5000m"]
     prone.append(
         dataclasses.replace(
@@ -683,42 +663,46 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     for row, c in zip(strings, prone, strict=False):
         note(f"stiff_pi at {c.measured_depth_m:g} m")
-        run = record_run(c, "stiff_pi", "surface", duration_s=args.duration, window_s=args.window)
+        run = record_run(
+            c, "stiff_pi", "surface", duration_s=spec.duration_s, window_s=spec.window_s
+        )
         row["stiff_pi_cycle_s"] = run.metrics["cycle_period_s"]
     reflections = reflection_table(case.string())
     runs: list[RunRecord] = []
     for name in names:
-        for obs in observations_of(name, args.observations):
+        for obs in observations_of(name, spec.observations):
             note(f"{name} ({obs}) on {case.id}")
             runs.append(
                 record_run(
                     case,
                     name,
                     obs,
-                    duration_s=args.duration,
-                    window_s=args.window,
-                    seed=args.seed,
+                    duration_s=spec.duration_s,
+                    window_s=spec.window_s,
+                    seed=spec.seed,
                 )
             )
     run_rows = [{"label": r.label, **r.metrics} for r in runs]
     equivalent: list[dict[str, Any]] = []
     smcs = [n for n in names if needs_full_state(n)]
-    if not args.no_equivalent and smcs:
+    if not spec.no_equivalent and smcs:
         cases = [
-            _case(d, w * 1e3, r, args.condition) for w, r in COMPARE_POINTS for d in args.depths
+            _case(d, w * 1e3, r, spec.condition) for w, r in COMPARE_POINTS for d in spec.depths_m
         ]
         note(f"4-DOF equivalent against the string: {len(cases)} scenarios x {len(smcs)}")
         equivalent = equivalent_table(
-            cases, smcs, duration_s=args.duration, window_s=args.window, seed=args.seed
+            cases, smcs, duration_s=spec.duration_s, window_s=spec.window_s, seed=spec.seed
         )
-    out: Path = args.out
+    out = spec.out
     out.mkdir(parents=True, exist_ok=True)
-    print(f"1. The strings (stiff_pi cycle at {args.wob / 1e3:g} kN, {args.rpm:g} rpm, "
-          f"{args.condition}):\n")  # fmt: skip
+    print(f"1. The strings (stiff_pi cycle at {spec.wob_n / 1e3:g} kN, {spec.rpm:g} rpm, "
+          f"{spec.condition}):\n")  # fmt: skip
     print(markdown_table(strings, STRING_COLUMNS))
     print(f"\n2. The speed loops' top drive at the stick-slip frequency of {case.id}:\n")
     print(markdown_table(reflections, REFLECTION_COLUMNS))
-    print(f"\n3. Every controller on {case.id}, last {args.window:g} s of {args.duration:g} s:\n")
+    print(
+        f"\n3. Every controller on {case.id}, last {spec.window_s:g} s of {spec.duration_s:g} s:\n"
+    )
     print(markdown_table(run_rows, RUN_COLUMNS))
     if equivalent:
         print("\n4. The paper's controllers on their 4-DOF equivalent and on the string:\n")
@@ -727,8 +711,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         write_json(
             {
                 "scenario": case.id,
-                "duration_s": args.duration,
-                "window_s": args.window,
+                "duration_s": spec.duration_s,
+                "window_s": spec.window_s,
                 "strings": strings,
                 "reflections": reflections,
                 "runs": run_rows,
@@ -738,8 +722,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             indent=2,
         )
     ]
-    if not args.no_plots and runs:
-        written += write_figures(runs, case, out / "figures", args.duration)
+    if not spec.no_plots and runs:
+        written += write_figures(runs, case, out / "figures", spec.duration_s)
     print(
         f"\n{len(runs)} recorded runs in {time.perf_counter() - start:.1f} s; wrote "
         f"{len(written)} files to {out}/"

@@ -19,6 +19,7 @@ from drill_env.metrics import METRIC_KEYS
 from drill_env.modes import natural_frequencies_hz
 from experiments import compare, evaluate, field, stick_slip_map, waves
 from experiments.plots import text_problems
+from experiments.spec_cli import spec_from_args
 from experiments.waves import space_time_figure, string_response_figure
 
 FIELD = field.FIELD_ENV
@@ -367,3 +368,30 @@ def test_string_table_has_the_modes_of_the_chain() -> None:
     assert rows[0]["second_mode_period_s"] == pytest.approx(1 / f2)
     assert rows[0]["round_trip_s"] == pytest.approx(2 * 2240.92 / np.sqrt(61e9 / 7850.0))
     assert rows[-1]["string"].startswith("zribi2024")
+
+
+# ------------------------------------------------------------------- waves, command line
+def test_waves_options_make_the_spec() -> None:
+    spec = spec_from_args(
+        waves.WavesSpec,
+        waves._parser().parse_args(
+            ["--controllers", "stiff_pi", "--depth", "3000", "--duration", "10", "--window", "5"]
+        ),
+    )
+    assert spec == waves.WavesSpec(
+        controllers=("stiff_pi",), depth_m=3000.0, duration_s=10.0, window_s=5.0
+    )
+    assert "--duration " not in waves._parser().format_help()  # the old name is hidden
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"duration_s": 10.0, "window_s": 20.0}, "--window: 20 is out of range"),
+        ({"duration_s": 10.01, "window_s": 5.0}, "--duration-s: 10.01 is not a multiple of 0.02 s"),
+        ({"depth_m": 100.0}, "--depth: 100 is out of range: allowed > BHA length"),
+    ],
+)
+def test_waves_spec_refuses_what_cannot_run(kwargs: dict[str, float], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        waves.WavesSpec(**kwargs)  # type: ignore[arg-type]

@@ -14,6 +14,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+from drill_env.control import controller_names
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout
 from drill_env.metrics import METRIC_KEYS
 from drill_env.options import REALISM_KEYWORDS, EnvConfig, FieldEnvConfig, realism_keywords
@@ -257,7 +258,7 @@ def test_the_tiny_study_runs_and_writes_its_files(
     out = tmp_path / "realism"
     argv = [
         "realism", "--controllers", "stiff_pi", "z_torque", "--scenarios", "h14", "h01",
-        "f03", "f07", "--episode", "3", "--factors", "rate_limit", "--out", str(out), "--no-progress",
+        "f03", "f07", "--duration-s", "3", "--factors", "rate_limit", "--out", str(out), "--no-progress",
     ]  # fmt: skip
     assert cli_main(argv) == 0
     printed = capsys.readouterr().out
@@ -329,16 +330,31 @@ def test_every_figure_has_no_text_problems() -> None:
         assert "break point (ring, in the controller's colour)" in labels
 
 
+def test_the_spec_is_the_study_the_options_ask_for() -> None:
+    spec = realism.RealismSpec(
+        envs=(PAPER_ENV, FIELD_ENV, PAPER_ENV), scenarios=("h14", "f03", "h14"), duration_s=3.0
+    )
+    study = spec.study(task_runs=2)
+    assert study.envs == (PAPER_ENV, FIELD_ENV) and study.task_runs == 2
+    assert dict(study.scenarios) == {PAPER_ENV: ("h14",), FIELD_ENV: ("f03",)}
+    assert study.episode_s == 3.0 and study.controllers == tuple(controller_names())
+    assert realism.RealismSpec().study().scenarios == realism.SCENARIOS
+    with pytest.raises(ValueError, match="--duration-s: 2.5 is not a whole number"):
+        realism.RealismSpec(duration_s=2.5)
+
+
 BAD = [
-    (["--env", "Mars-v0"], "argument --env: invalid choice: 'Mars-v0'"),
-    (["--factors", "wind"], "argument --factors: invalid choice: 'wind'"),
+    (["--env", "Mars-v0"], "argument --env: unknown env 'Mars-v0': allowed DrillString-v0"),
+    (["--factors", "wind"], "argument --factors: unknown factor 'wind': allowed observation"),
     (["--controllers", "foo"], "argument --controllers: unknown controller 'foo': allowed csmc"),
     (["--scenarios", "h99"], "argument --scenarios: unknown scenario 'h99': allowed h01"),
     (
         ["--env", "DrillString-v0", "--scenarios", "f03"],
-        "argument --scenarios: none of f03 is a held-out scenario of DrillString-v0",
+        "--scenarios: none of f03 is a held-out scenario of DrillString-v0",
     ),
-    (["--episode", "2.5"], "argument --episode: 2.5 is not a whole number of seconds"),
+    (["--duration-s", "2.5"], "--duration-s: 2.5 is not a whole number of seconds"),
+    (["--episode", "2.5"], "--duration-s: 2.5 is not a whole number of seconds"),
+    (["--duration-s", "-1"], "argument --duration-s: -1 is out of range: allowed (0, 10000] s"),
     (["--episode", "-1"], "argument --episode: -1 is out of range: allowed (0, 10000] s"),
     (["--seed", "x"], "argument --seed: 'x' is not an integer"),
 ]
