@@ -69,15 +69,15 @@ from baselines.tuned import (
 )
 from drill_env.control import make_controller
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout
-from experiments.arguments import ArgumentParser, check_output_folder, number_type, output_folder
+from experiments.arguments import ArgumentParser, check_output_folder, names_type, output_folder
 from experiments.results_db import Exactly, Fields, Flag, Number, Schema, Values
+from experiments.spec_cli import option, spec_from_args, spec_parser
 from experiments.sweep import (
     Backend,
+    RunnerSpec,
     SweepOutcome,
     Task,
     TaskResult,
-    add_sweep_options,
-    backend_from_args,
     chunks,
     run_sweep,
 )
@@ -92,9 +92,11 @@ __all__ = [
     "Factor",
     "Score",
     "TuneSettings",
+    "TuneSpec",
     "candidates_task",
     "latin_hypercube",
     "main",
+    "run_tune",
     "run_tuning",
     "score_of",
     "training_episodes",
@@ -414,55 +416,87 @@ def score_of(record: Mapping[str, Any], reference: Mapping[str, Any]) -> Score:
 
 # ------------------------------------------------------------------------------ search
 @dataclass(frozen=True)
-class TuneSettings:
-    """The settings of one search.
+class TuneSpec:
+    """Settings of ``drill-gym tune`` (each field is the option of the same name): the search
+    (see the module docstring) and where its outputs go."""
 
-    Attributes:
-        env_id: The env.
-        loops: The loops tuned (keys of :data:`SEARCH_SPACES`).
-        candidates: Candidates per loop in round 0 (the default factors included), >= 1.
-        refine: Candidates per loop in round 1 (0: no round 1).
-        zoom: Width of round 1's box as a share of the whole range of every factor, (0, 1].
-        episodes: Training episodes per candidate, >= 1.
-        top: Candidates per loop validated (by training score), >= 1.
-        search_seed: Seed of the Latin hypercubes.
-        task_candidates: Candidates per task of the sweep runner.
-    """
-
-    env_id: str = drill_env.ENV_ID
-    loops: tuple[str, ...] = tuple(SEARCH_SPACES)
-    candidates: int = 32
-    refine: int = 16
-    zoom: float = 0.25
-    episodes: int = 32
-    top: int = 4
-    search_seed: int = 0
-    task_candidates: int = 1
+    env_id: str = field(
+        default=drill_env.ENV_ID,
+        metadata=option(parse=names_type(lambda: ENVS, "env"), metavar="ENV", flag="--env"),
+    )
+    """the environment"""
+    loops: tuple[str, ...] = field(
+        default=tuple(SEARCH_SPACES),
+        metadata=option(parse=names_type(lambda: tuple(SEARCH_SPACES), "loop"), metavar="NAME"),
+    )
+    """the loops to tune"""
+    candidates: int = field(default=32, metadata=option(low=1, high=100_000))
+    """candidates per loop in round 0, the default factors included"""
+    refine: int = field(default=16, metadata=option(low=0, high=100_000))
+    """candidates per loop in round 1, around round 0's best (0: no round 1)"""
+    zoom: float = field(default=0.25, metadata=option(low=0.0, high=1.0, open_low=True))
+    """width of round 1's box as a share of each factor's whole (log) range"""
+    episodes: int = field(default=32, metadata=option(low=1, high=100_000))
+    """training episodes per candidate"""
+    top: int = field(default=4, metadata=option(low=1, high=100_000))
+    """candidates per loop validated, by training score"""
+    search_seed: int = field(default=0, metadata=option(low=0, high=2**31 - 1))
+    """seed of the Latin hypercubes"""
+    out: Path | None = field(
+        default=None,
+        metadata=option(parse=output_folder, metavar="DIR", default_text="results/tune/ENV"),
+    )
+    """output folder"""
+    write: bool = False
+    """store the selected factors in the tuned gains file (--gains-file)"""
+    gains_file: Path = field(
+        default=TUNED_GAINS_FILE,
+        metadata=option(metavar="FILE", default_text="baselines/tuned_gains.json"),
+    )
+    """the tuned gains file --write updates"""
+    no_progress: bool = False
+    """no progress bars"""
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "loops", tuple(dict.fromkeys(self.loops)))  # each loop once
         if self.env_id not in ENVS:
-            raise ValueError(f"env = {self.env_id!r} is not valid: allowed {', '.join(ENVS)}")
+            raise ValueError(f"--env: {self.env_id!r} is not valid: allowed {', '.join(ENVS)}")
         if not self.loops:
-            raise ValueError(
-                f"loops = () is empty: allowed one or more of {', '.join(SEARCH_SPACES)}"
-            )
+            raise ValueError(f"--loops: empty: allowed one or more of {', '.join(SEARCH_SPACES)}")
         for loop in self.loops:
             if loop not in SEARCH_SPACES:
-                raise ValueError(f"unknown loop {loop!r}: allowed {', '.join(SEARCH_SPACES)}")
+                raise ValueError(
+                    f"--loops: unknown loop {loop!r}: allowed {', '.join(SEARCH_SPACES)}"
+                )
         for name, low in (("candidates", 1), ("refine", 0), ("episodes", 1), ("top", 1)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                raise ValueError(f"{name} = {value!r} is out of range: allowed an integer >= {low}")
+                raise ValueError(
+                    f"--{name}: {value!r} is out of range: allowed an integer >= {low}"
+                )
         if self.top > self.candidates + self.refine:
             raise ValueError(
-                f"top = {self.top} is out of range: allowed at most candidates + refine = "
+                f"--top: {self.top} is out of range: allowed at most --candidates + --refine = "
                 f"{self.candidates + self.refine}"
             )
         if not (isinstance(self.zoom, (int, float)) and 0 < self.zoom <= 1):
-            raise ValueError(f"zoom = {self.zoom!r} is out of range: allowed (0, 1]")
+            raise ValueError(f"--zoom: {self.zoom!r} is out of range: allowed (0, 1]")
+
+    @property
+    def folder(self) -> Path:
+        """The output folder: ``out``, else ``results/tune/ENV``."""
+        folder = self.out if self.out is not None else Path("results") / "tune" / self.env_id
+        try:
+            return check_output_folder(folder)
+        except ValueError as err:
+            raise ValueError(f"--out: {err}") from None
 
 
-def _round0(settings: TuneSettings, loop: str) -> list[tuple[str, str, dict[str, float]]]:
+TuneSettings = TuneSpec
+"""Deprecated name of :class:`TuneSpec`."""
+
+
+def _round0(settings: TuneSpec, loop: str) -> list[tuple[str, str, dict[str, float]]]:
     space = SEARCH_SPACES[loop]
     rng = np.random.default_rng([settings.search_seed, list(SEARCH_SPACES).index(loop), 0])
     points = latin_hypercube(settings.candidates - 1, len(space), rng)
@@ -474,7 +508,7 @@ def _round0(settings: TuneSettings, loop: str) -> list[tuple[str, str, dict[str,
 
 
 def _round1(
-    settings: TuneSettings, loop: str, best: Mapping[str, float]
+    settings: TuneSpec, loop: str, best: Mapping[str, float]
 ) -> list[tuple[str, str, dict[str, float]]]:
     space = SEARCH_SPACES[loop]
     rng = np.random.default_rng([settings.search_seed, list(SEARCH_SPACES).index(loop), 1])
@@ -525,7 +559,7 @@ class TuneResult:
         wall_s: Wall seconds of this command's search (runs read back cost nothing).
     """
 
-    settings: TuneSettings
+    settings: TuneSpec
     loops: list[LoopResult]
     simulated_s: float
     compute_s: float
@@ -535,9 +569,10 @@ class TuneResult:
 
 def _study(
     name: str,
-    settings: TuneSettings,
+    settings: TuneSpec,
     episodes: Sequence[tuple[int, int]],
     candidates: Sequence[tuple[str, str, dict[str, float]]],
+    task_candidates: int,
 ) -> CandidateStudy:
     return CandidateStudy(
         name=name,
@@ -545,18 +580,19 @@ def _study(
         env_kwargs=tuning_env_kwargs(settings.env_id),
         episodes=tuple(episodes),
         candidates=tuple(candidates),
-        task_candidates=settings.task_candidates,
+        task_candidates=task_candidates,
     )
 
 
 def run_tuning(
-    settings: TuneSettings,
+    settings: TuneSpec,
     backend: Backend | None = None,
     out: Path | None = None,
     results: Path | None = None,
     resume: bool = False,
     progress: bool = True,
     overwrite: bool = False,
+    task_candidates: int = 1,
 ) -> TuneResult:
     """Search, validate and select (see the module docstring).
 
@@ -569,6 +605,7 @@ def run_tuning(
         resume: Keep what the results database already holds of these stages.
         progress: Progress bars on standard error.
         overwrite: Delete the rows of these stages from the results database first.
+        task_candidates: Candidates per task of the sweep runner (does not change the numbers).
     """
     started = time.perf_counter()
     train = training_episodes(settings.episodes)
@@ -577,7 +614,7 @@ def run_tuning(
     outcomes: list[SweepOutcome] = []
 
     def sweep(stage: str, episodes: Any, candidates: Any) -> SweepOutcome:
-        study = _study(f"tune-{stage}", settings, episodes, candidates)
+        study = _study(f"tune-{stage}", settings, episodes, candidates, task_candidates)
         path = results if results is not None else None if out is None else out / RESULTS_FILE
         outcome = run_sweep(study, backend, path, resume, progress, overwrite=overwrite)
         outcomes.append(outcome)
@@ -792,156 +829,48 @@ def write_gains(result: TuneResult, path: Path, command: str) -> tuple[Path, lis
 
 
 # ---------------------------------------------------------------------------- command line
-DESCRIPTION: Final = (
-    """\
-Tune the relative factors of the industry speed loops (stiff_pi, soft_speed, z_torque) with the
-residual agent's budget, scenarios and selection rule: every candidate runs the agent's first
---episodes training episodes (the env's randomisation, string i of the agent's vector env from
-reset seed 1 + i, then its own seed sequence), scored by the agent's validation score against
-the proposed sliding-mode controller on the same episodes (mean IAE ratio + 10 x max(mean RMSD
-ratio - 0.99, 0); a diverged run rules a candidate out). Round 0: the default factors and a
-Latin hypercube over log-spaced ranges; round 1: a Latin hypercube around round 0's best. The
---top candidates by training score (and the defaults) then run 32 validation scenarios
-(reset seeds 20000 + k: the agent's 16 and the 16 after them); the one with the lowest validation score is selected.
+DESCRIPTION: Final = """\
+Tune the factors of the speed loops with the residual agent's budget, scenarios and selection
+rule: two rounds of Latin hypercubes on the agent's first --episodes training episodes, then
+the --top candidates on 32 validation scenarios. Writes tune.sqlite (--resume continues it),
+candidates.csv and tune.json into --out; --write stores the selected factors in the tuned
+gains file. Ranges, budget and times: docs/reports/tuned-baselines.md.
 
-Writes into --out: tune.sqlite (the results database of the three stages; --resume continues
-them), candidates.csv, tune.json; --write stores the selected
-factors in baselines/tuned_gains.json (read by stiff_pi_tuned, soft_speed_tuned,
-z_torque_tuned). Runs serially, or on Ray with --workers N (the scale extra).
-
-search ranges (log-spaced):
+example: drill-gym tune --loops soft_speed --candidates 8 --refine 0 --episodes 4 --top 2
 """
-    + "\n".join(
-        f"  {loop}: " + ", ".join(f"{f.name} {f.low:g}-{f.high:g}" for f in space)
-        for loop, space in SEARCH_SPACES.items()
-    )
-    + """
-
-budget: the defaults run 3 loops x (32 + 16) candidates x 32 episodes of 100 s plus the
-validation (about 515,000 simulated s): about 5 CPU minutes on DrillString-v0 and 14 on
-the field string (docs/reports/tuned-baselines.md gives the measured times).
-
-examples:
-  drill-gym tune --write                                   # DrillString-v0
-  drill-gym tune --env DrillStringField-v0 --write         # the field string
-  drill-gym tune --loops soft_speed --candidates 8 --refine 0 --episodes 4 --top 2
-"""
-)
 
 
 def _parser() -> ArgumentParser:
-    p = ArgumentParser(prog="drill-gym tune", description=DESCRIPTION)
-    p.add_argument("--env", choices=ENVS, default=drill_env.ENV_ID, help="the environment")
-    p.add_argument(
-        "--loops",
-        nargs="+",
-        choices=list(SEARCH_SPACES),
-        default=list(SEARCH_SPACES),
-        metavar="NAME",
-        help=f"the loops to tune: {', '.join(SEARCH_SPACES)}",
-    )
-    count = number_type(1, 100_000, integer=True)
-    p.add_argument(
-        "--candidates",
-        type=count,
-        default=TuneSettings.candidates,
-        metavar="N",
-        help="candidates per loop in round 0, the default factors included",
-    )
-    p.add_argument(
-        "--refine",
-        type=number_type(0, 100_000, integer=True),
-        default=TuneSettings.refine,
-        metavar="N",
-        help="candidates per loop in round 1, around round 0's best (0: no round 1)",
-    )
-    p.add_argument(
-        "--zoom",
-        type=number_type(0.0, 1.0, open_low=True),
-        default=TuneSettings.zoom,
-        metavar="X",
-        help="width of round 1's box as a share of each factor's whole (log) range",
-    )
-    p.add_argument(
-        "--episodes",
-        type=count,
-        default=TuneSettings.episodes,
-        metavar="N",
-        help="training episodes per candidate (the agent's first N)",
-    )
-    p.add_argument(
-        "--top",
-        type=count,
-        default=TuneSettings.top,
-        metavar="N",
-        help="candidates per loop validated, by training score",
-    )
-    p.add_argument(
-        "--search-seed",
-        type=number_type(0, 2**31 - 1, integer=True),
-        default=TuneSettings.search_seed,
-        metavar="N",
-        help="seed of the Latin hypercubes",
-    )
-    p.add_argument(
-        "--out",
-        type=output_folder,
-        default=None,
-        metavar="DIR",
-        help="output folder (default: results/tune/ENV)",
-    )
-    p.add_argument(
-        "--write",
-        action="store_true",
-        help="store the selected factors in the tuned gains file (--gains-file)",
-    )
-    p.add_argument(
-        "--gains-file",
-        type=Path,
-        default=TUNED_GAINS_FILE,
-        metavar="FILE",
-        help="the tuned gains file --write updates",
-    )
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
-    add_sweep_options(p)
-    return p
+    return spec_parser("drill-gym tune", DESCRIPTION, TuneSpec, RunnerSpec)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``drill-gym tune``; returns the exit code (see ``--help``)."""
-    parser = _parser()
     argv = list(argv) if argv is not None else None
-    args = parser.parse_args(argv)
-    try:
-        settings = TuneSettings(
-            env_id=args.env,
-            loops=tuple(dict.fromkeys(args.loops)),
-            candidates=args.candidates,
-            refine=args.refine,
-            zoom=float(args.zoom),
-            episodes=args.episodes,
-            top=args.top,
-            search_seed=args.search_seed,
-            task_candidates=args.task_size or 1,
-        )
-    except ValueError as err:
-        parser.error(str(err))
-    if args.write and args.gains_file.is_file():
-        load_tuned_gains(args.gains_file)  # a malformed file fails now, not after the search
-    out = args.out if args.out is not None else Path("results") / "tune" / args.env
-    try:
-        check_output_folder(out)
-    except ValueError as err:
-        parser.fail("--out", str(err))
-    backend = backend_from_args(args)
+    args = _parser().parse_args(argv)
+    spec = spec_from_args(TuneSpec, args)
+    given = argv if argv is not None else sys.argv[1:]
+    return run_tune(
+        spec, spec_from_args(RunnerSpec, args), shlex.join(["drill-gym", "tune", *given])
+    )
+
+
+def run_tune(spec: TuneSpec, runner: RunnerSpec, command: str) -> int:
+    """Search, print and write what ``spec`` asks for on ``runner``; ``command`` is the
+    command line recorded in the tuned gains file. Returns the exit code."""
+    if spec.write and spec.gains_file.is_file():
+        load_tuned_gains(spec.gains_file)  # a malformed file fails now, not after the search
+    out = spec.folder
+    backend = runner.backend()
     result = run_tuning(
-        settings,
+        spec,
         backend,
         out=out,
-        results=args.results,
-        resume=args.resume,
-        progress=not args.no_progress,
-        overwrite=args.overwrite,
+        results=runner.results,
+        resume=runner.resume,
+        progress=not spec.no_progress,
+        overwrite=runner.overwrite,
+        task_candidates=runner.task_size or 1,
     )
     rows = [row for lr in result.loops for row in lr.rows]
     keys = list(dict.fromkeys(k for row in rows for k in row))
@@ -952,21 +881,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         if lr.selected is None:
             print(f"{lr.loop}: no validated candidate is feasible: nothing selected")
             continue
-        gains = derived_gains(lr.loop, factors_of(lr.row(lr.selected)), settings.env_id)
+        gains = derived_gains(lr.loop, factors_of(lr.row(lr.selected)), spec.env_id)
         print(
-            f"{lr.loop}: selected {lr.selected}; on {NOMINAL_PRESETS[settings.env_id]}: "
+            f"{lr.loop}: selected {lr.selected}; on {NOMINAL_PRESETS[spec.env_id]}: "
             + ", ".join(f"{k} {v:.4g}" for k, v in gains.items())
         )
     print(
-        f"tune on {settings.env_id} ({backend.describe()}): {result.simulated_s:,.0f} simulated s "
+        f"tune on {spec.env_id} ({backend.describe()}): {result.simulated_s:,.0f} simulated s "
         f"({', '.join(f'{k} {v:,.0f}' for k, v in result.per_loop_simulated_s.items())}), "
         f"{result.compute_s:.1f} s of runs, {result.wall_s:.1f} s wall; wrote "
         + ", ".join(str(w) for w in written)
     )
-    if args.write:
-        given = argv if argv is not None else sys.argv[1:]
-        command = shlex.join(["drill-gym", "tune", *given])
-        path, loops = write_gains(result, args.gains_file, command)
+    if spec.write:
+        path, loops = write_gains(result, spec.gains_file, command)
         print(f"wrote the factors of {', '.join(loops) or 'no loop'} to {path}")
     return 0
 

@@ -96,7 +96,7 @@ def test_the_default_factors_are_candidate_zero_and_are_validated(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     short_episodes(monkeypatch)
-    settings = tune.TuneSettings(loops=("stiff_pi",), candidates=3, refine=0, episodes=1, top=1)
+    settings = tune.TuneSpec(loops=("stiff_pi",), candidates=3, refine=0, episodes=1, top=1)
     result = tune.run_tuning(settings, progress=False)
     (loop,) = result.loops
     default = loop.row(loop.default)
@@ -353,13 +353,28 @@ def test_the_document_writer_and_the_parser_round_trip() -> None:
     assert again == entries
 
 
+def test_the_spec_names_the_option_of_a_bad_setting() -> None:
+    assert tune.TuneSpec(loops=("z_torque", "stiff_pi", "z_torque")).loops == (
+        "z_torque",
+        "stiff_pi",
+    )
+    assert tune.TuneSpec(env_id="DrillStringField-v0").folder == Path(
+        "results/tune/DrillStringField-v0"
+    )
+    assert tune.TuneSettings is tune.TuneSpec  # the former name
+    with pytest.raises(ValueError, match="--zoom: 0 is out of range"):
+        tune.TuneSpec(zoom=0)
+    with pytest.raises(ValueError, match="--loops: unknown loop 'pid'"):
+        tune.TuneSpec(loops=("pid",))
+
+
 # ------------------------------------------------------------------------ bad options
 BAD_OPTIONS = [
     (["--candidates", "0"], "argument --candidates: 0 is out of range: allowed [1, 100000]"),
-    (["--env", "CartPole-v1"], "argument --env: invalid choice: 'CartPole-v1'"),
-    (["--loops", "pid"], "argument --loops: invalid choice: 'pid'"),
+    (["--env", "CartPole-v1"], "argument --env: unknown env 'CartPole-v1': allowed DrillString-v0"),
+    (["--loops", "pid"], "argument --loops: unknown loop 'pid': allowed stiff_pi, soft_speed"),
     (["--zoom", "0"], "argument --zoom: 0 is out of range: allowed (0, 1]"),
-    (["--candidates", "2", "--refine", "0", "--top", "3"], "top = 3 is out of range: allowed at most candidates + refine = 2"),
+    (["--candidates", "2", "--refine", "0", "--top", "3"], "--top: 3 is out of range: allowed at most --candidates + --refine = 2"),
     (["--episodes", "x"], "argument --episodes: 'x' is not an integer"),
     (["--bogus"], "unrecognized arguments: --bogus"),
 ]  # fmt: skip
