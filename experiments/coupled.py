@@ -20,6 +20,7 @@ import dataclasses
 import sys
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
@@ -39,11 +40,12 @@ from drill_env.coupled import (
     simulated_map,
     stability_map,
 )
-from experiments.arguments import ArgumentParser, number_type
+from experiments.arguments import ArgumentParser
 from experiments.plots import save_figure
+from experiments.spec_cli import option, spec_from_args, spec_parser
 from experiments.tables import Column, markdown_table, write_json
 
-__all__ = ["FEATURE_COLUMNS", "main", "stability_figure"]
+__all__ = ["FEATURE_COLUMNS", "CoupledSpec", "main", "run_coupled", "stability_figure"]
 
 DEFAULT_FORCES_KN: Final = (40.0, 50.0, 60.0, 75.0, 90.0, 105.0, 120.0)
 """Applied forces of the map, kN."""
@@ -88,11 +90,9 @@ The coupled axial-torsional drill string with the regenerative (Richard-Germay-D
 bit at the four operating points of the standard run, the critical top-drive speeds from the
 linearised delay equation, and the stability map beside the simulated stick-slip and bounce.
 Prints two tables and writes coupled.json and figures/coupled_stability_map.png into --out.
+Model: docs/coupled-model.md; results: docs/reports/coupled.md.
 
-examples:
-  drill-gym coupled
-  drill-gym coupled --points P3 P4 --no-map
-  drill-gym coupled --surface delay --out results/coupled-delay
+example: drill-gym coupled --points P3 P4 --no-map
 """
 
 
@@ -170,105 +170,115 @@ def stability_figure(
     return fig
 
 
-def _parser() -> ArgumentParser:
-    p = ArgumentParser(prog="drill-gym coupled", description=DESCRIPTION)
-    p.add_argument(
-        "--parameters", choices=sorted(RGD_PRESETS), default="rgd_a", help="parameter set"
+@dataclass(frozen=True)
+class CoupledSpec:
+    """Settings of ``drill-gym coupled`` (each field is the option of the same name)."""
+
+    parameters: str = field(default="rgd_a", metadata=option(choices=tuple(sorted(RGD_PRESETS))))
+    """parameter set"""
+    points: tuple[str, ...] = field(
+        default=tuple(STANDARD_POINTS), metadata=option(choices=tuple(STANDARD_POINTS))
     )
-    p.add_argument(
-        "--points",
-        nargs="+",
-        choices=list(STANDARD_POINTS),
-        default=list(STANDARD_POINTS),
-        help="operating points of the standard run",
-    )
-    p.add_argument(
-        "--duration",
-        type=number_type(0.0, 2000.0, open_low=True, unit="s"),
+    """operating points of the standard run"""
+    duration_s: float = field(
         default=STANDARD_DURATION_S,
-        metavar="S",
-        help="length of each standard run, s",
+        metadata=option(
+            low=0.0, high=2000.0, open_low=True, unit="s", metavar="S", aliases=("--duration",)
+        ),
     )
-    p.add_argument(
-        "--window",
-        type=number_type(0.0, 2000.0, unit="s"),
-        nargs=2,
-        default=list(STANDARD_WINDOW_S),
-        metavar=("START", "END"),
-        help="window of the features, s",
+    """length of each standard run, s"""
+    window_s: tuple[float, ...] = field(
+        default=STANDARD_WINDOW_S,
+        metadata=option(low=0.0, high=2000.0, unit="s", metavar="S", flag="--window"),
     )
-    p.add_argument(
-        "--step",
-        type=number_type(1e-7, 1e-4, unit="s"),
-        default=1e-4,
-        metavar="S",
-        help="integration step, s",
+    """window of the features: START END, s"""
+    step_s: float = field(
+        default=1e-4, metadata=option(low=1e-7, high=1e-4, unit="s", metavar="S", flag="--step")
     )
-    p.add_argument("--surface", choices=SURFACE_RULES, default="max", help="rock-surface rule")
-    p.add_argument(
-        "--forces",
-        nargs="+",
-        type=number_type(0.0, 1e5, open_low=True, unit="kN"),
-        default=list(DEFAULT_FORCES_KN),
-        metavar="KN",
-        help="applied forces of the map and of the critical speeds, kN",
+    """integration step, s"""
+    surface: str = field(default="max", metadata=option(choices=SURFACE_RULES))
+    """rock-surface rule"""
+    forces_kn: tuple[float, ...] = field(
+        default=DEFAULT_FORCES_KN,
+        metadata=option(low=0.0, high=1e5, open_low=True, unit="kN", metavar="KN", flag="--forces"),
     )
-    p.add_argument(
-        "--speeds",
-        nargs="+",
-        type=number_type(0.0, 1000.0, open_low=True, unit="rad/s"),
-        default=list(DEFAULT_SPEEDS_RAD_S),
-        metavar="RAD_S",
-        help="top-drive speeds of the map, rad/s",
+    """applied forces of the map and of the critical speeds, kN"""
+    speeds_rad_s: tuple[float, ...] = field(
+        default=DEFAULT_SPEEDS_RAD_S,
+        metadata=option(
+            low=0.0, high=1000.0, open_low=True, unit="rad/s", metavar="RAD_S", flag="--speeds"
+        ),
     )
-    p.add_argument(
-        "--map-duration",
-        type=number_type(0.0, 2000.0, open_low=True, unit="s"),
+    """top-drive speeds of the map, rad/s"""
+    map_duration_s: float = field(
         default=100.0,
-        metavar="S",
-        help="length of each simulated run of the map, s (features over its second half)",
+        metadata=option(
+            low=0.0, high=2000.0, open_low=True, unit="s", metavar="S", flag="--map-duration"
+        ),
     )
-    p.add_argument("--no-map", action="store_true", help="skip the stability maps")
-    p.add_argument(
-        "--no-simulated-map", action="store_true", help="map the roots only, simulate no grid"
-    )
-    p.add_argument(
-        "--out", type=Path, default=Path("results/coupled"), metavar="DIR", help="output folder"
-    )
-    p.add_argument("--no-plots", action="store_true", help="write no figure")
-    p.add_argument("--no-progress", action="store_true", help="no progress lines")
-    return p
+    """length of each simulated run of the map, s (features over its second half)"""
+    no_map: bool = False
+    """skip the stability maps"""
+    no_simulated_map: bool = False
+    """map the roots only, simulate no grid"""
+    out: Path = field(default=Path("results/coupled"), metadata=option(metavar="DIR"))
+    """output folder"""
+    no_plots: bool = False
+    """write no figure"""
+    no_progress: bool = False
+    """no progress lines"""
+
+    def __post_init__(self) -> None:
+        if len(self.window_s) != 2:
+            raise ValueError(
+                f"--window: {' '.join(f'{w:g}' for w in self.window_s)}: allowed two values, "
+                "START END"
+            )
+        start_s, end_s = self.window_s
+        if not start_s < end_s <= self.duration_s:
+            raise ValueError(
+                f"--window: {start_s:g} {end_s:g} is out of range: allowed START < END <= "
+                "--duration-s"
+            )
+        if self.parameters not in RGD_PRESETS:
+            raise ValueError(
+                f"--parameters: {self.parameters!r} is not valid: allowed "
+                f"{', '.join(sorted(RGD_PRESETS))}"
+            )
+        floor_kn = RGD_PRESETS[self.parameters].contact_force_n / 1e3
+        for force in self.forces_kn:
+            if force <= floor_kn:
+                raise ValueError(
+                    f"--forces: {force:g} is out of range: allowed > W_f_bar = {floor_kn:g} kN"
+                )
+
+
+def _parser() -> ArgumentParser:
+    return spec_parser("drill-gym coupled", DESCRIPTION, CoupledSpec)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``drill-gym coupled``: run, print the tables, write ``coupled.json`` and the figure."""
-    parser = _parser()
-    args = parser.parse_args(argv)
-    start_s, end_s = args.window
-    if not start_s < end_s <= args.duration:
-        parser.fail(
-            "--window", f"{start_s:g} {end_s:g} is out of range: allowed START < END <= --duration"
-        )
-    parameters = RGD_PRESETS[args.parameters]
-    floor_kn = parameters.contact_force_n / 1e3
-    for force in args.forces:
-        if force <= floor_kn:
-            parser.fail(
-                "--forces", f"{force:g} is out of range: allowed > W_f_bar = {floor_kn:g} kN"
-            )
+    return run_coupled(spec_from_args(CoupledSpec, _parser().parse_args(argv)))
+
+
+def run_coupled(spec: CoupledSpec) -> int:
+    """Run the study of ``spec``, print its tables, write ``coupled.json`` and the figure."""
+    start_s, end_s = spec.window_s
+    parameters = RGD_PRESETS[spec.parameters]
     started = time.perf_counter()
 
     def note(text: str) -> None:
-        if not args.no_progress:
+        if not spec.no_progress:
             print(f"coupled: {text}", file=sys.stderr)
 
     rows = []
-    for point in args.points:
+    for point in spec.points:
         force, speed = STANDARD_POINTS[point]
         note(f"standard run at {point} ({force / 1e3:g} kN, {speed:g} rad/s)")
         cpu = time.process_time()
         trace = simulate(
-            parameters, speed, force, args.duration, step_s=args.step, surface=args.surface
+            parameters, speed, force, spec.duration_s, step_s=spec.step_s, surface=spec.surface
         )
         cpu = time.process_time() - cpu
         features = run_features(trace, (start_s, end_s))
@@ -277,25 +287,25 @@ def main(argv: Sequence[str] | None = None) -> int:
         rows.append(_feature_row(point, features, om_min, cpu))
         del trace
     runs_s = time.perf_counter() - started
-    print(f"1. Standard run ({args.parameters}, surface '{args.surface}', step {args.step:g} s, "
-          f"{args.duration:g} s, features over [{start_s:g}, {end_s:g}] s):\n")  # fmt: skip
+    print(f"1. Standard run ({spec.parameters}, surface '{spec.surface}', step {spec.step_s:g} s, "
+          f"{spec.duration_s:g} s, features over [{start_s:g}, {end_s:g}] s):\n")  # fmt: skip
     print(markdown_table(rows, FEATURE_COLUMNS))
     print(f"\n(standard runs: {runs_s:.1f} s wall)")
 
-    forces_n = [f * 1e3 for f in args.forces]
+    forces_n = [f * 1e3 for f in spec.forces_kn]
     hopf = 2 * np.sqrt(2 * parameters.k_a / parameters.axial_mass_kg) / parameters.blades
     critical: list[float | None] = []
     crit_rows = []
     result: dict[str, Any] = {
         "parameters": dataclasses.asdict(parameters),
-        "surface": args.surface,
-        "step_s": args.step,
-        "duration_s": args.duration,
+        "surface": spec.surface,
+        "step_s": spec.step_s,
+        "duration_s": spec.duration_s,
         "window_s": [start_s, end_s],
         "feature_symbols": FEATURE_SYMBOLS,
         "standard_run": rows,
     }
-    if not args.no_map:
+    if not spec.no_map:
         note("critical speeds from the roots of the characteristic equation")
         for force in forces_n:
             try:
@@ -315,39 +325,39 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("\n2. Critical top-drive speeds (steady drilling stable above):\n")
         print(markdown_table(crit_rows, CRITICAL_COLUMNS))
         note("stability map from the roots")
-        abscissa = stability_map(parameters, forces_n, args.speeds)
+        abscissa = stability_map(parameters, forces_n, spec.speeds_rad_s)
         simulated = None
-        if not args.no_simulated_map:
+        if not spec.no_simulated_map:
             note(
-                f"simulated map: {len(forces_n) * len(args.speeds)} runs of {args.map_duration:g} s"
+                f"simulated map: {len(forces_n) * len(spec.speeds_rad_s)} runs of {spec.map_duration_s:g} s"
             )
             simulated = simulated_map(
                 parameters,
                 forces_n,
-                args.speeds,
-                duration_s=args.map_duration,
-                window_s=(args.map_duration / 2, args.map_duration),
-                step_s=args.step,
-                surface=args.surface,
+                spec.speeds_rad_s,
+                duration_s=spec.map_duration_s,
+                window_s=(spec.map_duration_s / 2, spec.map_duration_s),
+                step_s=spec.step_s,
+                surface=spec.surface,
             )
         result.update(
             critical_speeds=crit_rows,
             map_forces_n=forces_n,
-            map_speeds_rad_s=list(args.speeds),
+            map_speeds_rad_s=list(spec.speeds_rad_s),
             rightmost_root_real=abscissa.tolist(),
             simulated=None if simulated is None else {k: v.tolist() for k, v in simulated.items()},
         )
-    out: Path = args.out
+    out = spec.out
     out.mkdir(parents=True, exist_ok=True)
     written = [write_json(result, out / "coupled.json", indent=2)]
-    if not args.no_map and not args.no_plots:
+    if not spec.no_map and not spec.no_plots:
         fig = stability_figure(
             forces_n,
-            args.speeds,
+            spec.speeds_rad_s,
             abscissa,
             critical,
             simulated,
-            f"{args.parameters}: steady drilling stability and simulated stick-slip/bounce",
+            f"{spec.parameters}: steady drilling stability and simulated stick-slip/bounce",
         )
         written.append(save_figure(fig, out / "figures" / "coupled_stability_map.png"))
     total_s = time.perf_counter() - started

@@ -15,7 +15,7 @@ from experiments.cli import main
 def test_short_run_prints_the_tables_and_writes_the_files(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    argv = ["coupled", "--points", "P1", "P3", "--duration", "4", "--window", "2", "4"]
+    argv = ["coupled", "--points", "P1", "P3", "--duration-s", "4", "--window", "2", "4"]
     argv += ["--forces", "60", "--speeds", "4", "20", "--map-duration", "2"]
     argv += ["--out", str(tmp_path), "--no-progress"]
     assert main(argv) == 0
@@ -37,8 +37,13 @@ def test_short_run_prints_the_tables_and_writes_the_files(
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["--forces", "20"], "argument --forces: 20 is out of range: allowed > W_f_bar"),
-        (["--window", "300", "200"], "argument --window: 300 200 is out of range"),
+        (["--forces", "20"], "--forces: 20 is out of range: allowed > W_f_bar"),
+        (["--window", "300", "200"], "--window: 300 200 is out of range"),
+        (["--window", "300"], "--window: 300: allowed two values, START END"),
+        (
+            ["--duration", "150"],
+            "--window: 100 400 is out of range: allowed START < END <= --duration-s",
+        ),
         (["--step", "0.001"], "argument --step: 0.001 is out of range"),
         (["--points", "P7"], "argument --points: invalid choice: 'P7'"),
     ],
