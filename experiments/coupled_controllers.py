@@ -22,6 +22,7 @@ import sys
 import textwrap
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
@@ -32,11 +33,20 @@ import baselines  # noqa: F401  (registers the controllers and the autodriller)
 import drill_env
 from agents import load_policy
 from drill_env.coupled_env import DrillStringCoupledEnv
-from experiments.arguments import ArgumentParser, number_type, output_folder
+from experiments.arguments import ArgumentParser, names_type, output_folder
 from experiments.plots import save_figure
+from experiments.spec_cli import option, spec_from_args, spec_parser
 from experiments.tables import Column, markdown_table, write_csv, write_json
 
-__all__ = ["AXIAL_LOOPS", "TORQUE_LOOPS", "main", "map_figure", "run_point"]
+__all__ = [
+    "AXIAL_LOOPS",
+    "TORQUE_LOOPS",
+    "CoupledControllersSpec",
+    "main",
+    "map_figure",
+    "run_point",
+    "run_study",
+]
 
 TORQUE_LOOPS: Final = ("pi", "stiff_pi", "soft_speed", "z_torque", "csmc", "proposed")
 """Top-drive loops of the study by default."""
@@ -86,9 +96,7 @@ force x reference speed, scored over the second half of each episode (stuck and 
 fractions, ROP, MSE, reward). Prints the summary and every row; writes
 coupled_controllers.json/.csv and figures/coupled_controllers_map.png into --out.
 
-examples:
-  drill-gym coupled-controllers
-  drill-gym coupled-controllers --torque-loops stiff_pi soft_speed --forces 60 90 --speeds 4 12
+example: drill-gym coupled-controllers --torque-loops stiff_pi soft_speed --forces 60 90
 """
 
 
@@ -328,91 +336,103 @@ def map_figure(
     return fig
 
 
+def _loop_names() -> list[str]:
+    return ["pi", *drill_env.controller_names()]
+
+
+@dataclass(frozen=True)
+class CoupledControllersSpec:
+    """Settings of ``drill-gym coupled-controllers`` (each field is the option of the same
+    name)."""
+
+    torque_loops: tuple[str, ...] = field(
+        default=TORQUE_LOOPS, metadata=option(parse=names_type(_loop_names, "loop"), metavar="NAME")
+    )
+    """top-drive loops: pi (the env's own) or registered controller names"""
+    axial_loops: tuple[str, ...] = field(
+        default=tuple(AXIAL_LOOPS), metadata=option(choices=tuple(AXIAL_LOOPS))
+    )
+    """axial loops"""
+    forces_kn: tuple[float, ...] = field(
+        default=DEFAULT_FORCES_KN,
+        metadata=option(low=31.2, high=250.0, unit="kN", metavar="KN", flag="--forces"),
+    )
+    """applied-force set points, kN"""
+    speeds_rad_s: tuple[float, ...] = field(
+        default=DEFAULT_SPEEDS_RAD_S,
+        metadata=option(low=0.5, high=100.0, unit="rad/s", metavar="RAD_S", flag="--speeds"),
+    )
+    """reference speeds, rad/s"""
+    duration_s: float = field(
+        default=30.0,
+        metadata=option(low=0.1, high=1000.0, unit="s", metavar="S", aliases=("--episode",)),
+    )
+    """episode length, s (scored over its second half)"""
+    out: Path = field(
+        default=Path("results/coupled-controllers"),
+        metadata=option(parse=output_folder, metavar="DIR"),
+    )
+    """output folder"""
+    agent: Path | None = field(default=None, metadata=option(metavar="MODEL"))
+    """also score this DrillStringCoupled-v0 model against its base loops"""
+    agent_episodes: int = field(default=8, metadata=option(low=1, high=1000))
+    """randomised episodes of the agent's evaluation"""
+    no_grid: bool = False
+    """skip the controllers' grid"""
+    no_plots: bool = False
+    """write no figure"""
+    no_progress: bool = False
+    """no progress lines"""
+
+
 def _parser() -> ArgumentParser:
-    p = ArgumentParser(prog="drill-gym coupled-controllers", description=DESCRIPTION)
-    p.add_argument(
-        "--torque-loops", nargs="+", default=list(TORQUE_LOOPS), metavar="NAME",
-        help="top-drive loops: pi (the env's own) or registered controller names",
-    )  # fmt: skip
-    p.add_argument(
-        "--axial-loops", nargs="+", choices=list(AXIAL_LOOPS), default=list(AXIAL_LOOPS),
-        help="axial loops",
-    )  # fmt: skip
-    p.add_argument(
-        "--forces", nargs="+", type=number_type(31.2, 250.0, unit="kN"),
-        default=list(DEFAULT_FORCES_KN), metavar="KN", help="applied-force set points, kN",
-    )  # fmt: skip
-    p.add_argument(
-        "--speeds", nargs="+", type=number_type(0.5, 100.0, unit="rad/s"),
-        default=list(DEFAULT_SPEEDS_RAD_S), metavar="RAD_S", help="reference speeds, rad/s",
-    )  # fmt: skip
-    p.add_argument(
-        "--episode", type=number_type(0.1, 1000.0, unit="s"), default=30.0, metavar="S",
-        help="episode length, s (scored over its second half)",
-    )  # fmt: skip
-    p.add_argument(
-        "--out", type=output_folder, default=output_folder("results/coupled-controllers"),
-        metavar="DIR", help="output folder",
-    )  # fmt: skip
-    p.add_argument(
-        "--agent", type=Path, metavar="MODEL",
-        help="also score this DrillStringCoupled-v0 model against its base loops",
-    )  # fmt: skip
-    p.add_argument(
-        "--agent-episodes", type=number_type(1, 1000, integer=True), default=8, metavar="N",
-        help="randomised episodes of the agent's evaluation",
-    )  # fmt: skip
-    p.add_argument("--no-grid", action="store_true", help="skip the controllers' grid")
-    p.add_argument("--no-plots", action="store_true", help="write no figure")
-    p.add_argument("--no-progress", action="store_true", help="no progress lines")
-    return p
+    return spec_parser("drill-gym coupled-controllers", DESCRIPTION, CoupledControllersSpec)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``drill-gym coupled-controllers``: run the grid, print the tables, write the files."""
-    parser = _parser()
-    args = parser.parse_args(argv)
-    names = ["pi", *drill_env.controller_names()]
-    for loop in args.torque_loops:
-        if loop not in names:
-            parser.fail("--torque-loops", f"{loop!r} is not a known loop: allowed {names}")
-    if args.agent is not None and not args.agent.exists():
-        parser.fail("--agent", f"{str(args.agent)!r} does not exist")
-    out: Path = args.out
+    return run_study(spec_from_args(CoupledControllersSpec, _parser().parse_args(argv)))
+
+
+def run_study(spec: CoupledControllersSpec) -> int:
+    """Run what ``spec`` asks for, print the tables, write the files; returns the exit code."""
+    if spec.agent is not None and not spec.agent.exists():
+        raise ValueError(f"--agent: {str(spec.agent)!r} does not exist")
+    out = spec.out
     out.mkdir(parents=True, exist_ok=True)
-    if args.agent is not None:
+    if spec.agent is not None:
         try:
-            agent_rows = evaluate_agent(args.agent, int(args.agent_episodes))
+            agent_rows = evaluate_agent(spec.agent, spec.agent_episodes)
         except ValueError as err:
-            parser.fail("--agent", str(err))
-        print(f"Agent against its base loops ({int(args.agent_episodes)} randomised episodes, "
+            raise ValueError(f"--agent: {err}") from None
+        print(f"Agent against its base loops ({spec.agent_episodes} randomised episodes, "
               f"reset seeds {AGENT_SEED}+k; reward terms are means per decision):\n")  # fmt: skip
         print(markdown_table(agent_rows, AGENT_COLUMNS))
         print()
-        write_json({"model": str(args.agent), "rows": agent_rows}, out / "coupled_agent.json")
-    if args.no_grid:
+        write_json({"model": str(spec.agent), "rows": agent_rows}, out / "coupled_agent.json")
+    if spec.no_grid:
         return 0
     started = time.perf_counter()
     rows = []
-    for axial in args.axial_loops:
-        for loop in args.torque_loops:
-            if not args.no_progress:
+    for axial in spec.axial_loops:
+        for loop in spec.torque_loops:
+            if not spec.no_progress:
                 print(f"coupled-controllers: {loop} / {axial}", file=sys.stderr)
-            for force in args.forces:
-                for speed in args.speeds:
-                    rows.append(run_point(loop, axial, force * 1e3, speed, args.episode))
+            for force in spec.forces_kn:
+                for speed in spec.speeds_rad_s:
+                    rows.append(run_point(loop, axial, force * 1e3, speed, spec.duration_s))
     wall = time.perf_counter() - started
-    print(f"Controllers on DrillStringCoupled-v0 ({args.episode:g} s episodes, scored over the "
-          f"second half; a point is held with stuck < {HOLD_STUCK:g} and bounce < "
+    print(f"Controllers on DrillStringCoupled-v0 ({spec.duration_s:g} s episodes, scored over "
+          f"the second half; a point is held with stuck < {HOLD_STUCK:g} and bounce < "
           f"{HOLD_BOUNCE:g}):\n")  # fmt: skip
     table = summary(rows)
     print(markdown_table(table, SUMMARY_COLUMNS))
     print("\nEvery run:\n")
     print(markdown_table(rows, ROW_COLUMNS))
     result = {
-        "episode_s": args.episode,
-        "forces_kn": list(args.forces),
-        "speeds_rad_s": list(args.speeds),
+        "episode_s": spec.duration_s,
+        "forces_kn": list(spec.forces_kn),
+        "speeds_rad_s": list(spec.speeds_rad_s),
         "summary": table,
         "rows": rows,
     }
@@ -420,8 +440,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         write_json(result, out / "coupled_controllers.json", indent=2),
         write_csv(rows, out / "coupled_controllers.csv", [c.key for c in ROW_COLUMNS]),
     ]
-    if not args.no_plots:
-        fig = map_figure(rows, args.torque_loops, args.forces, args.speeds)
+    if not spec.no_plots:
+        fig = map_figure(rows, spec.torque_loops, spec.forces_kn, spec.speeds_rad_s)
         written.append(save_figure(fig, out / "figures" / "coupled_controllers_map.png"))
     print(f"\nwrote {', '.join(str(w) for w in written)} ({wall:.1f} s wall for the runs)")
     return 0

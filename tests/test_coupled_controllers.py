@@ -21,7 +21,7 @@ def test_small_grid_tables_files_and_figure(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     argv = ["coupled-controllers", "--torque-loops", "pi", "stiff_pi", "--forces", "60", "90"]
-    argv += ["--speeds", "4", "--episode", "1", "--out", str(tmp_path), "--no-progress"]
+    argv += ["--speeds", "4", "--duration-s", "1", "--out", str(tmp_path), "--no-progress"]
     assert main(argv) == 0
     out = capsys.readouterr().out
     assert "| stiff_pi | autodriller |" in out and "points held" in out
@@ -67,9 +67,14 @@ def test_agent_evaluation(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["--torque-loops", "warp"], "argument --torque-loops: 'warp' is not a known loop"),
+        (
+            ["--torque-loops", "warp"],
+            "argument --torque-loops: unknown loop 'warp': allowed pi, csmc",
+        ),
         (["--forces", "20"], "argument --forces: 20 is out of range"),
-        (["--agent", "nowhere"], "argument --agent: 'nowhere' does not exist"),
+        (["--agent", "nowhere"], "--agent: 'nowhere' does not exist"),
+        (["--duration-s", "0"], "argument --duration-s: 0 is out of range: allowed [0.1, 1000] s"),
+        (["--episode", "0"], "argument --episode: 0 is out of range: allowed [0.1, 1000] s"),
     ],
 )
 def test_user_errors_are_one_line(
