@@ -52,7 +52,7 @@ import re
 import sys
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
@@ -64,14 +64,7 @@ from drill_env.distributed import DISTRIBUTED_PRESETS
 from drill_env.evaluation import Policy, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
 from drill_env.scenarios import WobProfile
-from experiments.arguments import (
-    SEED_HIGH,
-    ArgumentParser,
-    number_type,
-    one_line,
-    output_folder,
-    seed_option,
-)
+from experiments.arguments import SEED_HIGH, ArgumentParser, one_line, output_folder
 from experiments.controllers import (
     CONTROLLERS_HELP,
     controller_type,
@@ -91,6 +84,7 @@ from experiments.field import (
 )
 from experiments.heldout import HeldOutScenario, held_out_scenario
 from experiments.plots import METRIC_LABELS, save_figure
+from experiments.spec_cli import option, spec_from_args, spec_options
 from experiments.tables import json_clean, write_csv
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -106,6 +100,8 @@ __all__ = [
     "PRONE_ONLY",
     "SUITE_DIR",
     "SUITE_FORMAT",
+    "BenchmarkOptions",
+    "BenchmarkSpec",
     "Entry",
     "Suite",
     "SuiteScenario",
@@ -117,6 +113,7 @@ __all__ = [
     "make_entry",
     "normalised_score",
     "profiles_figure",
+    "run_benchmark",
     "run_suite",
     "score_suite",
     "scorecard_markdown",
@@ -390,10 +387,10 @@ def parse_suite(data: Any, where: str) -> Suite:
     if isinstance(version, bool) or not isinstance(version, int) or version < 1:
         raise r.fail("version", "an integer >= 1")
     env_id = r.choice("env_id", ENV_IDS)
-    field = is_field(env_id)
+    on_field = is_field(env_id)
     reference = r.text("reference")
-    observation = r.choice("observation", ("state", "surface") if field else (None,))
-    controller_model = r.choice("controller_model", CONTROLLER_MODELS if field else (None,))
+    observation = r.choice("observation", ("state", "surface") if on_field else (None,))
+    controller_model = r.choice("controller_model", CONTROLLER_MODELS if on_field else (None,))
     episode_s = r.real("episode_s", 1.0, 1e5)
     if episode_s != round(episode_s):  # every decision period of controllers and agents fits
         raise r.fail("episode_s", "a whole number of seconds in [1, 100000]")
@@ -403,11 +400,11 @@ def parse_suite(data: Any, where: str) -> Suite:
         raise r.fail("scenarios", "a non-empty list of scenarios")
     scenarios: list[SuiteScenario] = []
     for k, item in enumerate(items):
-        s = _Reader(item, f"{where}: scenarios[{k}]", _FIELD_KEYS if field else _PAPER_KEYS)
+        s = _Reader(item, f"{where}: scenarios[{k}]", _FIELD_KEYS if on_field else _PAPER_KEYS)
         try:
             scenario = (
                 _field_scenario(s, noise, str(controller_model))
-                if field
+                if on_field
                 else _paper_scenario(s, noise)
             )
         except ValueError as err:
@@ -508,14 +505,14 @@ class Entry:
         """``(label, policy, env keywords)`` of this entry's runs on ``suite`` (the
         scenario's keywords are added per run), or ``None`` when it does not run there (an
         agent made for another env)."""
-        field = is_field(suite.env_id)
+        on_field = is_field(suite.env_id)
         if self.agent is None:
             kwargs: dict[str, Any] = {
                 "base_controller": self.name,
                 "control_dt_s": IDLE_DECISION_S,
             }
             observation = None
-            if field:
+            if on_field:
                 observation = observations_of(self.name, (str(suite.observation),))[0]
                 kwargs["observation"] = observation
             label = run_label({"controller": self.name, "observation": observation})
@@ -523,7 +520,7 @@ class Entry:
         if self.agent.env_id != suite.env_id:
             return None
         own = dict(self.agent.env_kwargs)
-        observation = own.get("observation", "surface") if field else None
+        observation = own.get("observation", "surface") if on_field else None
         return run_label({"controller": self.name, "observation": observation}), self.agent, own
 
 
@@ -568,7 +565,7 @@ def run_suite(
         from tqdm import tqdm
 
         bar = tqdm(total=total, desc=suite.label, unit="run", file=sys.stderr)
-    field = is_field(suite.env_id)
+    on_field = is_field(suite.env_id)
     rows: list[dict[str, Any]] = []
     for entry, (label, policy, kwargs) in jobs:
         mine = entry.agent is None and is_user_controller(entry.name)
@@ -586,7 +583,7 @@ def run_suite(
                         suite.env_id, {**suite.env_kwargs(scenario), **kwargs}, policy, seed
                     )
                 except ValueError as err:
-                    if not field:
+                    if not on_field:
                         raise
                     # A controller that cannot be made for this string (its tuning or model
                     # has no solution there): a row without metrics, and the reason.
@@ -917,22 +914,60 @@ def profiles_figure(suites: Sequence[Suite], rows: Sequence[Mapping[str, Any]]) 
 
 
 # ----------------------------------------------------------------------------- command line
+@dataclass(frozen=True)
+class BenchmarkOptions:
+    """The options of ``drill-gym benchmark`` (each field is the option of the same name)."""
+
+    controllers: tuple[str, ...] = field(
+        default=(), metadata=option(parse=controller_type, metavar="NAME", default_text="none")
+    )
+    """controllers to score too (as POLICY): registered names, MODULE:CLASS or PATH.py:CLASS"""
+    suites: tuple[str, ...] = field(
+        default=(), metadata=option(metavar="SUITE", default_text="every shipped suite, latest")
+    )
+    """suites by name (its latest version), by NAME-vVERSION, or suite files (.json)"""
+    out: Path = field(
+        default=Path("results/benchmark"), metadata=option(parse=output_folder, metavar="DIR")
+    )
+    """output folder"""
+    resamples: int = field(default=DEFAULT_RESAMPLES, metadata=option(low=100, high=100_000))
+    """bootstrap resamples of each confidence interval"""
+    seed: int = field(default=0, metadata=option(low=0, high=SEED_HIGH))
+    """seed of the bootstrap resampling (the runs' seeds are the suites')"""
+    no_plots: bool = False
+    """write no figure"""
+    no_progress: bool = False
+    """no progress bar"""
+
+
+@dataclass(frozen=True)
+class BenchmarkSpec(BenchmarkOptions):
+    """Settings of ``drill-gym benchmark``: what to score (the POLICY arguments) and the
+    options."""
+
+    policies: tuple[str, ...] = ()
+    """what to score (empty: every registered controller and every model in agents/models/);
+    the controllers of ``controllers`` are scored too"""
+
+    def suite_names(self) -> list[str]:
+        """The suites named, each once (default: the latest version of every shipped one)."""
+        names = self.suites or sorted({label.rsplit("-v", 1)[0] for label in shipped_suites()})
+        return list(dict.fromkeys(names))
+
+    def entry_names(self) -> list[str]:
+        """What to score, each once (default: every controller and shipped model)."""
+        return list(dict.fromkeys([*self.policies, *self.controllers] or _default_entries()))
+
+
 DESCRIPTION: Final = """\
 Score controllers and agents on fixed, versioned scenario suites and write a scorecard: per
-suite and metric (IAE, stick-slip severity over the prone scenarios, RMS torque deviation,
-chattering), the interquartile mean over every scenario and seed with its 95 % stratified-
-bootstrap confidence interval, a score from 0 (the suite's reference controller) to 1 (the
-best entry), and performance profiles.
+suite and metric, the interquartile mean over every scenario and seed with its 95 % stratified-
+bootstrap interval, a score from 0 (the suite's reference controller) to 1 (the best entry),
+and performance profiles. Shipped suites (experiments/suites/NAME-vVERSION.json): heldout-v1,
+corners-v1 (DrillString-v0), field-v1, deep-v1 (DrillStringField-v0). Writes scorecard.md,
+scorecard.csv, runs.csv and profiles.png to --out. More: docs/reports/benchmark.md.
 
-Suites are JSON files (experiments/suites/NAME-vVERSION.json: the scenarios and their reset
-seeds); a shipped suite is never edited, a change is a new version. Shipped: heldout-v1 and
-corners-v1 (DrillString-v0), field-v1 and deep-v1 (DrillStringField-v0, the rig's surface
-signals). Writes scorecard.md, scorecard.csv, runs.csv and profiles.png to --out.
-
-examples:
-  drill-gym benchmark                                  # every shipped controller and agent
-  drill-gym benchmark proposed agents/models/residual_ppo --suites heldout corners
-  drill-gym benchmark examples/custom_controller.py:SpeedPI --suites heldout-v1
+example: drill-gym benchmark proposed agents/models/residual_ppo --suites heldout corners
 """
 
 
@@ -948,70 +983,42 @@ def _parser() -> ArgumentParser:
         + ". Default: every registered controller and every model in agents/models/; each "
         "suite's reference controller is always added",
     )
-    parser.add_argument(
-        "--controllers",
-        nargs="+",
-        default=[],
-        metavar="NAME",
-        type=controller_type,
-        help="controllers to score too (as POLICY): registered names, MODULE:CLASS or "
-        "PATH.py:CLASS",
-    )
-    parser.add_argument(
-        "--suites",
-        nargs="+",
-        default=None,
-        metavar="SUITE",
-        help="suites by name (its latest version), by NAME-vVERSION, or suite files (.json); "
-        "default: the latest version of every shipped suite",
-    )
-    parser.add_argument(
-        "--out",
-        type=output_folder,
-        default="results/benchmark",
-        metavar="DIR",
-        help="output folder",
-    )
-    parser.add_argument(
-        "--resamples",
-        type=number_type(100, 100_000, integer=True),
-        default=DEFAULT_RESAMPLES,
-        metavar="N",
-        help="bootstrap resamples of each confidence interval",
-    )
-    seed_option(parser, "seed of the bootstrap resampling (the runs' seeds are the suites')")
-    parser.add_argument("--no-plots", action="store_true", help="write no figure")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    spec_options(parser, BenchmarkOptions)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``drill-gym benchmark``: run, score and write; returns the exit code (see ``--help``)."""
-    parser = _parser()
-    args = parser.parse_args(list(argv) if argv is not None else None)
+    argv = list(argv) if argv is not None else None
+    spec = spec_from_args(BenchmarkSpec, _parser().parse_args(argv))
+    given = argv if argv is not None else sys.argv[1:]
+    return run_benchmark(spec, ("drill-gym benchmark " + " ".join(given)).strip())
+
+
+def run_benchmark(spec: BenchmarkSpec, command: str = "drill-gym benchmark") -> int:
+    """Run, score and write what ``spec`` asks for (``command``: the command line written in
+    the scorecard); returns the exit code."""
     if importlib.util.find_spec("scipy") is None:  # before minutes of runs, not after
-        parser.error(
+        raise ValueError(
             "needs the package 'scipy' for the bootstrap, which is not installed (the bench "
             "extra has it: pip install -e '.[bench]')"
         )
     start = time.perf_counter()
-    if args.suites is None:
-        args.suites = sorted({label.rsplit("-v", 1)[0] for label in shipped_suites()})
     suites: list[Suite] = []
-    for text in dict.fromkeys(args.suites):
+    for text in spec.suite_names():
         try:
             suites.append(load_suite(text))
         except ValueError as err:
-            parser.fail("--suites", str(err))
+            raise ValueError(f"--suites: {err}") from None
     labels = [s.label for s in suites]
     if len(set(labels)) != len(labels):
-        parser.fail("--suites", f"the same suite twice: {', '.join(labels)}")
+        raise ValueError(f"--suites: the same suite twice: {', '.join(labels)}")
     entries: list[Entry] = []
-    for text in dict.fromkeys([*args.policies, *args.controllers] or _default_entries()):
+    for text in spec.entry_names():
         try:
             entries.append(make_entry(text))
         except ValueError as err:
-            parser.fail("POLICY", str(err))
+            raise ValueError(f"POLICY: {err}") from None
     names = {e.name for e in entries}
     for suite in suites:
         if suite.reference not in names:
@@ -1020,27 +1027,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     taken = [e.name for e in entries]
     twice = sorted({n for n in taken if taken.count(n) > 1})
     if twice:
-        parser.fail("POLICY", f"two entries are named {', '.join(twice)}")
+        raise ValueError(f"POLICY: two entries are named {', '.join(twice)}")
     rows: list[dict[str, Any]] = []
     scores: list[dict[str, Any]] = []
     for suite in suites:
-        suite_rows = run_suite(suite, entries, progress=not args.no_progress)
+        suite_rows = run_suite(suite, entries, progress=not spec.no_progress)
         rows += suite_rows
-        scores += score_suite(suite, suite_rows, args.resamples, args.seed)
+        scores += score_suite(suite, suite_rows, spec.resamples, spec.seed)
     wall = time.perf_counter() - start
-    out: Path = args.out
+    out = spec.out
     out.mkdir(parents=True, exist_ok=True)
-    command = "drill-gym benchmark " + " ".join(list(argv) if argv is not None else sys.argv[1:])
-    text = scorecard_markdown(
-        suites, scores, entries, args.resamples, args.seed, command.strip(), wall
-    )
+    text = scorecard_markdown(suites, scores, entries, spec.resamples, spec.seed, command, wall)
     (out / "scorecard.md").write_text(text + "\n", encoding="utf-8")
     written = [
         out / "scorecard.md",
         write_csv(json_clean(scores), out / "scorecard.csv", SCORE_KEYS),
         write_csv(rows, out / "runs.csv", RUN_KEYS),
     ]
-    if not args.no_plots:
+    if not spec.no_plots:
         written.append(save_figure(profiles_figure(suites, rows), out / "profiles.png"))
     for suite in suites:
         print(f"{suite.label} ({suite.env_id}, reference {suite.reference}):")

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from experiments import benchmark
 from experiments.benchmark import (
     METRICS,
     SUITE_DIR,
@@ -32,6 +33,7 @@ from experiments.benchmark import (
 )
 from experiments.cli import main
 from experiments.heldout import CORNERS, FIELD_HELD_OUT, HELD_OUT
+from experiments.spec_cli import spec_from_args
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -278,13 +280,14 @@ def test_the_command_scores_a_controller_a_user_class_and_an_agent(tmp_path: Pat
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["--suites", "nope"], "argument --suites: unknown suite 'nope'"),
-        (["no_such_policy"], "argument POLICY: unknown controller 'no_such_policy'"),
+        (["--suites", "nope"], "--suites: unknown suite 'nope'"),
+        (["no_such_policy"], "POLICY: unknown controller 'no_such_policy'"),
         (["examples/custom_controller.py:Nope"], "has no 'Nope'"),
         (["--resamples", "5"], r"argument --resamples: 5 is out of range: allowed \[100, 100000\]"),
         (["--controllers", "nope_xyz"], "argument --controllers: unknown controller 'nope_xyz'"),
+        (["--suites", "deep", "deep-v1"], "--suites: the same suite twice: deep-v1, deep-v1"),
     ],
-    ids=["suite", "policy", "user-class", "resamples", "controllers"],
+    ids=["suite", "policy", "user-class", "resamples", "controllers", "twice"],
 )
 def test_a_bad_option_is_one_line_and_exit_code_2(
     argv: list[str], message: str, capsys: pytest.CaptureFixture[str], tmp_path: Path
@@ -366,3 +369,19 @@ def test_a_name_loads_the_latest_version_and_a_label_its_own(
     assert shipped_suites() == ["tiny-v1", "tiny-v2", "tiny-v10"]
     assert load_suite("tiny").label == "tiny-v10" and load_suite("tiny").episode_s == 30.0
     assert load_suite("tiny-v2").episode_s == 20.0
+
+
+def test_the_command_line_is_the_spec() -> None:
+    args = benchmark._parser().parse_args(
+        ["proposed", "stiff_pi", "--suites", "deep", "deep", "--resamples", "200", "--no-plots"]
+    )
+    spec = spec_from_args(benchmark.BenchmarkSpec, args)
+    assert spec == benchmark.BenchmarkSpec(
+        policies=("proposed", "stiff_pi"), suites=("deep", "deep"), resamples=200, no_plots=True
+    )
+    assert spec.suite_names() == ["deep"] and spec.entry_names() == ["proposed", "stiff_pi"]
+    every = benchmark.BenchmarkSpec()
+    assert every.suite_names() == ["corners", "deep", "field", "heldout"]
+    assert (
+        "proposed" in every.entry_names() and "--policies" not in benchmark._parser().format_help()
+    )
