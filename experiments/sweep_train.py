@@ -51,17 +51,11 @@ from pathlib import Path
 from typing import Any, Final
 
 from agents import train as training
-from agents.config import TrainConfig
+from agents.config import TrainConfig, field_docs, plain_text
 from agents.policy import is_model_folder, load_policy
 from agents.train import planned_timesteps, train
 from baselines.registry import REFERENCE_CONTROLLER
-from experiments.arguments import (
-    ArgumentParser,
-    names_type,
-    number_type,
-    output_folder,
-    seed_type,
-)
+from experiments.arguments import SEED_HIGH, ArgumentParser, names_type, output_folder
 from experiments.evaluate import (
     FIELD_HELD_OUT,
     HELD_OUT,
@@ -71,6 +65,7 @@ from experiments.evaluate import (
 )
 from experiments.field import ENV_IDS, FIELD_ENV, PAPER_ENV, is_field, run_label
 from experiments.paths import output_path
+from experiments.spec_cli import option, option_name, spec_from_args, spec_options
 from experiments.sweep import ADDRESS_VARIABLE, Backend, ray_session
 from experiments.tables import Column, markdown_table, write_csv, write_json
 
@@ -78,9 +73,12 @@ __all__ = [
     "METRIC",
     "SWEEP_DEFAULTS",
     "SweepSpec",
+    "SweepTrainOptions",
+    "SweepTrainSpec",
     "main",
     "parse_grid",
     "parse_sample",
+    "run_study",
     "run_training_sweep",
     "train_trial",
 ]
@@ -553,185 +551,165 @@ def _write_markdown(rows: Sequence[Mapping[str, Any]], spec: SweepSpec, path: Pa
 
 
 # ---------------------------------------------------------------------------- command line
+def _heldout_ids() -> list[str]:
+    return [s.id for s in (*HELD_OUT, *FIELD_HELD_OUT)]
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepTrainOptions:
+    """The options of ``drill-gym sweep-train`` generated from their fields (each field is the
+    option of the same name)."""
+
+    seeds: tuple[int, ...] = dataclasses.field(
+        default=(1,), metadata=option(low=0, high=SEED_HIGH, metavar="S")
+    )
+    """training seeds, a trial each"""
+    num_samples: int = dataclasses.field(
+        default=1, metadata=option(low=1, high=10_000, flag="--samples")
+    )
+    """--sample draws per grid point"""
+    sampler: str = dataclasses.field(
+        default="random", metadata=option(choices=("random", "optuna"))
+    )
+    """how --sample settings are drawn (optuna: TPE)"""
+    scheduler: str = dataclasses.field(
+        default="asha", metadata=option(choices=("asha", "median", "none"))
+    )
+    """early stopping of weak trials"""
+    grace_period: int = dataclasses.field(default=2, metadata=option(low=1, high=10_000))
+    """validations every trial reports before the scheduler may stop it"""
+    settings: tuple[str, ...] = dataclasses.field(
+        default=(),
+        metadata=option(
+            flag="--set",
+            metavar="NAME=VALUE",
+            default_text=", ".join(f"{k}={v}" for k, v in SWEEP_DEFAULTS.items()),
+        ),
+    )
+    """fixed training settings of every trial (the rest as drill-gym train)"""
+    env_id: str = dataclasses.field(
+        default=PAPER_ENV, metadata=option(choices=ENV_IDS, flag="--env")
+    )
+    """the env of every trial (its drill-gym train defaults)"""
+    train_budget: bool = False
+    """keep drill-gym train's budget for the env instead of the small one of --set"""
+    heldout: str = dataclasses.field(
+        default="best", metadata=option(choices=("best", "all", "none"))
+    )
+    """score the best trial's model, every trial's or none on the held-out scenarios"""
+    heldout_scenarios: tuple[str, ...] = dataclasses.field(
+        default=(),
+        metadata=option(
+            parse=names_type(_heldout_ids, "scenario"), metavar="ID", default_text="all"
+        ),
+    )
+    """only these held-out scenarios"""
+    workers: int = dataclasses.field(default=2, metadata=option(low=1, high=4096))
+    """trials at a time (CPUs of the local Ray cluster)"""
+    address: str | None = dataclasses.field(
+        default=None,
+        metadata=option(metavar="ADDR", default_text=f"${ADDRESS_VARIABLE}, else a local one"),
+    )
+    """join the Ray cluster at ADDR"""
+    out: Path = dataclasses.field(
+        default=Path("results/sweep-train"), metadata=option(parse=output_folder, metavar="DIR")
+    )
+    """output folder"""
+    no_progress: bool = False
+    """no Tune progress output"""
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepTrainSpec(SweepTrainOptions):
+    """Settings of ``drill-gym sweep-train``: the options, and the repeatable ``--grid`` and
+    ``--sample`` (:func:`_parser` adds those two)."""
+
+    grid: tuple[str, ...] = ()
+    """a training setting's values: every combination a trial"""
+    sample: tuple[str, ...] = ()
+    """a training setting drawn per trial, KIND uniform, loguniform or int (or choice:A,B)"""
+
+    def __post_init__(self) -> None:
+        self.sweep_spec()  # every value checked before anything starts
+
+    def sweep_spec(self) -> SweepSpec:
+        """The trials these settings ask for.
+
+        Raises:
+            ValueError: a setting that does not parse or does not fit (naming its option).
+        """
+        try:
+            grid = dict(parse_grid(g) for g in self.grid)
+            samples = dict(parse_sample(s) for s in self.sample)
+            fields = _fields()
+            explicit: dict[str, Any] = {}
+            for text in self.settings:
+                name, value = _field(text, "--set")
+                explicit[name] = _value(name, value, fields[name])
+            budget = {} if self.train_budget else SWEEP_DEFAULTS
+            settings = {k: v for k, v in budget.items() if k not in (*grid, *samples)}
+            settings.update(explicit)
+            if self.heldout_scenarios:
+                allowed = [s.id for s in held_out_set(self.env_id)]
+                wrong = [i for i in self.heldout_scenarios if i not in allowed]
+                if wrong:
+                    raise ValueError(
+                        f"--heldout-scenarios {', '.join(wrong)}: not a held-out scenario of "
+                        f"{self.env_id}: allowed {allowed[0]} to {allowed[-1]}"
+                    )
+            return SweepSpec(
+                seeds=tuple(dict.fromkeys(self.seeds)),
+                grid=grid,
+                samples=samples,
+                num_samples=self.num_samples,
+                sampler=self.sampler,
+                scheduler=self.scheduler,
+                settings=settings,
+                grace_period=self.grace_period,
+                env_id=self.env_id,
+            )
+        except TypeError as err:
+            raise ValueError(str(err)) from None
+
+
 DESCRIPTION: Final = """\
 Multi-seed training and hyperparameter search of the residual PPO agent on Ray Tune: every
-trial is a drill-gym train run in its own folder OUT/runs/TRIAL__seedS (TensorBoard logs,
-checkpoints without pickle, validation.csv, best/, model/); its validations (IAE, RMSD and
-severity relative to the base controller) are reported to Tune, whose scheduler stops the
-weak trials early on the validation IAE ratio. Afterwards: trials.csv and trials.md (one row
-per trial), best_model/ (the best trial's model, in the project's format) and its held-out
-scores (drill-gym evaluate's scenarios), summary.json. Needs the rl and scale extras.
+trial is a drill-gym train run in OUT/runs/TRIAL__seedS; its validations go to Tune, whose
+scheduler stops weak trials early on their validation IAE ratio. Writes trials.csv,
+trials.md, best_model/ (the best trial's model) with its held-out scores, and summary.json
+into --out. Needs the rl and scale extras.
 
-examples:
-  drill-gym sweep-train --seeds 1 2 3 --workers 2            # three seeds, small budget
-  drill-gym sweep-train --seeds 1 2 --grid learning_rate=1e-4,3e-4 --workers 2
+example:
   drill-gym sweep-train --sampler optuna --samples 8 \\
       --sample learning_rate=loguniform:1e-5:1e-3 --sample ent_coef=uniform:0:0.01
-  drill-gym sweep-train --seeds 1 2 3 --set total_timesteps=400000 validate_every=50000
-  drill-gym sweep-train --env DrillStringField-v0 --train-budget --seeds 1 2 3 --scheduler none
 """
 
 
 def _parser() -> ArgumentParser:
-    p = ArgumentParser(prog="drill-gym sweep-train", description=DESCRIPTION)
-    p.add_argument(
-        "--seeds",
-        nargs="+",
-        type=seed_type(),
-        default=[1],
-        metavar="S",
-        help="training seeds, one trial (per grid point and sample) each",
-    )
-    p.add_argument(
-        "--grid",
-        action="append",
-        default=[],
-        metavar="NAME=V1,V2",
-        help="a training setting's values, every combination a trial (repeatable)",
-    )
-    p.add_argument(
-        "--sample",
-        action="append",
-        default=[],
-        metavar="NAME=KIND:LOW:HIGH",
-        help="a training setting drawn per trial: uniform, loguniform or int with LOW:HIGH, or "
-        "choice:A,B (repeatable)",
-    )
-    p.add_argument(
-        "--samples",
-        type=number_type(1, 10_000, integer=True),
-        default=1,
-        metavar="N",
-        help="draws of the --sample settings per grid point (Tune's num_samples)",
-    )
-    p.add_argument(
-        "--sampler",
-        choices=("random", "optuna"),
-        default="random",
-        help="how --sample settings are drawn: at random, or by Optuna (TPE) through Tune's "
-        "OptunaSearch",
-    )
-    p.add_argument(
-        "--scheduler",
-        choices=("asha", "median", "none"),
-        default="asha",
-        help="early stopping on the validation IAE ratio: ASHA, the median stopping rule, none",
-    )
-    p.add_argument(
-        "--grace-period",
-        type=number_type(1, 10_000, integer=True),
-        default=2,
-        metavar="N",
-        help="validations every trial reports before the scheduler may stop it (the first "
-        "ones of a residual agent are close to the base controller's and say little)",
-    )
-    p.add_argument(
-        "--set",
-        nargs="+",
-        default=[],
-        metavar="NAME=VALUE",
-        help="fixed training settings of every trial (defaults: "
-        + ", ".join(f"{k}={v}" for k, v in SWEEP_DEFAULTS.items())
-        + ", the rest as drill-gym train)",
-    )
-    p.add_argument(
-        "--env",
-        choices=ENV_IDS,
-        default=PAPER_ENV,
-        help="the env of every trial; the settings not given take its drill-gym train "
-        "defaults (DrillStringField-v0: the field agent's)",
-    )
-    p.add_argument(
-        "--train-budget",
-        action="store_true",
-        help="keep the budget of drill-gym train for the env ("
-        + ", ".join(BUDGET_FIELDS)
-        + ") instead of the small one above: trials of the shipped configuration",
-    )
-    p.add_argument(
-        "--heldout",
-        choices=("best", "all", "none"),
-        default="best",
-        help="score the best trial's model, every trial's or none on the held-out scenarios",
-    )
-
-    ids = [s.id for s in HELD_OUT]
-    field_ids = [s.id for s in FIELD_HELD_OUT]
-    p.add_argument(
-        "--heldout-scenarios",
-        nargs="+",
-        default=None,
-        type=names_type(lambda: ids + field_ids, "scenario"),
-        metavar="ID",
-        help=f"only these held-out scenarios, {ids[0]} to {ids[-1]} (default: all 20; with "
-        f"--env DrillStringField-v0 {field_ids[0]} to {field_ids[-1]}, all 16)",
-    )
-    p.add_argument(
-        "--workers",
-        type=number_type(1, 4096, integer=True),
-        default=2,
-        metavar="N",
-        help="trials at a time (CPUs of the local Ray cluster)",
-    )
-    p.add_argument(
-        "--address",
-        default=None,
-        metavar="ADDR",
-        help=f"join the Ray cluster at ADDR (default: ${ADDRESS_VARIABLE}, else a local one)",
-    )
-    p.add_argument(
-        "--out",
-        type=output_folder,
-        default="results/sweep-train",
-        metavar="DIR",
-        help="output folder",
-    )
-    p.add_argument("--no-progress", action="store_true", help="no Tune progress output")
-    return p
-
-
-def spec_from_args(parser: ArgumentParser, args: Any) -> SweepSpec:
-    """The :class:`SweepSpec` of parsed options; a bad one is a one-line parser error."""
-    try:
-        grid = dict(parse_grid(g) for g in args.grid)
-        samples = dict(parse_sample(s) for s in args.sample)
-        fields = _fields()
-        explicit: dict[str, Any] = {}
-        for text in args.set:
-            name, value = _field(text, "--set")
-            explicit[name] = _value(name, value, fields[name])
-        budget = {} if args.train_budget else SWEEP_DEFAULTS
-        settings = {k: v for k, v in budget.items() if k not in (*grid, *samples)}
-        settings.update(explicit)
-        if args.heldout_scenarios:
-            allowed = [s.id for s in held_out_set(args.env)]
-            wrong = [i for i in args.heldout_scenarios if i not in allowed]
-            if wrong:
-                raise ValueError(
-                    f"--heldout-scenarios {', '.join(wrong)}: not a held-out scenario of "
-                    f"{args.env}: allowed {allowed[0]} to {allowed[-1]}"
-                )
-        return SweepSpec(
-            seeds=tuple(dict.fromkeys(args.seeds)),
-            grid=grid,
-            samples=samples,
-            num_samples=args.samples,
-            sampler=args.sampler,
-            scheduler=args.scheduler,
-            settings=settings,
-            grace_period=args.grace_period,
-            env_id=args.env,
+    parser = ArgumentParser(prog="drill-gym sweep-train", description=DESCRIPTION)
+    spec_options(parser, SweepTrainOptions)
+    docs = field_docs(SweepTrainSpec)
+    for name, metavar in (("grid", "NAME=V1,V2"), ("sample", "NAME=KIND:LOW:HIGH")):
+        parser.add_argument(
+            option_name(name),
+            action="append",
+            default=[],
+            metavar=metavar,
+            help=plain_text(docs[name]) + " (repeatable) (default: none)",
         )
-    except (ValueError, TypeError) as err:
-        parser.error(str(err))
+    return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``drill-gym sweep-train``; returns the exit code."""
-    parser = _parser()
-    args = parser.parse_args(list(argv) if argv is not None else None)
-    spec = spec_from_args(parser, args)
-    backend = Backend(workers=args.workers, use_ray=True, address=args.address)
+    args = _parser().parse_args(list(argv) if argv is not None else None)
+    return run_study(spec_from_args(SweepTrainSpec, args))
+
+
+def run_study(options: SweepTrainSpec) -> int:
+    """Run the training sweep ``options`` asks for and print its table; returns the exit code."""
+    spec = options.sweep_spec()
+    backend = Backend(workers=options.workers, use_ray=True, address=options.address)
     print(
         f"sweep-train: {spec.trials()} trials ({len(spec.seeds)} seeds"
         + "".join(f" x {len(v)} {k}" for k, v in spec.grid.items())
@@ -742,13 +720,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     summary = run_training_sweep(
         spec,
-        args.out,
+        options.out,
         backend,
-        heldout=args.heldout,
-        heldout_scenarios=args.heldout_scenarios,
-        progress=not args.no_progress,
+        heldout=options.heldout,
+        heldout_scenarios=list(options.heldout_scenarios) or None,
+        progress=not options.no_progress,
     )
-    print((Path(args.out) / "trials.md").read_text())
+    print((options.out / "trials.md").read_text())
     best = summary["best"]
     print(
         (
@@ -756,7 +734,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             if best
             else "no trial reported a validation; "
         )
-        + f"summary in {Path(args.out) / 'summary.json'} ({summary['wall_time_s']} s)"
+        + f"summary in {options.out / 'summary.json'} ({summary['wall_time_s']} s)"
     )
     return 0
 

@@ -11,7 +11,9 @@ from pathlib import Path
 
 import pytest
 
+from experiments import sweep_train
 from experiments.cli import main as cli_main
+from experiments.spec_cli import spec_from_args
 
 TINY = [
     "--set", "total_timesteps=200", "num_envs=2", "n_steps=50", "batch_size=50",
@@ -50,6 +52,24 @@ def test_bad_training_sweep_is_one_line_before_anything_starts(
     assert err.startswith("drill-gym sweep-train: error: ") and err.count("\n") == 1, err
     assert re.search(message, err), err
     assert not out.exists()
+
+
+def test_the_options_are_the_spec_and_grid_and_sample_repeat() -> None:
+    argv = ["--seeds", "3", "3", "4", "--grid", "gamma=0.9,0.99", "--grid", "n_steps=64,128"]
+    argv += ["--sample", "ent_coef=uniform:0:0.01", "--sample", "vf_coef=choice:0.5,1"]
+    spec = spec_from_args(sweep_train.SweepTrainSpec, sweep_train._parser().parse_args(argv))
+    assert spec.grid == ("gamma=0.9,0.99", "n_steps=64,128") and len(spec.sample) == 2
+    sweep = spec.sweep_spec()
+    assert sweep.seeds == (3, 4) and dict(sweep.grid) == {
+        "gamma": [0.9, 0.99],
+        "n_steps": [64, 128],
+    }
+    assert set(sweep.samples) == {"ent_coef", "vf_coef"} and sweep.trials() == 2 * 2 * 2
+    assert "n_steps" not in sweep.settings  # the grid wins over the small budget
+    assert sweep_train.SweepTrainSpec().sweep_spec().settings == sweep_train.SWEEP_DEFAULTS
+    assert sweep_train.SweepTrainSpec(train_budget=True).sweep_spec().settings == {}
+    with pytest.raises(ValueError, match="--grid 'oops': expected NAME=VALUE"):
+        sweep_train.SweepTrainSpec(grid=("oops",))
 
 
 def test_two_trial_sweep_on_the_local_cluster(
