@@ -489,7 +489,7 @@ class TuneSpec:
         try:
             return check_output_folder(folder)
         except ValueError as err:
-            raise ValueError(f"--out: {err}") from None
+            raise ValueError(f"argument --out: {err}") from None
 
 
 TuneSettings = TuneSpec

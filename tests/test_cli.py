@@ -7,6 +7,7 @@ These run in-process (fast); ``tests/test_commands.py`` runs the commands as a u
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib
 import re
 import shutil
@@ -15,6 +16,7 @@ from typing import Any
 
 import pytest
 
+from agents.config import TrainConfig
 from agents.policy import DEFAULT_MODEL_DIR
 from experiments.cli import DEBUG_VARIABLE, SUBCOMMANDS, main
 
@@ -233,3 +235,25 @@ def test_convert_an_old_model(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     np.testing.assert_array_equal(
         load_policy(tmp_path / "new").predict(obs)[0], old.predict(obs)[0]
     )
+
+
+def test_train_help_is_short_and_help_all_lists_every_setting(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """``train --help`` lists the everyday settings and points to ``--help-all``, which lists
+    every field of the run's settings; every field stays an option either way."""
+    code, short, _ = run(["train", "--help"], capsys)
+    assert code == 0 and short.rstrip().endswith("drill-gym train --help-all")
+    assert "--learning-rate" not in short and "--duration-s" in short and "--env " in short
+    code, full, _ = run(["train", "--help-all"], capsys)
+    assert code == 0 and "--learning-rate" in full and "PPO's sampling" in " ".join(full.split())
+    train = parser_of("train")
+    for f in dataclasses.fields(TrainConfig):
+        flag = "--" + f.name.replace("_", "-")
+        assert flag in train._option_string_actions, flag  # the field's own name works
+        if flag not in ("--env-id", "--run-dir", "--episode-s"):
+            assert flag in full, flag
+    args = train.parse_args(["--env-id", "DrillStringField-v0", "--episode-s", "50"])
+    assert (args.env_id, args.episode_s) == ("DrillStringField-v0", 50.0)
+    assert train.parse_args(["--duration-s", "40", "--anneal-lr", "false"]).episode_s == 40.0
+    assert train.parse_args(["--no-anneal-lr"]).anneal_lr is False

@@ -111,7 +111,7 @@ def test_train_with_its_defaults(command: list[str], tmp_path: Path) -> None:
 def test_train_without_progress_into_out(command: list[str], tmp_path: Path) -> None:
     result = drill_gym(
         command, tmp_path, "train", "--total-timesteps", "200", "--num-envs", "2",
-        "--n-steps", "100", "--batch-size", "100", "--validate-every", "0", "--episode-s", "10",
+        "--n-steps", "100", "--batch-size", "100", "--validate-every", "0", "--duration-s", "10",
         "--no-progress", "--out", "mine",
     )  # fmt: skip
     lines = result.stdout.splitlines()
