@@ -673,11 +673,10 @@ class SweepTrainSpec(SweepTrainOptions):
 
 
 DESCRIPTION: Final = """\
-Multi-seed training and hyperparameter search of the residual PPO agent on Ray Tune: every
-trial is a drill-gym train run in OUT/runs/TRIAL__seedS; its validations go to Tune, whose
-scheduler stops weak trials early on their validation IAE ratio. Writes trials.csv,
-trials.md, best_model/ (the best trial's model) with its held-out scores, and summary.json
-into --out. Needs the rl and scale extras.
+Multi-seed training and hyperparameter search of the residual PPO agent on Ray Tune: each
+trial is a drill-gym train run in OUT/runs/TRIAL__seedS, stopped early when weak on its
+validation IAE ratio. Writes trials.csv, trials.md, best_model/ (the best trial's model) with
+its held-out scores, and summary.json into --out. Needs the rl and scale extras.
 
 example:
   drill-gym sweep-train --sampler optuna --samples 8 \\

@@ -257,3 +257,24 @@ def test_train_help_is_short_and_help_all_lists_every_setting(
     assert (args.env_id, args.episode_s) == ("DrillStringField-v0", 50.0)
     assert train.parse_args(["--duration-s", "40", "--anneal-lr", "false"]).episode_s == 40.0
     assert train.parse_args(["--no-anneal-lr"]).anneal_lr is False
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        "waves",
+        "realism",
+        "tune",
+        "coupled",
+        "coupled-controllers",
+        "benchmark",
+        "sweep-train",
+        "train",
+    ],
+)
+def test_help_fits_on_a_screen(
+    name: str, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setenv("COLUMNS", "80")
+    code, out, _ = run([name, "--help"], capsys)
+    assert code == 0 and len(out.splitlines()) < 60, (name, len(out.splitlines()))
