@@ -55,6 +55,10 @@ class Option:
         flag: The option's name when it is not the field's (``--env`` for ``env_id``).
         default_text: The default as the help shows it (default: the field's default).
         group: Title of the help section the option is listed under (default: the options).
+        positional: A positional argument instead of an option (a tuple field takes any
+            number of values, others one or none).
+        repeat: An option given once per value (``--grid a=1,2 --grid b=3``) instead of one
+            option with several values (tuple fields).
     """
 
     low: float | None = None
@@ -68,6 +72,8 @@ class Option:
     flag: str | None = None
     default_text: str | None = None
     group: str | None = None
+    positional: bool = False
+    repeat: bool = False
 
 
 def option(**kwargs: Any) -> dict[str, Option]:
@@ -185,11 +191,22 @@ def spec_options(
             kwargs["type"] = parse
         if choices is not None and spec.parse is None:
             kwargs["choices"] = tuple(choices)
+            if spec.metavar:  # a long list of choices: the metavar in the usage, the list in errors
+                kwargs["metavar"] = spec.metavar
         else:
             kwargs["metavar"] = metavar
-        if many:
-            kwargs["nargs"] = "+"
+        if spec.repeat:
+            kwargs["action"] = "append"
+            kwargs["help"] += " (repeatable)"
+        elif many:
+            kwargs["nargs"] = "*" if spec.positional else "+"
+        elif spec.positional:
+            kwargs["nargs"] = "?"
         del optional  # an optional value is given like any other; its default is None
+        if spec.positional:
+            del kwargs["dest"]
+            target.add_argument(f.name, **kwargs)
+            continue
         target.add_argument(flag, **kwargs)
         _add_aliases(target, spec.aliases, kwargs)
 

@@ -125,3 +125,31 @@ def test_runner_spec_reads_what_the_options_ask() -> None:
     runner = spec_from_args(RunnerSpec, parser.parse_args(["--workers", "2"]))
     assert runner.requested and runner.backend().workers == 2
     assert runner.results_path(Path("d.sqlite")) == Path("d.sqlite")
+
+
+@dataclass(frozen=True)
+class PositionalSpec:
+    policies: tuple[str, ...] = field(
+        default=(), metadata=option(positional=True, metavar="POLICY")
+    )
+    """what to score"""
+    grid: tuple[str, ...] = field(default=(), metadata=option(repeat=True, metavar="NAME=V1,V2"))
+    """a setting's values"""
+    suites: tuple[str, ...] = field(
+        default=("a",), metadata=option(choices=("a", "b", "c"), metavar="SUITE")
+    )
+    """suites to run"""
+
+
+def test_positional_repeatable_and_named_choices() -> None:
+    parser = spec_parser("p", "", PositionalSpec)
+    spec = spec_from_args(
+        PositionalSpec,
+        parser.parse_args(["x", "y", "--grid", "lr=1,2", "--grid", "g=3", "--suites", "b", "c"]),
+    )
+    assert spec == PositionalSpec(policies=("x", "y"), grid=("lr=1,2", "g=3"), suites=("b", "c"))
+    assert spec_from_args(PositionalSpec, parser.parse_args([])) == PositionalSpec()
+    text = parser.format_help()
+    assert "POLICY" in text and "SUITE" in text and "(repeatable)" in text
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--suites", "d"])
