@@ -139,7 +139,7 @@ def test_evaluate_the_shipped_models(command: list[str], tmp_path: Path) -> None
 def test_compare_one_controller(command: list[str], tmp_path: Path) -> None:
     result = drill_gym(
         command, tmp_path, "compare", "--controllers", "csmc", "--conditions", "nominal",
-        "--noise", "0", "--duration", "2",
+        "--noise", "0", "--duration-s", "2",
     )  # fmt: skip
     out = tmp_path / "results"
     rows = json.loads((out / "compare.json").read_text())

@@ -223,7 +223,7 @@ def test_compare_and_evaluate_commands_with_workers_write_the_serial_files(tmp_p
     """Through the command line: the same CSV as the serial run, and the figures drawn from
     the traces that came back from the workers."""
     base = ["compare", "--controllers", "csmc", "proposed", "--conditions", "nominal"]
-    base += ["--noise", "0.1", "--duration", "2", "--no-agent", "--no-progress"]
+    base += ["--noise", "0.1", "--duration-s", "2", "--no-agent", "--no-progress"]
     assert cli_main([*base, "--no-plots", "--out", str(tmp_path / "c1")]) == 0
     assert cli_main([*base, "--workers", "2", "--out", str(tmp_path / "c2")]) == 0
     assert (tmp_path / "c2" / "compare.csv").read_text() == (
