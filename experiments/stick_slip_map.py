@@ -29,13 +29,12 @@ controllers also ``stick_slip_maps.png`` with all of them side by side.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import functools
 import inspect
 import math
 import time
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final, NamedTuple, Protocol, TypeAlias
@@ -60,13 +59,8 @@ from drill_env.options import REALISM_LEVELS, realism_keywords
 from drill_env.parameters import PLANT_DT_S, PRESETS
 from drill_env.scenarios import RPM
 from drill_env.validation import printable
-from experiments.arguments import (
-    ArgumentParser,
-    number_type,
-    output_folder,
-    seed_option,
-)
-from experiments.controllers import CONTROLLERS_HELP, controller_type, refuse_on_ray
+from experiments.arguments import BASE_SEED_HIGH, ArgumentParser, output_folder
+from experiments.controllers import controller_type, refuse_on_ray
 from experiments.field import (
     ENV_IDS,
     FIELD_ENV,
@@ -83,21 +77,19 @@ from experiments.plots import (
     save_figure,
 )
 from experiments.results_db import Fields, Near, Number, Schema, Values, exactly
+from experiments.spec_cli import option, spec_from_args, spec_parser
 from experiments.sweep import (
     MAP_TASK_CELLS,
+    RunnerSpec,
     SweepOutcome,
     Task,
     TaskResult,
-    add_sweep_options,
-    backend_from_args,
     check_controllers,
     check_observations,
     check_task_size,
     chunks,
     report_outcome,
-    results_path_from_args,
     run_sweep,
-    sweep_requested,
 )
 from experiments.tables import write_csv
 
@@ -106,6 +98,7 @@ __all__ = [
     "DEFAULT_REALISM",
     "MapPolicy",
     "MapRun",
+    "MapSpec",
     "MapStudy",
     "StickSlipMap",
     "compute_map",
@@ -116,7 +109,6 @@ __all__ = [
     "map_realism",
     "map_rows_task",
     "maps_figure",
-    "run_map_sweep",
     "stick_slip",
     "write_map_csv",
 ]
@@ -566,37 +558,11 @@ def write_map_csv(result: StickSlipMap, path: str | Path) -> Path:
 
 # ---------------------------------------------------------------------------- command line
 DESCRIPTION: Final = """\
-Stick-slip map of each controller over weight on bit (WOB) x reference bit speed: every cell
-is one run from rest with a constant WOB and reference; over the last --window seconds the map
-keeps the stick-slip severity (max - min) / (2 mean) of the bit speed (about 1 or more:
-stick-slip, near 0: steady rotation) and the share of time the bit is stuck. A cell is in
-stick-slip when its bit sticks in the window or its severity exceeds 0.5; the white line of the
-figures is the boundary of that region.
+Stick-slip map of each controller over weight on bit (WOB) x reference bit speed: each cell is
+one run from rest, scored by its stick-slip severity and stuck time at the end of the run; CSV
+and PNG per controller into --out (docs/reports/stick-slip-maps.md).
 
-Writes, per controller, stick_slip_map_NAME.csv and stick_slip_map_NAME.png into --out, and
-stick_slip_maps.png with every controller side by side when there are several.
-
-With --env DrillStringField-v0 the cells run on the distributed field string (--parameters
-field_2500m or deep_5000m) at each of --depths, each controller with each of --observations
-(the paper's sliding-mode controllers always with state: they need the whole state); the files are named
-stick_slip_map_NAME_OBSERVATION_DEPTHm and stick_slip_maps_DEPTHm.png. Its defaults: WOB
-50-200 kN, 40-160 rpm (4.19-16.76 rad/s), 100 s runs with the last 50 s analysed (the field
-string's stick-slip cycles last 4-11 s, so the window holds at least four of the longest).
-
-With --realism LEVEL (ideal, wired_pipe, field, surface_only) the cells get that level's
-sensors, telemetry and top drive (the field level: surface signals at 100 Hz with their noise,
-telemetry every 5 s and 5 s late, 20 ms dead time, 20 ms lag, a 100 kN m/s rate limit), every
-controller with the level's observation (the sliding-mode controllers on the surface signals
-run their state observer); the file names end in _LEVEL. Without it a map keeps the env's own
-settings (DrillString-v0: the ideal level).
-
-examples:
-  drill-gym map                                         # stiff_pi on the default grid
-  drill-gym map --controllers stiff_pi soft_speed z_torque proposed --out results/maps
-  drill-gym map --wob-n 5 --speed-n 4 --duration 40 --window 20   # a quick coarse map
-  drill-gym map --controllers z_torque proposed --models agents/models/residual_ppo
-  drill-gym map --env DrillStringField-v0 --controllers soft_speed --depths 1500 2500 4000
-  drill-gym map --controllers proposed stiff_pi --realism field --out results/maps-field
+example: drill-gym map --controllers stiff_pi proposed --wob-n 5 --speed-n 4 --duration-s 40
 """
 
 
@@ -607,149 +573,203 @@ class _Defaults(NamedTuple):
     speed_min: float
     speed_max: float
     speed_n: int
-    duration: float
     window: float
     parameters: str
 
 
 DEFAULTS: Final[dict[str, _Defaults]] = {
-    PAPER_ENV: _Defaults(40e3, 200e3, 20, 1.0, 16.0, 16, 100.0, DEFAULT_WINDOW_S, "zribi2024"),
-    FIELD_ENV: _Defaults(
-        50e3, 200e3, 16, 40 * RPM, 160 * RPM, 13, 100.0, FIELD_WINDOW_S, "field_2500m"
-    ),
+    PAPER_ENV: _Defaults(40e3, 200e3, 20, 1.0, 16.0, 16, DEFAULT_WINDOW_S, "zribi2024"),
+    FIELD_ENV: _Defaults(50e3, 200e3, 16, 40 * RPM, 160 * RPM, 13, FIELD_WINDOW_S, "field_2500m"),
 }
 """The grid and run defaults of the command line on each env."""
 
+DEFAULT_DURATION_S: Final = 100.0
+"""Length of each run of the command line's maps, s."""
 
-def _default(name: str, unit: str = "") -> str:
-    paper, field = (getattr(DEFAULTS[e], name) for e in (PAPER_ENV, FIELD_ENV))
-    return f"(default: {paper:g}{unit}; {field:g}{unit} on {FIELD_ENV})"
+
+def _on_each(name: str, digits: int = 6) -> str:
+    """The default of ``name`` on each env, as the help shows it."""
+    paper, field_value = (getattr(DEFAULTS[e], name) for e in (PAPER_ENV, FIELD_ENV))
+    if isinstance(paper, str):
+        return f"{paper}; field: {field_value}"
+    return f"{paper:.{digits}g}; field: {field_value:.{digits}g}"
+
+
+_WOB: Final = {"low": 0.0, "high": MAX_WOB_N, "open_low": True, "unit": "N", "metavar": "N"}
+_SPEED: Final = {"low": 0.0, "high": MAX_REFERENCE_RAD_S, "open_low": True, "unit": "rad/s"}
+_COUNT: Final = {"low": 1, "high": 10_000}
+
+
+@dataclass(frozen=True)
+class MapSpec:
+    """The settings of ``drill-gym map`` (its options are these fields); a grid setting left
+    ``None`` takes the env's default (:data:`DEFAULTS`)."""
+
+    controllers: tuple[str, ...] = field(
+        default=(),
+        metadata=option(
+            parse=controller_type,
+            metavar="NAME",
+            aliases=("--controller",),
+            default_text="stiff_pi, none with --models",
+        ),
+    )
+    """registered names, or MODULE:CLASS or PATH.py:CLASS"""
+    models: tuple[str, ...] = field(default=(), metadata=option(metavar="PATH"))
+    """model folders to map too"""
+    env_id: str = field(
+        default=PAPER_ENV, metadata=option(choices=ENV_IDS, flag="--env", aliases=("--env-id",))
+    )
+    """the env of the cells"""
+    depths: tuple[float, ...] = field(
+        default=(),
+        metadata=option(low=300.0, high=10_000.0, unit="m", metavar="M", default_text="preset's"),
+    )
+    """measured depths of the field string, m, one map each"""
+    observations: tuple[str, ...] = field(
+        default=OBSERVATIONS, metadata=option(choices=OBSERVATIONS)
+    )
+    """observation modes of the speed loops on the field string"""
+    wob_min: float | None = field(
+        default=None, metadata=option(**_WOB, default_text=_on_each("wob_min"))
+    )
+    """lowest WOB, N"""
+    wob_max: float | None = field(
+        default=None, metadata=option(**_WOB, default_text=_on_each("wob_max"))
+    )
+    """highest WOB, N"""
+    wob_n: int | None = field(
+        default=None, metadata=option(**_COUNT, default_text=_on_each("wob_n"))
+    )
+    """number of WOB values"""
+    speed_min: float | None = field(
+        default=None, metadata=option(**_SPEED, default_text=_on_each("speed_min", 3))
+    )
+    """lowest reference speed, rad/s"""
+    speed_max: float | None = field(
+        default=None, metadata=option(**_SPEED, default_text=_on_each("speed_max", 3))
+    )
+    """highest reference speed, rad/s"""
+    speed_n: int | None = field(
+        default=None, metadata=option(**_COUNT, default_text=_on_each("speed_n"))
+    )
+    """number of reference speeds"""
+    duration_s: float = field(
+        default=DEFAULT_DURATION_S,
+        metadata=option(low=0.0, high=1e4, open_low=True, unit="s", aliases=("--duration",)),
+    )
+    """run length, s (a multiple of 0.1 s)"""
+    window_s: float | None = field(
+        default=None,
+        metadata=option(
+            low=0.0,
+            high=1e4,
+            open_low=True,
+            unit="s",
+            aliases=("--window",),
+            default_text=_on_each("window"),
+        ),
+    )
+    """analysed end of each run, s"""
+    noise: float = field(default=0.0, metadata=option(low=0.0, high=10.0, unit="rad/s"))
+    """speed measurement noise, rad/s"""
+    parameters: str | None = field(
+        default=None,
+        metadata=option(
+            choices=sorted(PRESETS) + sorted(DISTRIBUTED_PRESETS),
+            default_text=_on_each("parameters"),
+        ),
+    )
+    """plant parameter preset"""
+    realism: str | None = field(
+        default=None, metadata=option(choices=REALISM_LEVELS, metavar="LEVEL", default_text="env's")
+    )
+    """realism of sensors and top drive"""
+    out: Path = field(default=Path("results"), metadata=option(parse=output_folder, metavar="DIR"))
+    """output folder"""
+    seed: int = field(default=0, metadata=option(low=0, high=BASE_SEED_HIGH))
+    """reset seed of cell 0 (cell i: seed + i)"""
+    no_plots: bool = False
+    """write the CSV files only"""
+    no_progress: bool = False
+    """no progress bar"""
+
+    def __post_init__(self) -> None:
+        field_env = is_field(self.env_id)
+        presets = DISTRIBUTED_PRESETS if field_env else PRESETS
+        if self.preset not in presets:
+            raise ValueError(
+                f"--parameters {self.preset}: allowed on {self.env_id} "
+                + ", ".join(sorted(presets))
+            )
+        if self.depths and not field_env:
+            raise ValueError(f"--depths: an option of the field string ({FIELD_ENV})")
+        for depth in self.depths:
+            bha = DISTRIBUTED_PRESETS[self.preset].bha_length_m
+            if depth <= bha:
+                raise ValueError(f"--depths {depth:g}: allowed > BHA length {bha} m")
+        self.wobs()  # the grid's own checks name the option
+        self.speeds()
+        if abs(round(self.duration_s * 10) - self.duration_s * 10) > 1e-6:
+            raise ValueError(f"--duration-s {self.duration_s:g}: allowed a multiple of 0.1 s")
+        if self.window > self.duration_s:
+            raise ValueError(
+                f"--window-s {self.window:g}: allowed (0, --duration-s = {self.duration_s:g}] s"
+            )
+
+    def _grid(self, name: str) -> Any:
+        value = getattr(self, name)
+        return getattr(DEFAULTS[self.env_id], name) if value is None else value
+
+    @property
+    def preset(self) -> str:
+        """The plant preset (default: the env's)."""
+        return str(self._grid("parameters"))
+
+    @property
+    def window(self) -> float:
+        """The analysis window, s (default: the env's)."""
+        return float(self.window_s if self.window_s is not None else DEFAULTS[self.env_id].window)
+
+    def wobs(self) -> np.ndarray:
+        """The WOB of each grid row, N."""
+        return grid_values(
+            "wob", self._grid("wob_min"), self._grid("wob_max"), self._grid("wob_n"), MAX_WOB_N
+        )
+
+    def speeds(self) -> np.ndarray:
+        """The reference bit speed of each grid column, rad/s."""
+        return grid_values(
+            "speed",
+            self._grid("speed_min"),
+            self._grid("speed_max"),
+            self._grid("speed_n"),
+            MAX_REFERENCE_RAD_S,
+        )
+
+    @property
+    def controller_names(self) -> tuple[str, ...]:
+        """The controllers, each once (default: ``stiff_pi``, none with models)."""
+        return tuple(dict.fromkeys(self.controllers or (() if self.models else ("stiff_pi",))))
 
 
 def _parser() -> ArgumentParser:
-    parser = ArgumentParser(prog="drill-gym map", description=DESCRIPTION)
-    controllers = controller_type
-    parser.add_argument(
-        "--controllers",
-        nargs="+",
-        default=None,
-        type=controllers,
-        metavar="NAME",
-        help=f"controllers to map, by registered name: {', '.join(controller_names())} "
-        f"(default: stiff_pi, or none when --models are given), {CONTROLLERS_HELP}",
-    )
-    parser.add_argument(
-        "--models",
-        nargs="+",
-        default=[],
-        metavar="PATH",
-        help="learned controllers to map too: model folders in the project's format (e.g. "
-        "agents/models/residual_ppo), each run with its own env keywords and its deterministic "
-        "action at every decision (maps of models run serially)",
-    )
-    parser.add_argument(  # the earlier name, still accepted
-        "--controller", dest="controllers", nargs="+", type=controllers, help=argparse.SUPPRESS
-    )
-    parser.add_argument(
-        "--env",
-        choices=ENV_IDS,
-        default=PAPER_ENV,
-        help="the env of the cells: the paper's 4-DOF string or the distributed field string",
-    )
-    parser.add_argument(
-        "--depths",
-        nargs="+",
-        type=number_type(300.0, 10_000.0, unit="m"),
-        default=None,
-        metavar="M",
-        help="measured depths of the field string, m, one map each (default: the preset's)",
-    )
-    parser.add_argument(
-        "--observations",
-        nargs="+",
-        choices=OBSERVATIONS,
-        default=list(OBSERVATIONS),
-        help="observation modes of the controllers on the field string (the paper's "
-        "controllers always run with state)",
-    )
-    wob = number_type(0.0, MAX_WOB_N, open_low=True, unit="N")
-    speed = number_type(0.0, MAX_REFERENCE_RAD_S, open_low=True, unit="rad/s")
-    count = number_type(1, 10_000, integer=True)
-    parser.add_argument(
-        "--wob-min", type=wob, metavar="NEWTONS", help="lowest WOB, N " + _default("wob_min")
-    )
-    parser.add_argument(
-        "--wob-max", type=wob, metavar="NEWTONS", help="highest WOB, N " + _default("wob_max")
-    )
-    parser.add_argument(
-        "--wob-n", type=count, metavar="COUNT", help="number of WOB values " + _default("wob_n")
-    )
-    parser.add_argument(
-        "--speed-min",
-        type=speed,
-        metavar="RAD_S",
-        help="lowest reference bit speed, rad/s " + _default("speed_min"),
-    )
-    parser.add_argument(
-        "--speed-max",
-        type=speed,
-        metavar="RAD_S",
-        help="highest reference bit speed, rad/s " + _default("speed_max"),
-    )
-    parser.add_argument(
-        "--speed-n",
-        type=count,
-        metavar="COUNT",
-        help="number of reference speeds " + _default("speed_n"),
-    )
-    parser.add_argument(
-        "--duration",
-        type=number_type(0.0, 1e4, open_low=True, unit="s"),
-        metavar="S",
-        help="length of each run from rest, s (a multiple of 0.1 s) " + _default("duration"),
-    )
-    parser.add_argument(
-        "--window",
-        type=number_type(0.0, 1e4, open_low=True, unit="s"),
-        metavar="S",
-        help="analysis window at the end of each run, s (at most --duration) " + _default("window"),
-    )
-    parser.add_argument(
-        "--noise",
-        type=number_type(0.0, 10.0, unit="rad/s"),
-        default=0.0,
-        metavar="STD",
-        help="standard deviation of the measurement noise on the speeds, rad/s (0: the map is "
-        "deterministic; on the field string the surface torque and telemetry are then exact, "
-        "else they carry the env's noise)",
-    )
-    parser.add_argument(
-        "--parameters",
-        choices=sorted(PRESETS) + sorted(DISTRIBUTED_PRESETS),
-        help="plant parameter preset: a 4-DOF one on DrillString-v0, a distributed one on "
-        f"{FIELD_ENV} (default: zribi2024; field_2500m on {FIELD_ENV})",
-    )
-    parser.add_argument(
-        "--realism",
-        choices=REALISM_LEVELS,
-        default=None,
-        metavar="LEVEL",
-        help=f"level of realism of the sensors, telemetry and top drive: {', '.join(REALISM_LEVELS)}"
-        " (every controller then runs with the level's observation, --observations is not "
-        f"used; files end in _LEVEL; default: the env's own, which is ideal on {PAPER_ENV})",
-    )
-    parser.add_argument(
-        "--out", type=output_folder, default="results", metavar="DIR", help="output folder"
-    )
-    seed_option(
-        parser,
-        "reset seed of the first cell (cell i uses seed + i; it drives the noise)",
-        base=True,
-    )
-    parser.add_argument("--no-plots", action="store_true", help="write the CSV files only")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    add_sweep_options(parser)
+    parser = spec_parser("drill-gym map", DESCRIPTION, MapSpec, RunnerSpec)
+    parser.usage = "drill-gym map [OPTIONS]"
     return parser
+
+
+def _map_line(result: StickSlipMap, depth: float | None, written: Sequence[Path]) -> str:
+    """The line printed for one map."""
+    simulated = result.cells * result.duration_s
+    return (
+        f"{printable(result.label)}{'' if depth is None else f' at {depth:g} m'}: "
+        f"{result.cells} cells "
+        f"x {result.duration_s:g} s in {result.wall_time_s:.1f} s "
+        f"({simulated / result.wall_time_s:,.0f} simulated s per wall s); "
+        f"{int(result.unstable().sum())} cells in stick-slip; wrote "
+        + " and ".join(str(p) for p in written)
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -759,128 +779,99 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     parser = _parser()
     args = parser.parse_args(argv)
-    field = is_field(args.env)
-    defaults = DEFAULTS[args.env]
-    for name in defaults._fields:
-        if getattr(args, name) is None:
-            setattr(args, name, getattr(defaults, name))
-    presets = DISTRIBUTED_PRESETS if field else PRESETS
-    if args.parameters not in presets:
-        parser.fail(
-            "--parameters",
-            f"{args.parameters} is not a preset of {args.env}: allowed {', '.join(sorted(presets))}",
-        )
-    if not field and args.depths is not None:
-        parser.fail("--depths", f"is an option of the field string ({FIELD_ENV})")
+    runner = spec_from_args(RunnerSpec, args)
     try:
-        wobs = grid_values("wob", args.wob_min, args.wob_max, args.wob_n, MAX_WOB_N)
-        speeds = grid_values(
-            "speed", args.speed_min, args.speed_max, args.speed_n, MAX_REFERENCE_RAD_S
-        )
+        spec = spec_from_args(MapSpec, args)
     except ValueError as err:
-        parser.error(f"argument {err}")
-    if args.window > args.duration:
-        parser.fail(
-            "--window",
-            f"{args.window:g} is out of range: allowed (0, --duration = {args.duration:g}] s",
-        )
-    if abs(round(args.duration * 10) - args.duration * 10) > 1e-6:
-        parser.fail("--duration", f"{args.duration:g} is not a multiple of 0.1 s")
-    level = map_realism(args.env, args.realism)
-    if args.controllers is None:
-        args.controllers = [] if args.models else ["stiff_pi"]
-    refuse_on_ray(parser.fail, args, args.controllers)
+        parser.error(str(err))
+    level = map_realism(spec.env_id, spec.realism)
+    refuse_on_ray(parser.fail, args, spec.controller_names)
     policies: list[MapPolicy] = []
-    if args.models:
-        if sweep_requested(args):
-            parser.fail(
-                "--models",
-                "maps of models run serially: without --workers, --ray, "
-                "--address, --results, --resume and --overwrite",
-            )
-
-        for path in args.models:
-            try:
-                policy = load_policy(path)
-                _policy_env_kwargs(policy, args.env)
-            except (OSError, ValueError) as err:
-                parser.fail("--models", f"{path}: {err}")
-            policies.append(policy)
-    runs: list[tuple[str | MapPolicy, str | None, float | None]] = []
-    if field:
-        string = DISTRIBUTED_PRESETS[args.parameters]
-        depths = list(dict.fromkeys(args.depths or [string.measured_depth_m]))
-        for depth in depths:
-            if depth <= string.bha_length_m:
-                parser.fail(
-                    "--depths",
-                    f"{depth:g} is out of range: allowed > BHA length {string.bha_length_m} m",
-                )
-        for name in dict.fromkeys(args.controllers):
-            modes = (
-                observations_of(name, args.observations)
-                if level is None
-                else (str(realism_keywords(level)["observation"]),)
-            )
-            runs += [(name, obs, depth) for depth in depths for obs in modes]
-        runs += [(policy, None, depth) for depth in depths for policy in policies]
-    else:
-        runs = [(name, None, None) for name in dict.fromkeys(args.controllers)]
-        runs += [(policy, None, None) for policy in policies]
-    computed: Iterable[tuple[StickSlipMap, float | None]]
-    if sweep_requested(args):  # on the sweep runner: Ray, a results database, a resume
-        named = [(name, obs, depth) for name, obs, depth in runs if isinstance(name, str)]
-        computed = ((m, m.measured_depth_m) for m in run_map_sweep(args, named, wobs, speeds))
-    else:
-        computed = (
-            (
-                compute_map(
-                    name,
-                    wobs,
-                    speeds,
-                    duration_s=args.duration,
-                    window_s=args.window,
-                    noise_std_rad_s=args.noise,
-                    seed=args.seed,
-                    parameters=args.parameters,
-                    progress=not args.no_progress,
-                    env_id=args.env,
-                    observation=observation,
-                    measured_depth_m=depth,
-                    realism=level,
-                ),
-                depth,
-            )
-            for name, observation, depth in runs
+    if spec.models and runner.requested:
+        parser.fail(
+            "--models",
+            "maps of models run serially: without --workers, --ray, "
+            "--address, --results, --resume and --overwrite",
         )
+    for folder in spec.models:
+        try:
+            loaded = load_policy(folder)
+            _policy_env_kwargs(loaded, spec.env_id)
+        except (OSError, ValueError) as err:
+            parser.fail("--models", f"{folder}: {err}")
+        policies.append(loaded)
+    field_env = is_field(spec.env_id)
+    depths: list[float | None] = [None]
+    if field_env:
+        string = DISTRIBUTED_PRESETS[spec.preset]
+        depths = list(dict.fromkeys(spec.depths or (string.measured_depth_m,)))
+    wobs, speeds = spec.wobs(), spec.speeds()
     results: dict[float | None, list[StickSlipMap]] = {}
-    for result, depth in computed:
+
+    def report(result: StickSlipMap, depth: float | None) -> None:
         stem = result.file_stem()
-        written = [write_map_csv(result, output_path(args.out, stem, suffix=".csv"))]
-        if not args.no_plots:
+        written = [write_map_csv(result, output_path(spec.out, stem, suffix=".csv"))]
+        if not spec.no_plots:
             figure = map_figure(result)
-            written.append(save_figure(figure, output_path(args.out, stem, suffix=".png")))
-        simulated = result.cells * result.duration_s
-        print(
-            f"{printable(result.label)}{'' if depth is None else f' at {depth:g} m'}: "
-            f"{result.cells} cells "
-            f"x {result.duration_s:g} s in {result.wall_time_s:.1f} s "
-            f"({simulated / result.wall_time_s:,.0f} simulated s per wall s); "
-            f"{int(result.unstable().sum())} cells in stick-slip; wrote "
-            + " and ".join(str(p) for p in written)
-        )
+            written.append(save_figure(figure, output_path(spec.out, stem, suffix=".png")))
+        print(_map_line(result, depth, written))
         results.setdefault(depth, []).append(result)
+
+    if spec.controller_names:
+        study = MapStudy(
+            spec.controller_names,
+            tuple(float(w) for w in wobs),
+            tuple(float(v) for v in speeds),
+            duration_s=spec.duration_s,
+            window_s=spec.window,
+            noise_std_rad_s=spec.noise,
+            seed=spec.seed,
+            parameters=spec.parameters,
+            task_cells=runner.task_size or MAP_TASK_CELLS,
+            env_id=spec.env_id,
+            observations=tuple(dict.fromkeys(spec.observations)),
+            depths_m=tuple(d for d in depths if d is not None),
+            # one entry per further compute_map option (none for the default map, so that
+            # its settings hash, and the results written for it, stay as they were)
+            keywords={} if level is None else {"realism": level},
+        )
+        backend = runner.backend()
+        outcome = run_sweep(
+            study,
+            backend,
+            runner.results_path(spec.out / "stick_slip_map.sqlite"),
+            runner.resume,
+            not spec.no_progress,
+            overwrite=runner.overwrite,
+        )
+        if runner.requested:
+            report_outcome(study.name, outcome, backend)
+        for result in study.maps(outcome):
+            report(result, result.measured_depth_m)
+    for depth in depths:  # models: each map in this process, the whole grid at once
+        for policy in policies:
+            result = compute_map(
+                policy,
+                wobs,
+                speeds,
+                duration_s=spec.duration_s,
+                window_s=spec.window,
+                noise_std_rad_s=spec.noise,
+                seed=spec.seed,
+                parameters=spec.parameters,
+                progress=not spec.no_progress,
+                env_id=spec.env_id,
+                measured_depth_m=depth,
+                realism=level,
+            )
+            report(result, depth)
     for depth, maps in results.items():
-        if len(maps) > 1 and not args.no_plots:
+        if len(maps) > 1 and not spec.no_plots:
             name = "stick_slip_maps" + ("" if depth is None else f"_{depth:g}m")
             name += "" if level is None else f"_{level}"
-            path = output_path(args.out, name, suffix=".png")
+            path = output_path(spec.out, name, suffix=".png")
             print(f"wrote {save_figure(maps_figure(maps), path)}")
     return 0
-
-
-if __name__ == "__main__":  # pragma: no cover
-    raise SystemExit(main())
 
 
 # ------------------------------------------------------------------- sweep adapter
@@ -1197,41 +1188,6 @@ class MapStudy:
         return maps
 
 
-def run_map_sweep(
-    args: Any, runs: Sequence[MapRun], wobs: Iterable[float], speeds: Iterable[float]
-) -> list[StickSlipMap]:
-    """``drill-gym map`` on the sweep runner (its parsed options ``args``): the maps of
-    ``runs`` (controller, observation mode, depth; in this order), on ``args.env``."""
-
-    # Further compute_map keywords of the command line: one entry per option (none for the
-    # default map, so that its spec, and the results files written for it, stay as they were).
-    level = map_realism(args.env, args.realism)
-    keywords: dict[str, Any] = {} if level is None else {"realism": level}
-    study = MapStudy(
-        tuple(dict.fromkeys(run[0] for run in runs)),
-        tuple(float(w) for w in wobs),
-        tuple(float(v) for v in speeds),
-        duration_s=args.duration,
-        window_s=args.window,
-        noise_std_rad_s=args.noise,
-        seed=args.seed,
-        parameters=args.parameters,
-        task_cells=args.task_size or MAP_TASK_CELLS,
-        env_id=args.env,
-        observations=tuple(dict.fromkeys(args.observations)),
-        depths_m=tuple(dict.fromkeys(float(run[2]) for run in runs if run[2] is not None)),
-        keywords=keywords,
-    )
-    assert study.runs() == [tuple(run) for run in runs], "the maps of drill-gym map, in order"
-    backend = backend_from_args(args)
-    path = results_path_from_args(args, Path(args.out) / "stick_slip_map.sqlite")
-    outcome = run_sweep(
-        study, backend, path, args.resume, not args.no_progress, overwrite=args.overwrite
-    )
-    report_outcome(study.name, outcome, backend)
-    return study.maps(outcome)
-
-
 # ------------------------------------------------------------------- stick-slip maps
 SEVERITY_LABEL: Final = "stick-slip severity (max - min) / (2 mean)"
 """Colour-bar label of the severity: the bit speed's over the analysis window."""
@@ -1340,3 +1296,7 @@ def _caption(result: StickSlipMap) -> str:
         f"{plant}, runs of {result.duration_s:g} s from rest, last "
         f"{result.window_s:g} s analysed, {noise}"
     )
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

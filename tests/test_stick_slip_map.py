@@ -150,9 +150,12 @@ def test_map_is_deterministic_without_noise_and_seeded_with_noise() -> None:
         (["--speed-max", "-3"], r"argument --speed-max: -3 is out of range"),
         (["--speed-min", "9", "--speed-max", "2"], r"--speed-min = 9.0 and --speed-max = 2.0: the range is inverted"),
         (["--speed-n", "-2"], r"argument --speed-n: -2 is out of range"),
+        (["--duration-s", "0"], r"argument --duration-s: 0 is out of range: allowed \(0, 10000\] s"),
         (["--duration", "0"], r"argument --duration: 0 is out of range: allowed \(0, 10000\] s"),
-        (["--duration", "10", "--window", "20"], r"argument --window: 20 is out of range: allowed \(0, --duration = 10\] s"),
-        (["--duration", "10.05", "--window", "5"], r"argument --duration: 10.05 is not a multiple of 0.1 s"),
+        (["--duration-s", "10", "--window-s", "20"], r"--window-s 20: allowed \(0, --duration-s = 10\] s"),
+        (["--duration-s", "10.05", "--window-s", "5"], r"--duration-s 10.05: allowed a multiple of 0.1 s"),
+        (["--depths", "1500"], r"--depths: an option of the field string"),
+        (["--parameters", "field_2500m"], r"--parameters field_2500m: allowed on DrillString-v0 navarro_lopez2007, zribi2024"),
         (["--noise", "-1"], r"argument --noise: -1 is out of range: allowed \[0, 10\] rad/s"),
         (["--wob-n", "two"], r"argument --wob-n: 'two' is not an integer"),
         (["--parameters", "nope"], r"argument --parameters: invalid choice: 'nope'"),
@@ -178,7 +181,7 @@ def test_cli_smoke_run_writes_csv_and_png(
         "--controllers", "stiff_pi", "z_torque",
         "--wob-min", "60000", "--wob-max", "180000", "--wob-n", "2",
         "--speed-min", "3", "--speed-max", "12", "--speed-n", "2",
-        "--duration", "2", "--window", "1",
+        "--duration-s", "2", "--window-s", "1",
         "--out", str(tmp_path),
         "--no-progress",
     ]  # fmt: skip
@@ -198,7 +201,7 @@ def test_cli_single_cell_grid(tmp_path: Path) -> None:
     argv = [
         "--wob-min", "1e5", "--wob-max", "1e5", "--wob-n", "1",
         "--speed-min", "5", "--speed-max", "5", "--speed-n", "1",
-        "--duration", "1", "--window", "0.5", "--out", str(tmp_path), "--no-progress",
+        "--duration-s", "1", "--window-s", "0.5", "--out", str(tmp_path), "--no-progress",
     ]  # fmt: skip
     assert main(argv) == 0
     assert (tmp_path / "stick_slip_map_stiff_pi.png").exists()
@@ -208,7 +211,7 @@ def test_cli_single_cell_grid(tmp_path: Path) -> None:
 def test_cli_no_plots_writes_only_csv(tmp_path: Path) -> None:
     argv = [
         "--controller", "soft_speed", "csmc", "--wob-n", "2", "--speed-n", "2",
-        "--duration", "1", "--window", "0.5", "--out", str(tmp_path), "--no-progress", "--no-plots",
+        "--duration-s", "1", "--window-s", "0.5", "--out", str(tmp_path), "--no-progress", "--no-plots",
     ]  # fmt: skip
     assert main(argv) == 0
     assert sorted(p.name for p in tmp_path.iterdir()) == [

@@ -304,7 +304,8 @@ def test_map_command_killed_mid_sweep_resumes_to_the_plain_csv(tmp_path: Path) -
     """``drill-gym map --resume`` in a process killed with SIGKILL after a few of its tasks,
     then run again: every WOB row once in the database, the CSV of a plain run."""
     base = ["map", "--controllers", "soft_speed", "--wob-n", "30", "--speed-n", "2"]
-    base += ["--duration", "4", "--window", "2", "--noise", "0.1", "--no-plots", "--no-progress"]
+    base += ["--duration-s", "4", "--window-s", "2", "--noise", "0.1"]
+    base += ["--no-plots", "--no-progress"]
     swept = tmp_path / "swept"
     path = swept / "stick_slip_map.sqlite"
     argv = [sys.executable, "-m", "experiments.cli", *base, "--task-size", "2", "--resume"]
@@ -420,7 +421,7 @@ def test_results_of_the_same_settings_on_the_command_line(
 ) -> None:
     """A second run of the same settings into one database is refused (one line naming
     --resume and --overwrite); other settings share the file."""
-    base = ["map", "--wob-n", "2", "--speed-n", "2", "--duration", "2", "--window", "1"]
+    base = ["map", "--wob-n", "2", "--speed-n", "2", "--duration-s", "2", "--window-s", "1"]
     base += ["--no-plots", "--no-progress", "--out", str(tmp_path)]
     results = ["--results", str(tmp_path / "r.sqlite")]
     assert cli_main([*base, *results]) == 0
@@ -439,7 +440,8 @@ def test_results_of_the_same_settings_on_the_command_line(
 
 def test_map_command_resumes_to_the_same_csv(tmp_path: Path) -> None:
     base = ["map", "--controllers", "soft_speed", "--wob-n", "3", "--speed-n", "2"]
-    base += ["--duration", "2", "--window", "1", "--noise", "0.1", "--no-plots", "--no-progress"]
+    base += ["--duration-s", "2", "--window-s", "1", "--noise", "0.1"]
+    base += ["--no-plots", "--no-progress"]
     assert cli_main([*base, "--out", str(tmp_path / "plain")]) == 0
     path = tmp_path / "swept" / "stick_slip_map.sqlite"
     assert cli_main([*base, "--out", str(tmp_path / "swept"), "--task-size", "2", "--resume"]) == 0
@@ -472,7 +474,7 @@ def test_a_sweep_on_ray_without_the_scale_extra_is_one_line(
         return real_import(name, *args, **kwargs)
 
     monkeypatch.setattr(builtins, "__import__", no_ray)
-    argv = ["map", "--wob-n", "1", "--speed-n", "1", "--duration", "1", "--window", "1"]
+    argv = ["map", "--wob-n", "1", "--speed-n", "1", "--duration-s", "1", "--window-s", "1"]
     assert cli_main([*argv, "--workers", "2", "--no-progress", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err == (

@@ -354,7 +354,7 @@ def _same_files(a: Path, b: Path, names: list[str]) -> None:
 
 def test_field_map_command_on_the_runner_writes_the_plain_files(tmp_path: Path) -> None:
     base = ["map", "--env", FIELD_ENV, "--controllers", "soft_speed", "csmc", "--depths", "1500"]
-    base += ["--wob-n", "3", "--speed-n", "1", "--duration", "2", "--window", "1"]
+    base += ["--wob-n", "3", "--speed-n", "1", "--duration-s", "2", "--window-s", "1"]
     base += ["--noise", "0.05", "--no-plots", "--no-progress"]
     assert cli_main([*base, "--out", str(tmp_path / "plain")]) == 0
     swept = tmp_path / "swept"

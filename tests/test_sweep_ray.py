@@ -141,7 +141,8 @@ def test_compare_table_on_ray_equals_the_serial_one() -> None:
 
 def test_map_command_with_workers_writes_the_serial_csv(tmp_path: Path) -> None:
     base = ["map", "--controllers", "z_torque", "--wob-n", "3", "--speed-n", "2"]
-    base += ["--duration", "2", "--window", "1", "--noise", "0.1", "--no-plots", "--no-progress"]
+    base += ["--duration-s", "2", "--window-s", "1", "--noise", "0.1"]
+    base += ["--no-plots", "--no-progress"]
     assert cli_main([*base, "--out", str(tmp_path / "serial")]) == 0
     assert (
         cli_main([*base, "--out", str(tmp_path / "ray"), "--workers", "2", "--task-size", "2"]) == 0
