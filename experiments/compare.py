@@ -56,6 +56,7 @@ from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, 
 from experiments.arguments import (
     SEED_HIGH,
     ArgumentParser,
+    check_output_folder,
     names_type,
     one_line,
     output_folder,
@@ -903,17 +904,22 @@ class CompareSpec:
 
     def __post_init__(self) -> None:
         try:
+            check_output_folder(self.out)
+        except ValueError as err:
+            raise ValueError(f"argument --out: {err}") from None
+        try:
             decision_period(self.duration_s)
         except ValueError:
             raise ValueError(
-                f"--duration-s {self.duration_s:g}: allowed a multiple of the {PLANT_DT_S:g} s "
-                "plant step"
+                f"argument --duration-s: {self.duration_s:g} is not a multiple of the "
+                f"{PLANT_DT_S:g} s plant step"
             ) from None
         allowed = FIELD_CONDITIONS if is_field(self.env_id) else CONDITIONS
         wrong = [c for c in self.conditions if c not in allowed]
         if wrong:
             raise ValueError(
-                f"--conditions {' '.join(wrong)}: allowed on {self.env_id} " + ", ".join(allowed)
+                f"argument --conditions: {', '.join(wrong)} is not a condition of {self.env_id}: "
+                f"allowed {', '.join(allowed)}"
             )
 
     @property

@@ -659,16 +659,21 @@ class EvaluateSpec:
         except ValueError:
             allowed = ", ".join(SCENARIO_SETS[FIELD_ENV if is_field(self.env_id) else PAPER_ENV])
             raise ValueError(
-                f"--scenario-set {self.scenario_set}: allowed on {self.env_id} {allowed}"
+                f"argument --scenario-set: {self.scenario_set} is not a held-out set of "
+                f"{self.env_id}: allowed {allowed}"
             ) from None
         ids = {s.id for s in held_out}
         wrong = [i for i in self.scenarios if i not in ids]
         if wrong:
             raise ValueError(
-                f"--scenarios {' '.join(wrong)}: allowed {held_out[0].id} to {held_out[-1].id} "
-                f"(the {self.scenario_set} set of {self.env_id})"
+                f"argument --scenarios: {', '.join(wrong)} is not a scenario of the "
+                f"{self.scenario_set} set of {self.env_id}: allowed {held_out[0].id} to "
+                f"{held_out[-1].id}"
             )
-        check_output_folder(self.output)
+        try:
+            check_output_folder(self.output)
+        except ValueError as err:
+            raise ValueError(f"argument --out: {err}") from None
 
     @property
     def output(self) -> Path:

@@ -59,7 +59,12 @@ from drill_env.options import REALISM_LEVELS, realism_keywords
 from drill_env.parameters import PLANT_DT_S, PRESETS
 from drill_env.scenarios import RPM
 from drill_env.validation import printable
-from experiments.arguments import BASE_SEED_HIGH, ArgumentParser, output_folder
+from experiments.arguments import (
+    BASE_SEED_HIGH,
+    ArgumentParser,
+    check_output_folder,
+    output_folder,
+)
 from experiments.controllers import controller_type, refuse_on_ray
 from experiments.field import (
     ENV_IDS,
@@ -695,26 +700,38 @@ class MapSpec:
     """no progress bar"""
 
     def __post_init__(self) -> None:
+        try:
+            check_output_folder(self.out)
+        except ValueError as err:
+            raise ValueError(f"argument --out: {err}") from None
         field_env = is_field(self.env_id)
         presets = DISTRIBUTED_PRESETS if field_env else PRESETS
         if self.preset not in presets:
             raise ValueError(
-                f"--parameters {self.preset}: allowed on {self.env_id} "
+                f"argument --parameters: {self.preset} is not a preset of {self.env_id}: allowed "
                 + ", ".join(sorted(presets))
             )
         if self.depths and not field_env:
-            raise ValueError(f"--depths: an option of the field string ({FIELD_ENV})")
+            raise ValueError(f"argument --depths: is an option of the field string ({FIELD_ENV})")
         for depth in self.depths:
             bha = DISTRIBUTED_PRESETS[self.preset].bha_length_m
             if depth <= bha:
-                raise ValueError(f"--depths {depth:g}: allowed > BHA length {bha} m")
-        self.wobs()  # the grid's own checks name the option
-        self.speeds()
+                raise ValueError(
+                    f"argument --depths: {depth:g} is out of range: allowed > BHA length {bha} m"
+                )
+        try:  # the grid's own checks name the option
+            self.wobs()
+            self.speeds()
+        except ValueError as err:
+            raise ValueError(f"argument {err}") from None
         if abs(round(self.duration_s * 10) - self.duration_s * 10) > 1e-6:
-            raise ValueError(f"--duration-s {self.duration_s:g}: allowed a multiple of 0.1 s")
+            raise ValueError(
+                f"argument --duration-s: {self.duration_s:g} is not a multiple of 0.1 s"
+            )
         if self.window > self.duration_s:
             raise ValueError(
-                f"--window-s {self.window:g}: allowed (0, --duration-s = {self.duration_s:g}] s"
+                f"argument --window-s: {self.window:g} is out of range: allowed (0, --duration-s = "
+                f"{self.duration_s:g}] s"
             )
 
     def _grid(self, name: str) -> Any:

@@ -69,7 +69,7 @@ USER_ERRORS = [
     (["train", "--resume", "--run-dir", "RUN"], "--resume: no checkpoint in"),
     (["train", "--seed", "x"], "argument --seed: invalid int value: 'x'"),
     (["compare", "--duration", "-1"], "argument --duration: -1 is out of range: allowed (0, 100000] s"),
-    (["compare", "--duration-s", "0.0005"], "--duration-s 0.0005: allowed a multiple of the 0.001 s plant step"),
+    (["compare", "--duration-s", "0.0005"], "argument --duration-s: 0.0005 is not a multiple of the 0.001 s plant step"),
     (["compare", "--controllers", "foo"], "argument --controllers: unknown controller 'foo': allowed csmc, msmc, asmc, proposed"),
     (["compare", "--conditions", "condition4"], "argument --conditions: unknown condition 'condition4'"),
     (["compare", "--noise", "-0.1"], "argument --noise: -0.1 is out of range: allowed [0, 10] rad/s"),

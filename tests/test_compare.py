@@ -230,13 +230,13 @@ class TestArguments:
         [
             (["--controllers", "pid"], "argument --controllers: unknown controller 'pid': allowed csmc, msmc, asmc, proposed"),
             (["--conditions", "condition4"], "argument --conditions: unknown condition 'condition4': allowed nominal, condition1"),
-            (["--conditions", "severe"], "--conditions severe: allowed on DrillString-v0 nominal, condition1"),
+            (["--conditions", "severe"], "argument --conditions: severe is not a condition of DrillString-v0: allowed nominal, condition1"),
             (["--noise", "-0.1"], "argument --noise: -0.1 is out of range: allowed [0, 10] rad/s"),
             (["--noise", "nan"], "argument --noise: nan is out of range"),
             (["--duration-s", "0"], "argument --duration-s: 0 is out of range: allowed (0, 100000] s"),
             (["--duration", "0"], "argument --duration: 0 is out of range: allowed (0, 100000] s"),
             (["--duration-s", "-5"], "argument --duration-s: -5 is out of range"),
-            (["--duration-s", "0.0005"], "--duration-s 0.0005: allowed a multiple of the 0.001 s plant step"),
+            (["--duration-s", "0.0005"], "argument --duration-s: 0.0005 is not a multiple of the 0.001 s plant step"),
             (["--seed", "-1"], "argument --seed: -1 is out of range: allowed [0, 4294967295]"),
         ],
     )  # fmt: skip

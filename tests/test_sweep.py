@@ -401,8 +401,11 @@ def test_resume_needs_a_results_file() -> None:
         (["probability-map", "--workers", "0"], r"argument --workers: 0 is out of range"),
         (["probability-map", "--speed-min", "5", "--speed-max", "5"], r"--speed-min = --speed-max = 5.0: the range is empty"),
         (["probability-map", "--rows", "depth"], r"argument --rows: depth needs the distributed string: add --env DrillStringField-v0"),
+        (["probability-map", "--depth", "2000"], r"argument --depth: is for the distributed string"),
         (["probability-map", "--parameters", "field_2500m"], r"argument --parameters: 'field_2500m' is not a preset of DrillString-v0"),
         (["probability-map", "--delta-min", "0.5", "--delta-max", "0.1"], r"argument --delta-max: 0.1 is below --delta-min = 0.5"),
+        (["probability-map", "--duration-s", "10", "--window-s", "20"], r"argument --window-s: 20 is out of range: allowed \(0, --duration-s = 10\] s"),
+        (["probability-map", "--duration", "10.05", "--window", "5"], r"argument --duration-s: 10.05 is not a multiple of 0.1 s"),
         (["probability-map", "--env", "CartPole-v1"], r"argument --env: invalid choice: 'CartPole-v1'"),
     ],
 )  # fmt: skip
