@@ -82,6 +82,7 @@ from experiments.field import (
 )
 from experiments.paths import output_file
 from experiments.plots import (
+    Envelope,
     adaptive_gains_figure,
     downsample,
     envelope,
@@ -114,8 +115,6 @@ from experiments.tables import markdown_table as _markdown
 
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.figure import Figure
-
-    from experiments.plots import Envelope
 
 __all__ = [
     "CONDITIONS",

@@ -89,6 +89,7 @@ from experiments.sweep import (
     SweepOutcome,
     Task,
     TaskResult,
+    agent_fingerprint,
     check_controllers,
     check_observations,
     check_task_size,
@@ -804,12 +805,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     level = map_realism(spec.env_id, spec.realism)
     refuse_on_ray(parser.fail, args, spec.controller_names)
     policies: list[MapPolicy] = []
-    if spec.models and runner.requested:
-        parser.fail(
-            "--models",
-            "maps of models run serially: without --workers, --ray, "
-            "--address, --results, --resume and --overwrite",
-        )
     for folder in spec.models:
         try:
             loaded = load_policy(folder)
@@ -823,18 +818,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         string = DISTRIBUTED_PRESETS[spec.preset]
         depths = list(dict.fromkeys(spec.depths or (string.measured_depth_m,)))
     wobs, speeds = spec.wobs(), spec.speeds()
-    results: dict[float | None, list[StickSlipMap]] = {}
 
-    def report(result: StickSlipMap, depth: float | None) -> None:
-        stem = result.file_stem()
-        written = [write_map_csv(result, output_path(spec.out, stem, suffix=".csv"))]
-        if not spec.no_plots:
-            figure = map_figure(result)
-            written.append(save_figure(figure, output_path(spec.out, stem, suffix=".png")))
-        print(_map_line(result, depth, written))
-        results.setdefault(depth, []).append(result)
-
-    if spec.controller_names:
+    try:
         study = MapStudy(
             spec.controller_names,
             tuple(float(w) for w in wobs),
@@ -851,37 +836,30 @@ def main(argv: Sequence[str] | None = None) -> int:
             # one entry per further compute_map option (none for the default map, so that
             # its settings hash, and the results written for it, stay as they were)
             keywords={} if level is None else {"realism": level},
+            models=tuple(policies),
         )
-        backend = runner.backend()
-        outcome = run_sweep(
-            study,
-            backend,
-            runner.results_path(spec.out / "stick_slip_map.sqlite"),
-            runner.resume,
-            not spec.no_progress,
-            overwrite=runner.overwrite,
-        )
-        if runner.requested:
-            report_outcome(study.name, outcome, backend)
-        for result in study.maps(outcome):
-            report(result, result.measured_depth_m)
-    for depth in depths:  # models: each map in this process, the whole grid at once
-        for policy in policies:
-            result = compute_map(
-                policy,
-                wobs,
-                speeds,
-                duration_s=spec.duration_s,
-                window_s=spec.window,
-                noise_std_rad_s=spec.noise,
-                seed=spec.seed,
-                parameters=spec.parameters,
-                progress=not spec.no_progress,
-                env_id=spec.env_id,
-                measured_depth_m=depth,
-                realism=level,
-            )
-            report(result, depth)
+    except ValueError as err:
+        parser.error(str(err))
+    backend = runner.backend()
+    outcome = run_sweep(
+        study,
+        backend,
+        runner.results_path(spec.out / "stick_slip_map.sqlite"),
+        runner.resume,
+        not spec.no_progress,
+        overwrite=runner.overwrite,
+    )
+    if runner.requested:
+        report_outcome(study.name, outcome, backend)
+    results: dict[float | None, list[StickSlipMap]] = {}
+    for result in study.maps(outcome):
+        stem = result.file_stem()
+        written = [write_map_csv(result, output_path(spec.out, stem, suffix=".csv"))]
+        if not spec.no_plots:
+            figure = map_figure(result)
+            written.append(save_figure(figure, output_path(spec.out, stem, suffix=".png")))
+        print(_map_line(result, result.measured_depth_m, written))
+        results.setdefault(result.measured_depth_m, []).append(result)
     for depth, maps in results.items():
         if len(maps) > 1 and not spec.no_plots:
             name = "stick_slip_maps" + ("" if depth is None else f"_{depth:g}m")
@@ -914,7 +892,7 @@ def map_key(controller: str, observation: str | None = None, depth_m: float | No
 
 
 def map_rows_task(
-    controller: str,
+    controller: str | MapPolicy,
     rows: Sequence[int],
     wob_n: Sequence[float],
     reference_speed_rad_s: Sequence[float],
@@ -929,8 +907,9 @@ def map_rows_task(
     keywords: Mapping[str, Any] | None = None,
 ) -> TaskResult:
     """The WOB rows ``rows`` (consecutive indices into the whole grid; ``wob_n`` their WOB
-    values) of one map: one :func:`compute_map` over them (on ``env_id``, with ``observation``,
-    ``measured_depth_m`` and the further compute_map ``keywords``), cell ``i`` of the grid
+    values) of one map of ``controller`` (a registered name or a learned policy): one
+    :func:`compute_map` over them (on ``env_id``, with ``observation``, ``measured_depth_m``
+    and the further compute_map ``keywords``), cell ``i`` of the grid
     reset with ``seed + i``. Records ``{map_key}/row{r}``: ``severity`` and ``stuck_fraction``
     per reference speed (``None``: diverged) and ``map``, the map's settings as compute_map
     reports them (every field of :class:`StickSlipMap` but its arrays and wall time)."""
@@ -957,7 +936,7 @@ def map_rows_task(
         if f.name not in (*_ARRAY_FIELDS, "wall_time_s")
     }
     settings["seed"] = int(seed)  # the map's cell 0, not this block's
-    prefix = map_key(controller, observation, measured_depth_m)
+    prefix = map_key(result.controller, result.observation, result.measured_depth_m)
     records = {
         f"{prefix}/row{r}": {
             "severity": result.severity[k].tolist(),
@@ -976,7 +955,8 @@ def _floats(values: Sequence[Any]) -> np.ndarray:
 
 @dataclass(frozen=True)
 class MapStudy:
-    """Stick-slip maps of ``controllers`` over the same grid on the sweep runner.
+    """Stick-slip maps of ``controllers`` (and learned ``models``) over the same grid on the
+    sweep runner.
 
     On ``DrillString-v0`` one map per controller; on ``DrillStringField-v0`` one per
     controller, measured depth and observation mode it can use (:meth:`runs`, the order of
@@ -1003,6 +983,9 @@ class MapStudy:
         keywords: Further keywords of :func:`compute_map`, the same for every map (any it
             accepts but those the study sets itself); passed to every call and part of the
             spec.
+        models: Learned policies (:class:`MapPolicy`) to map after the controllers, each with
+            its own env keywords; a model's map is one task (the whole grid in one batch, as
+            :func:`compute_map` runs it). Their fingerprints are part of the spec.
     """
 
     controllers: tuple[str, ...]
@@ -1019,9 +1002,16 @@ class MapStudy:
     observations: tuple[str, ...] = OBSERVATIONS
     depths_m: tuple[float, ...] = ()
     keywords: Mapping[str, Any] = field(default_factory=dict)
+    models: tuple[MapPolicy, ...] = field(default=(), compare=False)
 
     def __post_init__(self) -> None:
-        check_controllers(self.controllers)
+        if self.controllers or not self.models:
+            check_controllers(self.controllers)
+        names = [m.name for m in self.models]
+        if len(set(names)) != len(names) or set(names) & set(self.controllers):
+            raise ValueError(f"models {names!r}: each model needs a name of its own")
+        for model in self.models:
+            _policy_env_kwargs(model, self.env_id)
         for label, values in (
             ("wob_n", self.wob_n),
             ("reference_speed_rad_s", self.reference_speed_rad_s),
@@ -1078,20 +1068,32 @@ class MapStudy:
     def runs(self) -> list[MapRun]:
         """The maps, in the order of ``drill-gym map``: each controller, then (on the field
         string) each depth, then each observation mode the controller can use (with a level
-        of realism in :attr:`keywords`, the level's observation for every controller)."""
+        of realism in :attr:`keywords`, the level's observation for every controller); then
+        each depth and each model (with the observation it was trained on)."""
+        named: list[MapRun]
         if not self.field:
-            return list(dict.fromkeys((c, None, None) for c in self.controllers))
+            named = [(c, None, None) for c in self.controllers]
+            return list(dict.fromkeys([*named, *((m.name, None, None) for m in self.models)]))
         depths = self.depths_m or (DISTRIBUTED_PRESETS[self.preset].measured_depth_m,)
         level = map_realism(self.env_id, self.keywords.get("realism"))
         fixed = None if level is None else (str(realism_keywords(level)["observation"]),)
-        return list(
-            dict.fromkeys(
-                (c, o, float(d))
-                for c in self.controllers
-                for d in depths
-                for o in (fixed or observations_of(c, self.observations))
-            )
-        )
+        named = [
+            (c, o, float(d))
+            for c in self.controllers
+            for d in depths
+            for o in (fixed or observations_of(c, self.observations))
+        ]
+        learned = [
+            (m.name, fixed[0] if fixed else self._trained_observation(m), float(d))
+            for d in depths
+            for m in self.models
+        ]
+        return list(dict.fromkeys([*named, *learned]))
+
+    @staticmethod
+    def _trained_observation(model: MapPolicy) -> str:
+        """The field env's observation mode ``model`` runs with in a map."""
+        return str(dict(model.env_kwargs).get("observation") or "state")
 
     def spec(self) -> dict[str, Any]:
         """The map's settings (not the task size)."""
@@ -1106,6 +1108,8 @@ class MapStudy:
             "seed": int(self.seed),
             "parameters": self.preset,
             "keywords": dict(self.keywords),
+            # only with models, so that the spec of a map of controllers stays as it was
+            **({"models": [agent_fingerprint(m) for m in self.models]} if self.models else {}),
         }
 
     def items(self) -> list[str]:
@@ -1146,11 +1150,15 @@ class MapStudy:
         )
 
     def tasks(self, missing: Sequence[str]) -> list[Task]:
-        """Blocks of consecutive missing rows of one map, ``task_cells`` cells each."""
-        per_task = max(1, self.task_cells // len(self.reference_speed_rad_s))
+        """Blocks of consecutive missing rows of one map, ``task_cells`` cells each (a
+        model's: all of them)."""
+        per_cells = max(1, self.task_cells // len(self.reference_speed_rad_s))
+        models = {m.name: m for m in self.models}
         wanted = set(missing)
         tasks: list[Task] = []
         for controller, observation, depth in self.runs():
+            model = models.get(controller)
+            per_task = per_cells if model is None else len(self.wob_n)
             prefix = map_key(controller, observation, depth)
             rows = [r for r in range(len(self.wob_n)) if f"{prefix}/row{r}" in wanted]
             blocks: list[list[int]] = []
@@ -1166,7 +1174,7 @@ class MapStudy:
                             key=f"{prefix}/rows{block[0]}-{block[-1]}",
                             function=map_rows_task,
                             kwargs={
-                                "controller": controller,
+                                "controller": controller if model is None else model,
                                 "rows": block,
                                 "wob_n": [self.wob_n[r] for r in block],
                                 "reference_speed_rad_s": list(self.reference_speed_rad_s),
@@ -1176,7 +1184,7 @@ class MapStudy:
                                 "seed": self.seed,
                                 "parameters": self.preset,
                                 "env_id": self.env_id,
-                                "observation": observation,
+                                "observation": observation if model is None else None,
                                 "measured_depth_m": depth,
                                 "keywords": dict(self.keywords),
                             },

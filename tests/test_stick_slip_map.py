@@ -17,12 +17,14 @@ from drill_env.evaluation import ZeroAction, rollout
 from experiments.cli import main as cli_main
 from experiments.stick_slip_map import (
     CSV_COLUMNS,
+    MapStudy,
     StickSlipMap,
     compute_map,
     grid_values,
     main,
     write_map_csv,
 )
+from experiments.sweep import run_sweep
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -283,8 +285,6 @@ def test_a_model_of_another_env_or_period_is_refused() -> None:
     ("argv", "message"),
     [
         (["--models", "no/such/model"], r"argument --models: no/such/model: "),
-        (["--models", "agents/models/residual_ppo", "--workers", "2"],
-         r"argument --models: maps of models run serially"),
     ],
 )  # fmt: skip
 def test_cli_bad_models_name_the_argument(
@@ -296,3 +296,27 @@ def test_cli_bad_models_name_the_argument(
     err = capsys.readouterr().err
     assert err.startswith("drill-gym map: error: ") and err.count("\n") == 1, err
     assert re.search(message, err), err
+
+
+def test_a_model_map_on_the_runner_is_its_compute_map(tmp_path: Path) -> None:
+    """A model's map is one task over the whole grid: the cells of compute_map, bit for bit,
+    written to the results database and read back on resume; the model is part of the
+    settings."""
+    grid = ([60e3, 170e3], [2.0, 10.0])
+    study = MapStudy(("proposed",), *grid, duration_s=3.0, window_s=1.0, models=(_ZeroResidual(),))
+    assert [run[0] for run in study.runs()] == ["proposed", "zero_residual"]
+    assert [t.key for t in study.tasks(study.items())] == [
+        "proposed/rows0-1",
+        "zero_residual/rows0-1",
+    ]
+    path = tmp_path / "map.sqlite"
+    maps = study.maps(run_sweep(study, results_path=path, progress=False))
+    plain = compute_map(_ZeroResidual(), *grid, duration_s=3.0, window_s=1.0, progress=False)
+    assert maps[1].severity.tobytes() == plain.severity.tobytes()
+    assert maps[1].stuck_fraction.tobytes() == plain.stuck_fraction.tobytes()
+    resumed = run_sweep(study, results_path=path, resume=True, progress=False)
+    assert resumed.loaded == 4 and not resumed.ran
+    without = MapStudy(("proposed",), *grid, duration_s=3.0, window_s=1.0)
+    assert "models" not in without.spec() and "models" in study.spec()
+    with pytest.raises(ValueError, match="each model needs a name of its own"):
+        MapStudy(("proposed",), *grid, models=(_ZeroResidual(), _ZeroResidual()))
