@@ -92,7 +92,6 @@ __all__ = [
     "run_sweep",
     "runner_from_args",
     "spec_hash",
-    "sweep_requested",
 ]
 
 WORKER_ENV: Final[dict[str, str]] = {
@@ -545,11 +544,6 @@ def add_sweep_options(parser: argparse.ArgumentParser) -> None:
 def runner_from_args(args: argparse.Namespace) -> RunnerSpec:
     """The :class:`RunnerSpec` of parsed options."""
     return spec_from_args(RunnerSpec, args)
-
-
-def sweep_requested(args: argparse.Namespace) -> bool:
-    """Whether the options ask for the sweep runner (Ray, a results database, a resume)."""
-    return runner_from_args(args).requested
 
 
 def backend_from_args(args: argparse.Namespace) -> Backend:

@@ -302,7 +302,7 @@ def test_a_model_map_on_the_runner_is_its_compute_map(tmp_path: Path) -> None:
     """A model's map is one task over the whole grid: the cells of compute_map, bit for bit,
     written to the results database and read back on resume; the model is part of the
     settings."""
-    grid = ([60e3, 170e3], [2.0, 10.0])
+    grid = ((60e3, 170e3), (2.0, 10.0))
     study = MapStudy(("proposed",), *grid, duration_s=3.0, window_s=1.0, models=(_ZeroResidual(),))
     assert [run[0] for run in study.runs()] == ["proposed", "zero_residual"]
     assert [t.key for t in study.tasks(study.items())] == [
