@@ -829,7 +829,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             noise_std_rad_s=spec.noise,
             seed=spec.seed,
             parameters=spec.parameters,
-            task_cells=runner.task_size or MAP_TASK_CELLS,
+            # a plain serial run: each map one task, the whole grid at once (one vector env, as
+            # fast as it gets in one process); on Ray or into a database: MAP_TASK_CELLS
+            task_cells=runner.task_size
+            or (MAP_TASK_CELLS if runner.requested else wobs.size * speeds.size),
             env_id=spec.env_id,
             observations=tuple(dict.fromkeys(spec.observations)),
             depths_m=tuple(d for d in depths if d is not None),
