@@ -547,7 +547,7 @@ def _policy_env_kwargs(policy: MapPolicy, env_id: str) -> dict[str, Any]:
     residual scale, observation mode, ...) without those the map sets; a policy trained on
     another env is refused."""
     kwargs = dict(policy.env_kwargs)
-    trained_on = kwargs.get("env_id", PAPER_ENV)
+    trained_on = getattr(policy, "env_id", None) or kwargs.get("env_id", PAPER_ENV)
     if trained_on != env_id:
         raise ValueError(
             f"policy {policy.name!r} was trained on {trained_on}: map it with env_id {trained_on}"

@@ -320,3 +320,20 @@ def test_a_model_map_on_the_runner_is_its_compute_map(tmp_path: Path) -> None:
     assert "models" not in without.spec() and "models" in study.spec()
     with pytest.raises(ValueError, match="each model needs a name of its own"):
         MapStudy(("proposed",), *grid, models=(_ZeroResidual(), _ZeroResidual()))
+
+
+class _FieldModel(_ZeroResidual):
+    """A model of the field string: its env is an attribute, not one of its env keywords."""
+
+    name = "field_model"
+    env_id = "DrillStringField-v0"
+    env_kwargs = {"base_controller": "stiff_pi", "control_dt_s": 0.1, "observation": "surface"}
+
+
+def test_a_model_is_mapped_on_the_env_it_was_trained_on() -> None:
+    cells = {"duration_s": 2.0, "window_s": 1.0}
+    field = MapStudy((), (1e5,), (5.0,), env_id="DrillStringField-v0", depths_m=(1500.0,),
+                     models=(_FieldModel(),), **cells)  # fmt: skip
+    assert field.runs() == [("field_model", "surface", 1500.0)]
+    with pytest.raises(ValueError, match="was trained on DrillStringField-v0"):
+        MapStudy((), (1e5,), (5.0,), models=(_FieldModel(),), **cells)  # type: ignore[arg-type]
