@@ -331,9 +331,9 @@ class _FieldModel(_ZeroResidual):
 
 
 def test_a_model_is_mapped_on_the_env_it_was_trained_on() -> None:
-    cells = {"duration_s": 2.0, "window_s": 1.0}
+    cells: dict[str, Any] = {"duration_s": 2.0, "window_s": 1.0}
     field = MapStudy((), (1e5,), (5.0,), env_id="DrillStringField-v0", depths_m=(1500.0,),
                      models=(_FieldModel(),), **cells)  # fmt: skip
     assert field.runs() == [("field_model", "surface", 1500.0)]
     with pytest.raises(ValueError, match="was trained on DrillStringField-v0"):
-        MapStudy((), (1e5,), (5.0,), models=(_FieldModel(),), **cells)  # type: ignore[arg-type]
+        MapStudy((), (1e5,), (5.0,), models=(_FieldModel(),), **cells)
