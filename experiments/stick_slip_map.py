@@ -770,6 +770,38 @@ class MapSpec:
         """The controllers, each once (default: ``stiff_pi``, none with models)."""
         return tuple(dict.fromkeys(self.controllers or (() if self.models else ("stiff_pi",))))
 
+    @property
+    def cells(self) -> int:
+        """Cells of one map."""
+        return int(self.wobs().size * self.speeds().size)
+
+    def study(self, models: Sequence[MapPolicy] = (), task_cells: int = MAP_TASK_CELLS) -> MapStudy:
+        """The study of these settings: the maps of the controllers and of ``models`` (the
+        policies of :attr:`models`, loaded), ``task_cells`` cells per task."""
+        depths: tuple[float, ...] = ()
+        if is_field(self.env_id):
+            string = DISTRIBUTED_PRESETS[self.preset]
+            depths = tuple(dict.fromkeys(self.depths or (string.measured_depth_m,)))
+        level = map_realism(self.env_id, self.realism)
+        return MapStudy(
+            self.controller_names,
+            tuple(float(w) for w in self.wobs()),
+            tuple(float(v) for v in self.speeds()),
+            duration_s=self.duration_s,
+            window_s=self.window,
+            noise_std_rad_s=self.noise,
+            seed=self.seed,
+            parameters=self.parameters,
+            task_cells=task_cells,
+            env_id=self.env_id,
+            observations=tuple(dict.fromkeys(self.observations)),
+            depths_m=depths,
+            # one entry per further compute_map option (none for the default map, so that
+            # its settings hash, and the results written for it, stay as they were)
+            keywords={} if level is None else {"realism": level},
+            models=tuple(models),
+        )
+
 
 def _parser() -> ArgumentParser:
     parser = spec_parser("drill-gym map", DESCRIPTION, MapSpec, RunnerSpec)
@@ -812,35 +844,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         except (OSError, ValueError) as err:
             parser.fail("--models", f"{folder}: {err}")
         policies.append(loaded)
-    field_env = is_field(spec.env_id)
-    depths: list[float | None] = [None]
-    if field_env:
-        string = DISTRIBUTED_PRESETS[spec.preset]
-        depths = list(dict.fromkeys(spec.depths or (string.measured_depth_m,)))
-    wobs, speeds = spec.wobs(), spec.speeds()
-
+    # a plain serial run: each map one task, the whole grid at once (one vector env, as fast
+    # as it gets in one process); on Ray or into a database: MAP_TASK_CELLS
+    task_cells = runner.task_size or (MAP_TASK_CELLS if runner.requested else spec.cells)
     try:
-        study = MapStudy(
-            spec.controller_names,
-            tuple(float(w) for w in wobs),
-            tuple(float(v) for v in speeds),
-            duration_s=spec.duration_s,
-            window_s=spec.window,
-            noise_std_rad_s=spec.noise,
-            seed=spec.seed,
-            parameters=spec.parameters,
-            # a plain serial run: each map one task, the whole grid at once (one vector env, as
-            # fast as it gets in one process); on Ray or into a database: MAP_TASK_CELLS
-            task_cells=runner.task_size
-            or (MAP_TASK_CELLS if runner.requested else wobs.size * speeds.size),
-            env_id=spec.env_id,
-            observations=tuple(dict.fromkeys(spec.observations)),
-            depths_m=tuple(d for d in depths if d is not None),
-            # one entry per further compute_map option (none for the default map, so that
-            # its settings hash, and the results written for it, stay as they were)
-            keywords={} if level is None else {"realism": level},
-            models=tuple(policies),
-        )
+        study = spec.study(tuple(policies), task_cells)
     except ValueError as err:
         parser.error(str(err))
     backend = runner.backend()

@@ -17,6 +17,7 @@ from drill_env.evaluation import ZeroAction, rollout
 from experiments.cli import main as cli_main
 from experiments.stick_slip_map import (
     CSV_COLUMNS,
+    MapSpec,
     MapStudy,
     StickSlipMap,
     compute_map,
@@ -337,3 +338,16 @@ def test_a_model_is_mapped_on_the_env_it_was_trained_on() -> None:
     assert field.runs() == [("field_model", "surface", 1500.0)]
     with pytest.raises(ValueError, match="was trained on DrillStringField-v0"):
         MapStudy((), (1e5,), (5.0,), models=(_FieldModel(),), **cells)
+
+
+def test_the_command_settings_make_the_study() -> None:
+    """``MapSpec`` (the options of ``drill-gym map``) resolves each env's defaults."""
+    paper = MapSpec(wob_n=2, speed_n=3, duration_s=2.0, window_s=1.0).study()
+    assert paper.controllers == ("stiff_pi",) and paper.preset == "zribi2024"
+    assert paper.wob_n == (40e3, 200e3) and paper.reference_speed_rad_s == (1.0, 8.5, 16.0)
+    assert paper.items() == ["stiff_pi/row0", "stiff_pi/row1"]
+    field = MapSpec(env_id="DrillStringField-v0", controllers=("csmc",), wob_n=1).study()
+    assert field.window_s == 50.0 and field.preset == "field_2500m"
+    assert field.runs() == [("csmc", "state", 2500.0)]  # the preset's depth, state only
+    assert MapSpec(realism="field").study().keywords == {"realism": "field"}
+    assert MapSpec(realism="ideal").study().keywords == {}  # the env's own level
