@@ -42,7 +42,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final, NamedTuple
 
 import numpy as np
-from tqdm import tqdm
 
 import baselines  # noqa: F401  (registers the built-in controllers, in their order)
 from agents import DEFAULT_MODEL_DIR, load_policy
@@ -55,13 +54,14 @@ from drill_env.metrics import METRIC_KEYS
 from drill_env.parameters import PLANT_DT_S, resolve_parameters
 from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, WobProfile
 from experiments.arguments import (
+    SEED_HIGH,
     ArgumentParser,
-    number_type,
+    check_output_folder,
+    names_type,
     one_line,
     output_folder,
-    seed_option,
 )
-from experiments.controllers import CONTROLLERS_HELP, controller_type, refuse_on_ray
+from experiments.controllers import controller_type, refuse_on_ray
 from experiments.field import (
     COMPARE_CONDITIONS,
     COMPARE_DEPTHS_M,
@@ -82,6 +82,7 @@ from experiments.field import (
 )
 from experiments.paths import output_file
 from experiments.plots import (
+    Envelope,
     adaptive_gains_figure,
     downsample,
     envelope,
@@ -93,30 +94,27 @@ from experiments.plots import (
     value_label,
 )
 from experiments.results_db import Exactly, Fields, Flag, Name, Number, Schema, exactly
+from experiments.spec_cli import option, spec_from_args, spec_parser
 from experiments.sweep import (
     COMPARE_TASK_RUNS,
+    Backend,
+    RunnerSpec,
     SweepOutcome,
     Task,
     TaskResult,
-    add_sweep_options,
     agent_fingerprint,
-    backend_from_args,
     check_controllers,
     check_observations,
     check_task_size,
     chunks,
     report_outcome,
-    results_path_from_args,
     run_sweep,
-    sweep_requested,
 )
 from experiments.tables import Column, write_csv, write_json
 from experiments.tables import markdown_table as _markdown
 
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.figure import Figure
-
-    from experiments.plots import Envelope
 
 __all__ = [
     "CONDITIONS",
@@ -128,16 +126,17 @@ __all__ = [
     "SCENARIO",
     "Case",
     "CompareJob",
+    "CompareSpec",
     "CompareStudy",
     "RunTraces",
     "compare_item",
     "compare_runs_task",
     "comparison_cases",
+    "compare_run",
     "comparison_figures",
     "default_controllers",
     "main",
     "markdown_table",
-    "run_compare_sweep",
     "run_comparison",
     "write_figures",
 ]
@@ -399,6 +398,42 @@ def _row(
     return row
 
 
+def compare_run(
+    job: CompareJob,
+    *,
+    duration_s: float,
+    seed: int,
+    reading: str,
+    gains: str,
+    agent: Any,
+    env_id: str,
+) -> tuple[dict[str, Any], Trace]:
+    """One run of the comparison: ``job``'s controller (or ``agent``) on its case at its noise
+    level, on ``env_id``; its row (:data:`ROW_KEYS`, :data:`FIELD_ROW_KEYS`) and its trace."""
+    scenario = job.case.keywords(job.noise, duration_s, reading)
+    if job.is_agent:
+        own = {k: v for k, v in dict(agent.env_kwargs).items() if k != "max_episode_steps"}
+        trace = run_on(env_id, {**own, **scenario}, agent, seed)
+        gain_label = "agent"
+    else:
+        overrides = GAIN_PRESETS[gains].get(job.label)
+        controller = make_controller(job.label, **(overrides or {}))
+        kwargs = {
+            **scenario,
+            "base_controller": controller,
+            "control_dt_s": decision_period(duration_s),
+        }
+        if job.observation is not None:
+            kwargs["observation"] = job.observation
+        trace = run_on(env_id, kwargs, ZeroAction(), seed)
+        gain_label = gains if overrides is not None else "default"
+    metrics = {**episode_metrics(trace), "static_error_rad_s": static_error(trace)}
+    row = _row(
+        job.label, job.observation, job.case, job.noise, metrics, gain_label, seed, duration_s
+    )
+    return row, trace
+
+
 def run_comparison(
     controllers: Sequence[str],
     conditions: Sequence[str],
@@ -415,12 +450,13 @@ def run_comparison(
     cases: Sequence[Case] | None = None,
     observations: Sequence[str] = OBSERVATIONS,
 ) -> tuple[list[dict[str, Any]], dict[tuple[str, str, float], RunTraces]]:
-    """Run every controller (and ``agent``) on every case and noise level.
+    """Every controller (and ``agent``) on every case and noise level: the
+    :class:`CompareStudy` run serially in this process (no results database).
 
     Args:
         controllers: Registered controller names.
-        conditions: Table 3 condition names (the cases on ``DrillString-v0``); not used when
-            ``cases`` is given.
+        conditions: Condition names (:func:`comparison_cases`); not used when ``cases`` is
+            given.
         noises: Measurement noise levels on the speeds, rad/s.
         duration_s: Run length, s.
         seed: Reset seed of every run (it drives the noise).
@@ -431,7 +467,7 @@ def run_comparison(
         keep_traces: Keep light copies of the traces (:class:`RunTraces`) for figures.
         progress: Show a progress bar on standard error.
         env_id: The env of every run (:data:`experiments.field.ENV_IDS`).
-        cases: The cases (:func:`comparison_cases`); default the paper's ``conditions``.
+        cases: The cases (:func:`comparison_cases`); default those of ``conditions``.
         observations: On the field string, the observation modes to run the controllers with
             (each with those it can use, :func:`experiments.field.observations_of`).
 
@@ -439,51 +475,23 @@ def run_comparison(
         The rows (see :data:`ROW_KEYS`, :data:`FIELD_ROW_KEYS`) and the traces by
         ``(run label, case name, noise)``.
     """
-    field = is_field(env_id)
-    if cases is None:
-        cases = comparison_cases(env_id, conditions, reading=reading)
-    preset = GAIN_PRESETS[gains]
-    dt = decision_period(duration_s)
-    labels: list[tuple[str, str | None, bool]] = []
-    for c in controllers:
-        labels += (
-            [(c, o, False) for o in observations_of(c, observations)]
-            if field
-            else [(c, None, False)]
-        )
-    if agent is not None and getattr(agent, "env_id", PAPER_ENV) == env_id:
-        own_observation = dict(agent.env_kwargs).get("observation", "surface") if field else None
-        labels.append((str(agent.name), own_observation, True))
-    jobs = [(c, o, a, case, float(n)) for c, o, a in labels for case in cases for n in noises]
-    rows: list[dict[str, Any]] = []
-    traces: dict[tuple[str, str, float], RunTraces] = {}
-    bar = tqdm(jobs, desc="compare", unit="run", file=sys.stderr, disable=not progress)
-    for label, observation, is_agent, case, noise in bar:
-        name = label if observation is None else f"{label} ({observation})"
-        bar.set_postfix_str(f"{name} {case.name} noise={noise:g}", refresh=False)
-        scenario = case.keywords(noise, duration_s, reading)
-        if is_agent:
-            own = {k: v for k, v in dict(agent.env_kwargs).items() if k != "max_episode_steps"}
-            kwargs = {**own, **scenario}
-            trace = run_on(env_id, kwargs, agent, seed)
-            gain_label = "agent"
-        else:
-            overrides = preset.get(label)
-            controller = make_controller(label, **(overrides or {}))
-            kwargs = {**scenario, "base_controller": controller, "control_dt_s": dt}
-            if observation is not None:
-                kwargs["observation"] = observation
-            trace = run_on(env_id, kwargs, ZeroAction(), seed)
-            gain_label = gains if overrides is not None else "default"
-        metrics = {**episode_metrics(trace), "static_error_rad_s": static_error(trace)}
-        rows.append(_row(label, observation, case, noise, metrics, gain_label, seed, duration_s))
-        if keep_traces:
-            traces[(name, case.name, noise)] = RunTraces(
-                downsample(trace, PLOT_EVERY),
-                time_window(trace, max(trace.duration_s - TAIL_S, 0.0)),
-                envelope(trace, BAND_S),
-            )
-    return rows, traces
+    study = CompareStudy(
+        tuple(controllers),
+        tuple(c.name for c in cases) if cases is not None else tuple(conditions),
+        tuple(float(n) for n in noises),
+        duration_s=duration_s,
+        seed=seed,
+        reading=reading,
+        gains=gains,
+        agent=agent,
+        keep_traces=keep_traces,
+        env_id=env_id,
+        observations=tuple(observations),
+        case_list=None if cases is None else tuple(cases),
+    )
+    if not study.jobs():
+        return [], {}
+    return study.results(run_sweep(study, Backend(workers=1), progress=progress))
 
 
 # ----------------------------------------------------------------------------- output
@@ -810,148 +818,132 @@ def load_agent(loader: Callable[[], Any] | None = None, env_id: str = PAPER_ENV)
 
 
 # -------------------------------------------------------------------------------- CLI
-CONDITIONS_HELP: Final = (
-    "the paper's parametric-uncertainty conditions (nominal, condition1-3: c_pi, k_pi, c_dt "
-    "raised by up to 75 %%)"
-)
-"""How ``--help`` explains the conditions (argparse help text: ``%%`` is a percent sign)."""
-
 DESCRIPTION: Final = """\
-Run each controller on the paper's scenario (WOB 97,347 N, reference bit speed 12 rad/s,
-150 s from rest) under each uncertainty condition and measurement-noise level, score every run
-on the paper's metrics (ISE, IAE, RMSE, RMSD, overshoot, settling time, chattering, stick-slip
-severity), print a ranked summary (one line per controller: the means over its runs, lowest
-IAE first) and write every run to compare.md, compare.csv and compare.json, and figures/ into
---out.
+Run each controller and the env's shipped agent on the paper's scenario under each
+uncertainty condition and noise level, print a ranked summary of the paper's metrics and write
+compare.md/.csv/.json and figures/ into --out (docs/specification.md section 2.2).
 
-Uncertainty conditions: the paper's parametric-uncertainty conditions. nominal is the plant as
-specified; condition1, condition2 and condition3 raise the pipe damping c_pi, the pipe
-stiffness k_pi and the top-drive damping c_dt by 40/30/30 %, 60/50/40 % and 75/75/75 %.
-
-With --env DrillStringField-v0 the runs are on the distributed field string field_2500m at
-each of --depths, at two operating points (150 kN at 60 rpm, prone to stick-slip, and 100 kN
-at 120 rpm) and under each field condition of the bit-rock friction and the mud damping
-(nominal: the preset's; severe: mu_a 1.0, mu_0/mu_a 0.5, xi 1.0 s/rad, half the mud damping;
-mild: mu_a 0.6, mu_0/mu_a 0.8, xi 0.3 s/rad, twice the mud damping). The controllers know
-the nominal string (--controller-model exact: the true one). The paper's sliding-mode
-controllers run with the whole state measured (observation state), the speed loops with each
-of --observations. --noise sets the noise of the measured speeds; with a level above 0 the
-surface torque (250 N m) and the telemetry (0.1 rad/s) are noisy too, with 0 nothing is.
-
-examples:
-  drill-gym compare                                    # the default comparison
-  drill-gym compare --gains rescaled                   # Table 1 gains x J_dt
-  drill-gym compare --controllers csmc proposed --conditions nominal --noise 0 --duration 20
-  drill-gym compare --env DrillStringField-v0 --out results/field-compare
+example: drill-gym compare --controllers csmc proposed --conditions nominal --duration-s 20
 """
 
 FIELD_NOISE_RAD_S: Final = (0.0, 0.05)
 """Noise levels of the measured speeds in the field comparison, rad/s (0.05: the env's)."""
 
+ALL_CONDITIONS: Final = (*CONDITIONS, *(c for c in FIELD_CONDITIONS if c not in CONDITIONS))
+"""The conditions of either env (``--conditions``)."""
+
+
+@dataclass(frozen=True)
+class CompareSpec:
+    """The settings of ``drill-gym compare`` (its options are these fields)."""
+
+    env_id: str = field(
+        default=PAPER_ENV, metadata=option(choices=ENV_IDS, flag="--env", aliases=("--env-id",))
+    )
+    """the env of every run"""
+    controllers: tuple[str, ...] = field(
+        default=(),
+        metadata=option(parse=controller_type, metavar="NAME", default_text="all registered"),
+    )
+    """registered names, or MODULE:CLASS or PATH.py:CLASS"""
+    conditions: tuple[str, ...] = field(
+        default=(),
+        metadata=option(
+            parse=names_type(lambda: ALL_CONDITIONS, "condition"),
+            metavar="NAME",
+            default_text="nominal condition1-3; field: " + " ".join(COMPARE_CONDITIONS),
+        ),
+    )
+    """uncertainty conditions; on the field string friction and damping conditions"""
+    noise: tuple[float, ...] = field(
+        default=(),
+        metadata=option(
+            low=0.0,
+            high=10.0,
+            unit="rad/s",
+            metavar="STD",
+            default_text=" ".join(f"{n:g}" for n in DEFAULT_NOISE_RAD_S)
+            + "; field: "
+            + " ".join(f"{n:g}" for n in FIELD_NOISE_RAD_S),
+        ),
+    )
+    """standard deviations of the noise on the measured speeds, rad/s"""
+    duration_s: float = field(
+        default=DEFAULT_DURATION_S,
+        metadata=option(
+            low=0.0, high=1e5, open_low=True, unit="s", metavar="S", aliases=("--duration",)
+        ),
+    )
+    """length of every run, s (a multiple of the 1 ms plant step)"""
+    seed: int = field(default=0, metadata=option(low=0, high=SEED_HIGH))
+    """reset seed of every run (drives the noise)"""
+    reading: str = field(default="plant", metadata=option(choices=("plant", "controller")))
+    """uncertainty in the plant or in the controllers' model"""
+    gains: str = field(default="paper", metadata=option(choices=tuple(GAIN_PRESETS)))
+    """the paper's gains, or rescaled x J_dt"""
+    depths: tuple[float, ...] = field(
+        default=COMPARE_DEPTHS_M,
+        metadata=option(low=300.0, high=10_000.0, unit="m", metavar="M"),
+    )
+    """measured depths of the field string, m"""
+    observations: tuple[str, ...] = field(
+        default=OBSERVATIONS, metadata=option(choices=OBSERVATIONS)
+    )
+    """observation modes of the speed loops on the field string"""
+    controller_model: str = field(default="nominal", metadata=option(choices=CONTROLLER_MODELS))
+    """what the controllers know of the field string"""
+    out: Path = field(default=Path("results"), metadata=option(parse=output_folder, metavar="DIR"))
+    """output folder"""
+    no_plots: bool = False
+    """write no figures"""
+    no_agent: bool = False
+    """leave out the env's shipped agent"""
+    no_progress: bool = False
+    """no progress bar"""
+
+    def __post_init__(self) -> None:
+        try:
+            check_output_folder(self.out)
+        except ValueError as err:
+            raise ValueError(f"argument --out: {err}") from None
+        try:
+            decision_period(self.duration_s)
+        except ValueError:
+            raise ValueError(
+                f"argument --duration-s: {self.duration_s:g} is not a multiple of the "
+                f"{PLANT_DT_S:g} s plant step"
+            ) from None
+        allowed = FIELD_CONDITIONS if is_field(self.env_id) else CONDITIONS
+        wrong = [c for c in self.conditions if c not in allowed]
+        if wrong:
+            raise ValueError(
+                f"argument --conditions: {', '.join(wrong)} is not a condition of {self.env_id}: "
+                f"allowed {', '.join(allowed)}"
+            )
+
+    @property
+    def controller_names(self) -> tuple[str, ...]:
+        """The controllers, each once (default: :func:`default_controllers`)."""
+        return tuple(dict.fromkeys(self.controllers or default_controllers()))
+
+    @property
+    def condition_names(self) -> tuple[str, ...]:
+        """The conditions, each once (default: the env's)."""
+        field_env = is_field(self.env_id)
+        default = COMPARE_CONDITIONS if field_env else CONDITIONS
+        return tuple(dict.fromkeys(self.conditions or default))
+
+    @property
+    def noise_levels(self) -> tuple[float, ...]:
+        """The noise levels, each once, rad/s (default: the env's)."""
+        default = FIELD_NOISE_RAD_S if is_field(self.env_id) else DEFAULT_NOISE_RAD_S
+        return tuple(dict.fromkeys(float(n) for n in self.noise or default))
+
 
 def _parser() -> ArgumentParser:
-    p = ArgumentParser(prog="drill-gym compare", description=DESCRIPTION)
-    p.add_argument(
-        "--env",
-        choices=ENV_IDS,
-        default=PAPER_ENV,
-        help="the env of every run: the paper's 4-DOF string or the distributed field string",
-    )
-    p.add_argument(
-        "--depths",
-        nargs="+",
-        type=number_type(300.0, 10_000.0, unit="m"),
-        default=list(COMPARE_DEPTHS_M),
-        metavar="M",
-        help="measured depths of the field string, m (DrillStringField-v0)",
-    )
-    p.add_argument(
-        "--observations",
-        nargs="+",
-        choices=OBSERVATIONS,
-        default=list(OBSERVATIONS),
-        help="observation modes of the speed loops on the field string (the paper's "
-        "controllers always run with state)",
-    )
-    p.add_argument(
-        "--controller-model",
-        choices=CONTROLLER_MODELS,
-        default="nominal",
-        help="what the controllers know of the field string: its nominal friction and damping, "
-        "or the exact string",
-    )
-    p.add_argument(
-        "--controllers",
-        nargs="+",
-        metavar="NAME",
-        type=controller_type,
-        help="controllers to compare, by registered name: "
-        + ", ".join(controller_names())
-        + " (default: all, the paper's four first), "
-        + CONTROLLERS_HELP,
-    )
-    p.add_argument(
-        "--conditions",
-        nargs="+",
-        choices=(*CONDITIONS, *(c for c in FIELD_CONDITIONS if c not in CONDITIONS)),
-        default=None,
-        metavar="NAME",
-        help=CONDITIONS_HELP
-        + "; allowed "
-        + ", ".join(CONDITIONS)
-        + " (default: all four); on the field string the friction and damping conditions "
-        + ", ".join(FIELD_CONDITIONS)
-        + " (default: "
-        + " ".join(COMPARE_CONDITIONS)
-        + ")",
-    )
-    p.add_argument(
-        "--noise",
-        nargs="+",
-        type=number_type(0.0, 10.0, unit="rad/s"),
-        default=None,
-        metavar="STD",
-        help="standard deviations of the measurement noise on the speeds, rad/s (default: "
-        + " ".join(f"{v:g}" for v in DEFAULT_NOISE_RAD_S)
-        + "; on the field string "
-        + " ".join(f"{v:g}" for v in FIELD_NOISE_RAD_S)
-        + ")",
-    )
-    p.add_argument(
-        "--duration",
-        type=number_type(0.0, 1e5, open_low=True, unit="s"),
-        default=DEFAULT_DURATION_S,
-        metavar="S",
-        help="length of every run, s (a multiple of the 1 ms plant step)",
-    )
-    seed_option(p, "reset seed of every run (it drives the measurement noise)")
-    p.add_argument(
-        "--out", type=output_folder, default="results", metavar="DIR", help="output folder"
-    )
-    p.add_argument(
-        "--reading",
-        choices=("plant", "controller"),
-        default="plant",
-        help="where the uncertainty acts: plant scales the true plant, controller scales the "
-        "controllers' model of it",
-    )
-    p.add_argument(
-        "--gains",
-        choices=tuple(GAIN_PRESETS),
-        default="paper",
-        help="gain preset: paper (the paper's Table 1) or rescaled (Table 1 x the top-drive "
-        "inertia J_dt)",
-    )
-    p.add_argument("--no-plots", action="store_true", help="write no figures")
-    p.add_argument(
-        "--no-agent",
-        action="store_true",
-        help="leave out the env's shipped agent (residual_ppo on DrillString-v0, field_agent "
-        "on DrillStringField-v0)",
-    )
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    add_sweep_options(p)
-    return p
+    parser = spec_parser("drill-gym compare", DESCRIPTION, CompareSpec, RunnerSpec)
+    parser.usage = "drill-gym compare [OPTIONS]"
+    return parser
 
 
 def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | None = None) -> int:
@@ -961,101 +953,78 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
     """
     parser = _parser()
     args = parser.parse_args(argv)
-    controllers = list(args.controllers) if args.controllers else default_controllers()
-    refuse_on_ray(parser.fail, args, controllers)
+    runner = spec_from_args(RunnerSpec, args)
     try:
-        decision_period(args.duration)
-    except ValueError:
-        parser.fail(
-            "--duration", f"{args.duration:g} is not a multiple of the {PLANT_DT_S:g} s plant step"
-        )
-    field = is_field(args.env)
-    allowed = FIELD_CONDITIONS if field else CONDITIONS
-    conditions = list(
-        dict.fromkeys(args.conditions or (COMPARE_CONDITIONS if field else CONDITIONS))
-    )
-    wrong = [c for c in conditions if c not in allowed]
-    if wrong:
-        parser.fail(
-            "--conditions",
-            f"{', '.join(wrong)} is not a condition of {args.env}: allowed {', '.join(allowed)}",
-        )
-    noises = list(
-        dict.fromkeys(args.noise or (FIELD_NOISE_RAD_S if field else DEFAULT_NOISE_RAD_S))
-    )
-    cases = comparison_cases(
-        args.env,
-        conditions,
-        reading=args.reading,
-        depths_m=list(dict.fromkeys(args.depths)),
-        controller_model=args.controller_model,
-    )
-    agent = None if args.no_agent else load_agent(agent_loader, args.env)
-    start = time.perf_counter()
-    figures = not args.no_plots
-    if sweep_requested(args):  # on the sweep runner: Ray, a results database, a resume
-        rows, traces, figures = run_compare_sweep(
-            args,
-            list(dict.fromkeys(controllers)),
-            conditions,
-            noises,
+        spec = spec_from_args(CompareSpec, args)
+    except ValueError as err:
+        parser.error(str(err))
+    refuse_on_ray(parser.fail, args, spec.controller_names)
+    agent = load_agent(agent_loader, spec.env_id) if not spec.no_agent else None
+    try:
+        study = CompareStudy.from_spec(
+            spec,
             agent,
-            keep_traces=not args.no_plots,
+            keep_traces=not spec.no_plots,
+            task_runs=runner.task_size or COMPARE_TASK_RUNS,
         )
-        if not args.no_plots and not figures:
-            print("no figures: runs read from the results file keep no traces (rerun without "
-                  "--resume for the figures)")  # fmt: skip
-    else:
-        rows, traces = run_comparison(
-            list(dict.fromkeys(controllers)),
-            conditions,
-            noises,
-            duration_s=args.duration,
-            seed=args.seed,
-            reading=args.reading,
-            gains=args.gains,
-            agent=agent,
-            keep_traces=not args.no_plots,
-            progress=not args.no_progress,
-            env_id=args.env,
-            cases=cases,
-            observations=list(dict.fromkeys(args.observations)),
-        )
+    except ValueError as err:
+        parser.error(str(err))
+    start = time.perf_counter()
+    backend = runner.backend()
+    outcome = run_sweep(
+        study,
+        backend,
+        runner.results_path(spec.out / "compare.sqlite"),
+        runner.resume,
+        not spec.no_progress,
+        overwrite=runner.overwrite,
+    )
+    if runner.requested:
+        report_outcome(study.name, outcome, backend)
+    rows, traces = study.results(outcome)
+    figures = not spec.no_plots and outcome.loaded == 0
+    if not spec.no_plots and not figures:
+        print("no figures: runs read from the results file keep no traces (rerun without "
+              "--resume for the figures)")  # fmt: skip
     simulated = time.perf_counter() - start
-    out: Path = args.out
+    out = spec.out
     out.mkdir(parents=True, exist_ok=True)
-    if field:
+    field_env = is_field(spec.env_id)
+    if field_env:
         points = ", ".join(f"{w:g} kN at {r:g} rpm" for w, r in COMPARE_POINTS)
         print(
-            f"Scenarios: field_2500m at {', '.join(f'{d:,.0f}' for d in args.depths)} m; {points}; "
-            f"conditions {', '.join(conditions)}; {args.duration:g} s from rest; the "
-            f"controllers know the {args.controller_model} string; gains '{args.gains}', seed "
-            f"{args.seed}.\n"
+            f"Scenarios: field_2500m at {', '.join(f'{d:,.0f}' for d in spec.depths)} m; {points}; "
+            f"conditions {', '.join(spec.condition_names)}; {spec.duration_s:g} s from rest; the "
+            f"controllers know the {spec.controller_model} string; gains '{spec.gains}', seed "
+            f"{spec.seed}.\n"
         )
     else:
         print(
             f"Scenario: WOB {SCENARIO.wob.initial_n:,.0f} N, V_ref "
-            f"{SCENARIO.reference.value(0.0):g} rad/s, {args.duration:g} s from rest; uncertainty "
-            f"reading '{args.reading}', gains '{args.gains}', seed {args.seed}.\n"
+            f"{SCENARIO.reference.value(0.0):g} rad/s, {spec.duration_s:g} s from rest; "
+            f"uncertainty reading '{spec.reading}', gains '{spec.gains}', seed {spec.seed}.\n"
         )
-    keys = FIELD_ROW_KEYS if field else ROW_KEYS
+    keys = FIELD_ROW_KEYS if field_env else ROW_KEYS
     written = [
         write_csv(rows, out / "compare.csv", keys),
         write_json([{k: r[k] for k in keys} for r in rows], out / "compare.json"),
         _write_text(markdown_table(rows) + "\n", out / "compare.md"),
     ]
+    cases = study.cases()
     per = len(rows) // max(1, len({run_label(r) for r in rows}))
     print(
         f"Ranked by mean IAE (rad), lowest first: the means of the paper's metrics over the "
         f"{per} run{'s' * (per != 1)} of each controller ({len(cases)} "
-        f"{'scenario' if field else 'condition'}{'s' * (len(cases) != 1)} x noise "
-        f"{', '.join(f'{n:g}' for n in noises)} rad/s); settling: mean over the runs that "
-        f"settle. Every run: {out / 'compare.md'} (also .csv, .json).\n"
+        f"{'scenario' if field_env else 'condition'}{'s' * (len(cases) != 1)} x noise "
+        f"{', '.join(f'{n:g}' for n in spec.noise_levels)} rad/s); settling: mean over the runs "
+        f"that settle. Every run: {out / 'compare.md'} (also .csv, .json).\n"
     )
     print(summary_table(rows))
-    if not args.no_plots and figures and rows:
+    if figures and rows:
         chosen, focus = (
-            figure_cases([c.field for c in cases if c.field is not None]) if field else (None, None)
+            figure_cases([c.field for c in cases if c.field is not None])
+            if field_env
+            else (None, None)
         )
         written += write_figures(rows, traces, out / "figures", chosen, focus)
     total = time.perf_counter() - start
@@ -1064,10 +1033,6 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
         f"wrote {len(written)} files to {out}/"
     )
     return 0
-
-
-if __name__ == "__main__":  # pragma: no cover
-    raise SystemExit(main())
 
 
 # ------------------------------------------------------------------- sweep adapter
@@ -1081,8 +1046,8 @@ class CompareJob(NamedTuple):
     """The field env's observation mode of the run (``None`` on ``DrillString-v0``)."""
     is_agent: bool
     """Whether the run is the agent's."""
-    case: Any
-    """The :class:`experiments.compare.Case` of the run."""
+    case: Case
+    """The case of the run."""
     noise: float
     """Measurement noise on the speeds, rad/s."""
 
@@ -1107,24 +1072,28 @@ def compare_runs_task(
     keep_traces: bool,
     env_id: str = PAPER_ENV,
 ) -> TaskResult:
-    """Runs of the comparison, each one :func:`experiments.compare.run_comparison` of one
-    controller (or the agent), with one observation mode, on one case and one noise level;
-    records by :attr:`CompareJob.item`, extras: the light traces by ``(run label, case,
-    noise)``."""
-
+    """Runs of the comparison (:func:`compare_run`), records by :attr:`CompareJob.item`;
+    extras (with ``keep_traces``): the light traces (:class:`RunTraces`) by ``(run label,
+    case, noise)``."""
     records: dict[str, dict[str, Any]] = {}
-    traces: dict[tuple[str, str, float], Any] = {}
+    traces: dict[tuple[str, str, float], RunTraces] = {}
     for job in runs:
-        rows, run_traces = run_comparison(
-            [] if job.is_agent else [job.label], [job.case.name], [job.noise],
-            duration_s=duration_s, seed=seed, reading=reading, gains=gains,
-            agent=agent if job.is_agent else None, keep_traces=keep_traces, progress=False,
-            env_id=env_id, cases=[job.case],
-            observations=OBSERVATIONS if job.observation is None else [job.observation],
-        )  # fmt: skip
-        assert len(rows) == 1, f"{job.item} made {len(rows)} rows"
-        records[job.item] = rows[0]
-        traces.update(run_traces)
+        row, trace = compare_run(
+            job,
+            duration_s=duration_s,
+            seed=seed,
+            reading=reading,
+            gains=gains,
+            agent=agent if job.is_agent else None,
+            env_id=env_id,
+        )
+        records[job.item] = row
+        if keep_traces:
+            traces[(job.run_label, job.case.name, job.noise)] = RunTraces(
+                downsample(trace, PLOT_EVERY),
+                time_window(trace, max(trace.duration_s - TAIL_S, 0.0)),
+                envelope(trace, BAND_S),
+            )
     return TaskResult(records, traces or None)
 
 
@@ -1136,16 +1105,15 @@ def compare_item(label: str, condition: str, noise: float) -> str:
 
 @dataclass(frozen=True)
 class CompareStudy:
-    """The comparison (:func:`experiments.compare.run_comparison`) on the sweep runner: an
-    item is one run (controller or agent, observation mode, case, noise), a task
-    ``task_runs`` of them.
+    """The comparison on the sweep runner: an item is one run (controller or agent,
+    observation mode, case, noise), a task ``task_runs`` of them.
 
-    Attributes: as :func:`experiments.compare.run_comparison` and
-    :func:`experiments.compare.comparison_cases` (``conditions`` are the paper's Table 3
-    conditions on ``DrillString-v0``, the field conditions on ``DrillStringField-v0``;
-    ``depths_m``, ``controller_model`` and ``observations`` are the field string's), plus
-    ``task_runs``, the runs per task (does not change the numbers). The agent runs only on its
-    own env (its ``env_id``, ``DrillString-v0`` when it has none).
+    Attributes: as :func:`run_comparison` and :func:`comparison_cases` (``conditions`` are
+    the paper's Table 3 conditions on ``DrillString-v0``, the field conditions on
+    ``DrillStringField-v0``; ``depths_m``, ``controller_model`` and ``observations`` are the
+    field string's), plus ``task_runs``, the runs per task (does not change the numbers), and
+    ``case_list``, cases to run instead of those of ``conditions`` (``None``: those). The agent
+    runs only on its own env (its ``env_id``, ``DrillString-v0`` when it has none).
     """
 
     controllers: tuple[str, ...]
@@ -1163,9 +1131,34 @@ class CompareStudy:
     depths_m: tuple[float, ...] = COMPARE_DEPTHS_M
     controller_model: str = "nominal"
     observations: tuple[str, ...] = OBSERVATIONS
+    case_list: tuple[Case, ...] | None = None
+
+    @classmethod
+    def from_spec(
+        cls, spec: CompareSpec, agent: Any = None, *, keep_traces: bool, task_runs: int
+    ) -> CompareStudy:
+        """The study of ``drill-gym compare``'s settings ``spec`` (``agent``: the agent to add,
+        if any; ``keep_traces``: keep the traces for figures)."""
+        return cls(
+            spec.controller_names,
+            spec.condition_names,
+            spec.noise_levels,
+            duration_s=spec.duration_s,
+            seed=spec.seed,
+            reading=spec.reading,
+            gains=spec.gains,
+            agent=agent,
+            keep_traces=keep_traces,
+            task_runs=task_runs,
+            env_id=spec.env_id,
+            depths_m=tuple(dict.fromkeys(float(d) for d in spec.depths)),
+            controller_model=spec.controller_model,
+            observations=tuple(dict.fromkeys(spec.observations)),
+        )
 
     def __post_init__(self) -> None:
-        check_controllers(self.controllers)
+        if self.controllers:  # none: only the agent runs
+            check_controllers(self.controllers)
         for label, values in (("conditions", self.conditions), ("noises", self.noises)):
             if not values:
                 raise ValueError(f"{label} = [] is empty: the comparison needs at least one")
@@ -1181,9 +1174,10 @@ class CompareStudy:
             if case.field is not None:
                 case.field.nominal_string()
 
-    def cases(self) -> list[Any]:
-        """The cases (:func:`experiments.compare.comparison_cases`), in table order."""
-
+    def cases(self) -> list[Case]:
+        """The cases (:attr:`case_list`, else :func:`comparison_cases`), in table order."""
+        if self.case_list is not None:
+            return list(self.case_list)
         return comparison_cases(
             self.env_id,
             list(self.conditions),
@@ -1193,8 +1187,7 @@ class CompareStudy:
         )
 
     def jobs(self) -> list[CompareJob]:
-        """The runs in table order, as :func:`experiments.compare.run_comparison` makes them:
-        each controller with each observation mode it can use (the agent last, on its own env
+        """The runs in table order: each controller with each observation mode it can use (the agent last, on its own env
         only), on each case, at each noise level."""
         field_env = is_field(self.env_id)
         labels: list[tuple[str, str | None, bool]] = []
@@ -1296,38 +1289,5 @@ class CompareStudy:
         return rows, traces
 
 
-def run_compare_sweep(
-    args: Any,
-    controllers: Sequence[str],
-    conditions: Sequence[str],
-    noises: Sequence[float],
-    agent: Any,
-    keep_traces: bool,
-) -> tuple[list[dict[str, Any]], dict[tuple[str, str, float], Any], bool]:
-    """``drill-gym compare`` on the sweep runner (on ``args.env``): the rows, the traces and
-    whether every run has its traces (not when some were read from the results file)."""
-
-    study = CompareStudy(
-        tuple(controllers),
-        tuple(conditions),
-        tuple(float(n) for n in noises),
-        duration_s=args.duration,
-        seed=args.seed,
-        reading=args.reading,
-        gains=args.gains,
-        agent=agent,
-        keep_traces=keep_traces,
-        task_runs=args.task_size or COMPARE_TASK_RUNS,
-        env_id=args.env,
-        depths_m=tuple(dict.fromkeys(float(d) for d in args.depths)),
-        controller_model=args.controller_model,
-        observations=tuple(dict.fromkeys(args.observations)),
-    )
-    backend = backend_from_args(args)
-    path = results_path_from_args(args, Path(args.out) / "compare.sqlite")
-    outcome = run_sweep(
-        study, backend, path, args.resume, not args.no_progress, overwrite=args.overwrite
-    )
-    report_outcome(study.name, outcome, backend)
-    rows, traces = study.results(outcome)
-    return rows, traces, outcome.loaded == 0
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

@@ -29,12 +29,11 @@ Examples::
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 import time
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
@@ -44,7 +43,6 @@ import baselines  # noqa: F401  (registers the built-in controllers, in their or
 from agents.policy import (
     DEFAULT_MODEL_DIR,
     DEFAULT_MODEL_NAME,
-    PICKLE_RISK,
     ResidualPolicy,
     is_model_folder,
     load_policy,
@@ -55,7 +53,7 @@ from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
 from drill_env.validation import printable
 from experiments.arguments import ArgumentParser, check_output_folder, names_type, output_folder
-from experiments.controllers import CONTROLLERS_HELP, controller_type, refuse_on_ray
+from experiments.controllers import controller_type, refuse_on_ray
 from experiments.field import (
     ENV_IDS,
     FIELD_ENV,
@@ -85,22 +83,20 @@ from experiments.plots import (
     speed_torque_figure,
 )
 from experiments.results_db import Fields, Flag, Name, Number, Schema, Text, Values, exactly
+from experiments.spec_cli import option, spec_from_args, spec_parser
 from experiments.sweep import (
     EVALUATE_TASK_SCENARIOS,
+    RunnerSpec,
     SweepOutcome,
     Task,
     TaskResult,
-    add_sweep_options,
     agent_fingerprint,
-    backend_from_args,
     check_controllers,
     check_observations,
     check_task_size,
     chunks,
     report_outcome,
-    results_path_from_args,
     run_sweep,
-    sweep_requested,
 )
 from experiments.tables import write_csv, write_json
 
@@ -113,6 +109,7 @@ __all__ = [
     "FIELD_HELD_OUT",
     "HELD_OUT",
     "RIG_LOOPS",
+    "EvaluateSpec",
     "EvaluateStudy",
     "HeldOutScenario",
     "evaluate",
@@ -120,7 +117,6 @@ __all__ = [
     "goal_report",
     "heldout_figures",
     "main",
-    "run_evaluate_sweep",
     "run_scenario",
     "summarize",
     "write_figures",
@@ -596,110 +592,108 @@ def shipped_models() -> list[Path]:
 
 
 DESCRIPTION: Final = """\
-Score trained agents and every registered controller on the held-out scenario set: 20 fixed
-scenarios, none of them a training draw (WOB 60-200 kN, eight with one step change; reference
-bit speed 4-16 rad/s; the paper's four parametric-uncertainty conditions nominal and
-condition1-3, which raise the pipe damping c_pi, the pipe stiffness k_pi and the top-drive
-damping c_dt by up to 75 %; 0.1 rad/s measurement noise; 100 s from rest; a fixed reset seed
-per scenario, so every controller and agent sees the same noise samples).
+Score trained agents and every registered controller on a held-out scenario set (20 fixed
+scenarios on DrillString-v0, 16 on the field string, 100 s each), print the means per
+controller and the IAE and severity per scenario, and write heldout.csv/.json, summary.json
+and figures/ into --out (docs/specification.md section 15).
 
-Prints a table of the means per controller (ratios to the proposed SMC) and one of IAE and
-stick-slip severity per scenario, and writes heldout.csv, heldout.json, summary.json and
-figures/ into --out. The goal per agent: a mean IAE and a mean severity over the
-stick-slip-prone scenarios below every engineered controller's, at most 1 % more RMSD and no
-more chattering than its base controller, and at most 5 % more IAE than the base in any
-scenario.
-
-With --env DrillStringField-v0 the set is the field string's: 16 fixed scenarios f01-f16
-(f01-f08 within the env's randomisation ranges: field_2500m at 1.2-4.5 km, 60-200 kN, 50-150
-rpm, friction and mud damping in their ranges; f09-f12 on deep_5000m at 3.8-6 km; f13-f16
-outside the ranges: 5.5 km, 800 m, 220 kN at 30 rpm with friction outside every range,
-180 rpm), the env's sensors, telemetry and actuator, 0.05 rad/s speed noise, 100 s from rest.
-The controllers know the nominal string; the paper's sliding-mode controllers run with the
-whole state measured, the speed loops with each of --observations. Only models whose
-config.json names that env (env_kwargs.env_id) run there; the means are compared with
-proposed (state), and the per-scenario table lists every controller.
-
-examples:
-  drill-gym evaluate                               # the models shipped in agents/models/
-  drill-gym evaluate runs/residual_ppo__1/model    # a model of your own
-  drill-gym evaluate --controllers proposed --scenarios h01 h14 --no-plots
-  drill-gym evaluate --env DrillStringField-v0 --out results/field-evaluate
+example: drill-gym evaluate runs/residual_ppo__1/model --controllers proposed --scenarios h01
 """
+
+_SCENARIO_IDS: Final = tuple(
+    s.id for env_sets in SCENARIO_SETS.values() for v in env_sets.values() for s in v
+)
+"""Every held-out scenario id of either env (``--scenarios``)."""
+
+
+@dataclass(frozen=True)
+class EvaluateSpec:
+    """The settings of ``drill-gym evaluate`` (its options are these fields, and the model
+    folders also as arguments)."""
+
+    env_id: str = field(
+        default=PAPER_ENV, metadata=option(choices=ENV_IDS, flag="--env", aliases=("--env-id",))
+    )
+    """the env of the held-out set"""
+    models: tuple[str, ...] = field(
+        default=(), metadata=option(metavar="PATH", default_text="the shipped models")
+    )
+    """model folders (also given as MODEL)"""
+    observations: tuple[str, ...] = field(
+        default=OBSERVATIONS, metadata=option(choices=OBSERVATIONS)
+    )
+    """observation modes of the speed loops on the field string"""
+    controllers: tuple[str, ...] = field(
+        default=(), metadata=option(parse=controller_type, metavar="NAME", default_text="all")
+    )
+    """registered names, or MODULE:CLASS or PATH.py:CLASS"""
+    scenario_set: str = field(
+        default="heldout",
+        metadata=option(
+            choices=tuple(dict.fromkeys(n for sets in SCENARIO_SETS.values() for n in sets))
+        ),
+    )
+    """the held-out set (corners: DrillString-v0 only)"""
+    scenarios: tuple[str, ...] = field(
+        default=(),
+        metadata=option(
+            parse=names_type(lambda: _SCENARIO_IDS, "scenario"), metavar="ID", default_text="all"
+        ),
+    )
+    """only these scenarios of the set"""
+    out: Path | None = field(
+        default=None,
+        metadata=option(parse=output_folder, metavar="DIR", default_text="results/evaluate[_SET]"),
+    )
+    """output folder"""
+    no_plots: bool = field(default=False, metadata=option(aliases=("--no-figures",)))
+    """write no figures"""
+    no_progress: bool = False
+    """no progress bar"""
+    trust_pickle: bool = False
+    """also load Stable-Baselines3 .zip models (unpickling runs code: trusted files only)"""
+
+    def __post_init__(self) -> None:
+        try:
+            held_out = held_out_set(self.env_id, self.scenario_set)
+        except ValueError:
+            allowed = ", ".join(SCENARIO_SETS[FIELD_ENV if is_field(self.env_id) else PAPER_ENV])
+            raise ValueError(
+                f"argument --scenario-set: {self.scenario_set} is not a held-out set of "
+                f"{self.env_id}: allowed {allowed}"
+            ) from None
+        ids = {s.id for s in held_out}
+        wrong = [i for i in self.scenarios if i not in ids]
+        if wrong:
+            raise ValueError(
+                f"argument --scenarios: {', '.join(wrong)} is not a scenario of the "
+                f"{self.scenario_set} set of {self.env_id}: allowed {held_out[0].id} to "
+                f"{held_out[-1].id}"
+            )
+        try:
+            check_output_folder(self.output)
+        except ValueError as err:
+            raise ValueError(f"argument --out: {err}") from None
+
+    @property
+    def output(self) -> Path:
+        """The output folder (default: ``results/evaluate``, ``results/evaluate_SET`` for
+        another set)."""
+        if self.out is not None:
+            return self.out
+        name = "evaluate" if self.scenario_set == "heldout" else f"evaluate_{self.scenario_set}"
+        return Path("results") / name
+
+    def held_out(self) -> tuple[HeldOutScenario, ...]:
+        """The scenarios to run, in the set's order."""
+        held_out = held_out_set(self.env_id, self.scenario_set)
+        return tuple(s for s in held_out if not self.scenarios or s.id in self.scenarios)
 
 
 def _parser() -> ArgumentParser:
-    parser = ArgumentParser(prog="drill-gym evaluate", description=DESCRIPTION)
-    parser.add_argument(
-        "--env",
-        choices=ENV_IDS,
-        default=PAPER_ENV,
-        help="the env of the held-out set: the paper's 4-DOF string or the distributed field "
-        "string",
-    )
-    parser.add_argument(
-        "--observations",
-        nargs="+",
-        choices=OBSERVATIONS,
-        default=list(OBSERVATIONS),
-        help="observation modes of the speed loops on the field string (the paper's "
-        "controllers always run with state)",
-    )
-    parser.add_argument(
-        "models",
-        nargs="*",
-        metavar="MODEL",
-        help="model folders (config.json, policy.safetensors, obs_norm.safetensors; default: "
-        "every model shipped in agents/models/)",
-    )
-    parser.add_argument(
-        "--controllers",
-        nargs="+",
-        default=None,
-        metavar="NAME",
-        type=controller_type,
-        help="controllers to score beside the agents, by registered name: "
-        + ", ".join(controller_names())
-        + " (default: all; an agent's base controller is always added), "
-        + CONTROLLERS_HELP,
-    )
-    sets = {name: s for env_sets in SCENARIO_SETS.values() for name, s in env_sets.items()}
-    parser.add_argument(
-        "--scenario-set",
-        default="heldout",
-        choices=list(sets),
-        help=f"the held-out set: heldout (h01-h20; on {FIELD_ENV} f01-f16) or corners "
-        f"(c01-c16, {PAPER_ENV} only: the edges of the training randomisation and beyond)",
-    )
-    ids = [s.id for env_sets in SCENARIO_SETS.values() for v in env_sets.values() for s in v]
-    parser.add_argument(
-        "--scenarios",
-        nargs="+",
-        default=None,
-        metavar="ID",
-        type=names_type(lambda: ids, "scenario"),
-        help="only these scenarios of the set (default: all of them)",
-    )
-    parser.add_argument(
-        "--out",
-        type=output_folder,
-        default=None,
-        metavar="DIR",
-        help="output folder (default: results/evaluate, results/evaluate_corners for the "
-        "corner set)",
-    )
-    parser.add_argument("--no-plots", action="store_true", help="write no figures")
-    parser.add_argument(
-        "--no-figures", dest="no_plots", action="store_true", help=argparse.SUPPRESS
-    )
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    parser.add_argument(
-        "--trust-pickle",
-        action="store_true",
-        help=f"also load the Stable-Baselines3 .zip files (older models) named as MODEL: "
-        f"{PICKLE_RISK}; only for files you made yourself or got from a source you trust",
-    )
-    add_sweep_options(parser)
+    parser = spec_parser("drill-gym evaluate", DESCRIPTION, EvaluateSpec, RunnerSpec)
+    parser.usage = "drill-gym evaluate [MODEL ...] [OPTIONS]"
+    parser.add_argument("model_folders", nargs="*", metavar="MODEL", help="model folders")
     return parser
 
 
@@ -707,59 +701,46 @@ def main(argv: Sequence[str] | None = None) -> int:
     """``drill-gym evaluate [MODEL ...]``; returns the exit code (see ``--help``)."""
     parser = _parser()
     args = parser.parse_args(list(argv) if argv is not None else None)
-    default_out = "evaluate" if args.scenario_set == "heldout" else f"evaluate_{args.scenario_set}"
-    out: Path = args.out if args.out is not None else Path("results") / default_out
+    args.models = [*args.model_folders, *args.models]
+    runner = spec_from_args(RunnerSpec, args)
     try:
-        check_output_folder(out)
+        spec = spec_from_args(EvaluateSpec, args)
     except ValueError as err:
-        parser.fail("--out", str(err))
-
-    field = is_field(args.env)
-    paths = [Path(p) for p in args.models] or shipped_models()
-    if not paths and not field:
+        parser.error(str(err))
+    out = spec.output
+    field_env = is_field(spec.env_id)
+    paths = [Path(p) for p in spec.models] or shipped_models()
+    if not paths and not field_env:
         parser.error(f"no MODEL given and no model shipped in {DEFAULT_MODEL_DIR}")
-    agents = [load_policy(p, trust_pickle=args.trust_pickle) for p in paths]
+    agents = [load_policy(p, trust_pickle=spec.trust_pickle) for p in paths]
     for agent, path in zip(agents, paths, strict=True):
-        if agent.env_id != args.env:
-            if args.models:
-                parser.error(f"MODEL {path} is for {agent.env_id}, not for {args.env}")
+        if agent.env_id != spec.env_id:
+            if spec.models:
+                parser.error(f"MODEL {path} is for {agent.env_id}, not for {spec.env_id}")
             print(
                 f"evaluate: {printable(path.name)} is for {printable(agent.env_id)}, left out "
                 f"(drill-gym evaluate --env {printable(agent.env_id)} scores it)",
                 file=sys.stderr,
             )
-    paths = [p for a, p in zip(agents, paths, strict=True) if a.env_id == args.env]
-    agents = [a for a in agents if a.env_id == args.env]
+    paths = [p for a, p in zip(agents, paths, strict=True) if a.env_id == spec.env_id]
+    agents = [a for a in agents if a.env_id == spec.env_id]
     labels = [a.name for a in agents]
     if len(set(labels)) != len(labels):
         for a, p in zip(agents, paths, strict=True):
             a.name = f"{a.name}:{p}"
         labels = [a.name for a in agents]
-    try:
-        held_out = held_out_set(args.env, args.scenario_set)
-    except ValueError as err:
-        parser.fail("--scenario-set", str(err))
-    scenarios: Sequence[HeldOutScenario] = held_out
-    if args.scenarios:
-        wrong = [i for i in args.scenarios if i not in {s.id for s in held_out}]
-        if wrong:
-            parser.fail(
-                "--scenarios",
-                f"{', '.join(wrong)} is not a scenario of the {args.scenario_set} set of "
-                f"{args.env}: allowed {held_out[0].id} to {held_out[-1].id}",
-            )
-        scenarios = [s for s in held_out if s.id in args.scenarios]
+    scenarios = spec.held_out()
     t0 = time.perf_counter()
     base_names = sorted({a.env_kwargs.get("base_controller") or BASE_CONTROLLER for a in agents})
-    if field and not agents:
+    if field_env and not agents:
         base_names = [BASE_CONTROLLER]
-    controllers = args.controllers
-    if controllers is not None:
-        controllers = list(dict.fromkeys([*controllers, *base_names]))
+    controllers = None
+    if spec.controllers:
+        controllers = list(dict.fromkeys([*spec.controllers, *base_names]))
         refuse_on_ray(parser.fail, args, controllers)
     base_label = BASE_CONTROLLER
     bases = base_names
-    if field:  # a run's label is its controller and observation mode
+    if field_env:  # a run's label is its controller and observation mode
         base_label = run_label({"controller": BASE_CONTROLLER, "observation": "state"})
         bases = list(
             dict.fromkeys(
@@ -775,7 +756,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             )
         ) or [base_label]
     agent_labels = labels  # the agents' rows as the tables label them
-    if field:
+    if field_env:
         agent_labels = [
             run_label(
                 {"controller": a.name, "observation": a.env_kwargs.get("observation", "surface")}
@@ -783,34 +764,46 @@ def main(argv: Sequence[str] | None = None) -> int:
             for a in agents
         ]
     keep = [*bases, *agent_labels]
-    figures = not args.no_plots
-    if sweep_requested(args):  # on the sweep runner: Ray, a results database, a resume
-        rows, traces, figures = run_evaluate_sweep(args, agents, controllers, scenarios, keep)
-        if not args.no_plots and not figures:
-            print("no figures: runs read from the results file keep no traces (rerun without "
-                  "--resume for the figures)")  # fmt: skip
-    else:
-        rows, traces = evaluate(
-            agents,
-            controllers,
+    try:
+        study = EvaluateStudy(
+            tuple(agents),
+            None if controllers is None else tuple(controllers),
             scenarios,
-            keep_traces=keep,
-            progress=not args.no_progress,
-            env_id=args.env,
-            observations=list(dict.fromkeys(args.observations)),
+            keep_traces=tuple(keep) if not spec.no_plots else (),
+            task_scenarios=runner.task_size or EVALUATE_TASK_SCENARIOS,
+            env_id=spec.env_id,
+            observations=tuple(dict.fromkeys(spec.observations)),
         )
+    except ValueError as err:
+        parser.error(str(err))
+    backend = runner.backend()
+    outcome = run_sweep(
+        study,
+        backend,
+        runner.results_path(out / "heldout.sqlite"),
+        runner.resume,
+        not spec.no_progress,
+        overwrite=runner.overwrite,
+    )
+    if runner.requested:
+        report_outcome(study.name, outcome, backend)
+    rows, traces = study.results(outcome)
+    figures = not spec.no_plots and outcome.loaded == 0
+    if not spec.no_plots and not figures:
+        print("no figures: runs read from the results file keep no traces (rerun without "
+              "--resume for the figures)")  # fmt: skip
     summary = summarize(rows, base_label, agents=agent_labels)
-    if field:
+    if field_env:
         summary["versus_rig_loops"] = versus_rig_loops(summary, agent_labels)
     summary["seconds"] = round(time.perf_counter() - t0, 1)
     summary["models"] = {a.name: str(p) for a, p in zip(agents, paths, strict=True)}
     written = write_outputs(rows, summary, out)
-    if not args.no_plots and figures:
+    if figures:
         written += write_figures(rows, traces, keep, out / "figures")
     total = time.perf_counter() - t0
     print(markdown_table(summary))
     print()
-    print(per_scenario_table(rows, list(summary["means"]) if field else keep))
+    print(per_scenario_table(rows, list(summary["means"]) if field_env else keep))
     print()
     kinds = {
         label: (
@@ -963,30 +956,5 @@ class EvaluateStudy:
         return rows, traces
 
 
-def run_evaluate_sweep(
-    args: Any,
-    agents: Sequence[Any],
-    controllers: Sequence[str] | None,
-    scenarios: Sequence[Any],
-    keep: Sequence[str],
-) -> tuple[list[dict[str, Any]], dict[tuple[str, str], Any], bool]:
-    """``drill-gym evaluate`` on the sweep runner (on ``args.env``): the rows, the kept traces
-    and whether every run has its trace (not when some were read from the results file)."""
-
-    study = EvaluateStudy(
-        tuple(agents),
-        None if controllers is None else tuple(controllers),
-        tuple(scenarios),
-        keep_traces=tuple(keep) if not args.no_plots else (),
-        task_scenarios=args.task_size or EVALUATE_TASK_SCENARIOS,
-        env_id=args.env,
-        observations=tuple(dict.fromkeys(args.observations)),
-    )
-    backend = backend_from_args(args)
-    path = results_path_from_args(args, Path(args.out) / "heldout.sqlite")
-    outcome = run_sweep(
-        study, backend, path, args.resume, not args.no_progress, overwrite=args.overwrite
-    )
-    report_outcome(study.name, outcome, backend)
-    rows, traces = study.results(outcome)
-    return rows, traces, outcome.loaded == 0
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

@@ -45,7 +45,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
@@ -67,25 +67,24 @@ from drill_env.parameters import PLANT_DT_S, PRESETS
 from drill_env.scenarios import FieldRandomization, Randomization
 from drill_env.validation import printable
 from experiments.arguments import (
+    BASE_SEED_HIGH,
     ArgumentParser,
+    check_output_folder,
     names_type,
-    number_type,
     output_folder,
-    seed_option,
 )
 from experiments.paths import output_path
 from experiments.plots import cell_edges, new_figure, save_figure, suptitle
 from experiments.results_db import Fields, Number, Schema, Values
+from experiments.spec_cli import option, spec_from_args, spec_parser
 from experiments.stick_slip_map import DEFAULT_WINDOW_S, grid_values, stick_slip
 from experiments.sweep import (
     PROBABILITY_TASK_CELLS,
+    RunnerSpec,
     SweepOutcome,
     Task,
     TaskResult,
-    add_sweep_options,
-    backend_from_args,
     chunks,
-    results_path_from_args,
     run_sweep,
 )
 from experiments.tables import write_csv
@@ -94,6 +93,7 @@ __all__ = [
     "CSV_COLUMNS",
     "ENVS",
     "ProbabilityMap",
+    "ProbabilitySpec",
     "ProbabilityStudy",
     "main",
     "probability_cells_task",
@@ -118,6 +118,8 @@ CSV_TAIL: Final = (
 CSV_COLUMNS: Final = {axis: (key, *CSV_TAIL) for axis, key in ROW_KEYS.items()}
 """Columns of the CSV by row axis, one row per cell."""
 DEFAULT_DELTA_RANGE: Final = Randomization().delta_range
+MAX_DEPTH_M: Final = 20_000.0
+"""Deepest measured depth of a depth row (or of ``--depth``), m."""
 """Range of each uncertainty Delta on ``DrillString-v0`` (the env's default)."""
 MAX_CHUNK_STEPS: Final = 1000
 """Plant steps per compiled call (1 s)."""
@@ -559,203 +561,189 @@ class ProbabilityStudy:
 
 # ---------------------------------------------------------------------------- command line
 DESCRIPTION: Final = """\
-Probability of stick-slip over weight on bit (WOB) x reference bit speed (or measured depth x
-reference speed on the field string) under parametric uncertainty: every cell runs --draws
-times from rest, each on a plant drawn from the env's randomisation (DrillString-v0: the
-uncertainty Deltas of c_pi, k_pi and c_dt, uniform in [--delta-min, --delta-max];
-DrillStringField-v0: bit friction mu_a, mu_0, xi and the mud damping). A draw is in stick-slip
-when its bit sticks in the last --window seconds or its severity exceeds 0.5 (the criterion of
-drill-gym map); a cell's probability is the share of its draws in stick-slip. Draw k of every
-cell uses the reset seed --seed + k (the same plants in every cell).
+Probability of stick-slip over WOB (or measured depth) x reference speed under parametric
+uncertainty: each cell runs --draws times from rest on plants drawn from the env's
+randomisation; its probability is the share of draws in stick-slip. CSV and PNG per controller
+into --out (docs/reports/probability-maps.md).
 
-Writes, per controller, stick_slip_probability_NAME.csv and stick_slip_probability_NAME.png
-(heatmap with contour lines at 0.1, 0.5 and 0.9) into --out. Runs serially, or on Ray with
---workers N (the scale extra).
-
-examples:
-  drill-gym probability-map --workers 2                  # stiff_pi on the 4-DOF string
-  drill-gym probability-map --env DrillStringField-v0 --rows depth --depth-min 1000 \\
-      --depth-max 5000 --depth-n 5 --wob 100000 --workers 2
-  drill-gym probability-map --wob-n 4 --speed-n 4 --draws 8 --duration 40 --window 20
+example: drill-gym probability-map --wob-n 4 --speed-n 4 --draws 8 --duration-s 40 --window-s 20
 """
+
+_WOB: Final = {"low": 0.0, "high": MAX_WOB_N, "open_low": True, "unit": "N", "metavar": "N"}
+_SPEED: Final = {"low": 0.0, "high": MAX_REFERENCE_RAD_S, "open_low": True, "unit": "rad/s"}
+_DEPTH: Final = {"low": 1.0, "high": MAX_DEPTH_M, "unit": "m", "metavar": "M"}
+_COUNT: Final = {"low": 1, "high": 1000}
+_DELTA: Final = {"low": -0.9, "high": 10.0}
+
+
+@dataclass(frozen=True)
+class ProbabilitySpec:
+    """The settings of ``drill-gym probability-map`` (its options are these fields)."""
+
+    env_id: str = field(
+        default=drill_env.ENV_ID,
+        metadata=option(choices=ENVS, flag="--env", aliases=("--env-id",)),
+    )
+    """the env (plant) mapped"""
+    controllers: tuple[str, ...] = field(
+        default=("stiff_pi",),
+        metadata=option(parse=names_type(controller_names, "controller"), metavar="NAME"),
+    )
+    """controllers to map, by registered name"""
+    rows: str = field(default="wob", metadata=option(choices=ROW_AXES))
+    """rows of the map (depth: field string only)"""
+    wob_min: float = field(default=40e3, metadata=option(**_WOB))
+    """lowest WOB, N"""
+    wob_max: float = field(default=200e3, metadata=option(**_WOB))
+    """highest WOB, N"""
+    wob_n: int = field(default=9, metadata=option(**_COUNT))
+    """number of WOB rows"""
+    wob: float = field(default=100e3, metadata=option(**_WOB))
+    """the WOB of depth rows, N"""
+    depth_min: float = field(default=1000.0, metadata=option(**_DEPTH))
+    """shallowest depth, m"""
+    depth_max: float = field(default=5000.0, metadata=option(**_DEPTH))
+    """deepest depth, m"""
+    depth_n: int = field(default=5, metadata=option(**_COUNT))
+    """number of depths"""
+    depth: float | None = field(default=None, metadata=option(**_DEPTH, default_text="preset's"))
+    """measured depth of WOB rows on the field string, m"""
+    speed_min: float = field(default=1.0, metadata=option(**_SPEED))
+    """lowest reference speed, rad/s"""
+    speed_max: float = field(default=16.0, metadata=option(**_SPEED))
+    """highest reference speed, rad/s"""
+    speed_n: int = field(default=8, metadata=option(**_COUNT))
+    """number of reference speeds"""
+    draws: int = field(default=32, metadata=option(low=1, high=100_000))
+    """parameter draws per cell"""
+    delta_min: float = field(default=DEFAULT_DELTA_RANGE[0], metadata=option(**_DELTA))
+    """lowest uncertainty Delta (DrillString-v0)"""
+    delta_max: float = field(default=DEFAULT_DELTA_RANGE[1], metadata=option(**_DELTA))
+    """highest uncertainty Delta (DrillString-v0)"""
+    duration_s: float = field(
+        default=100.0,
+        metadata=option(low=0.0, high=1e4, open_low=True, unit="s", aliases=("--duration",)),
+    )
+    """run length, s (a multiple of 0.1 s)"""
+    window_s: float = field(
+        default=DEFAULT_WINDOW_S,
+        metadata=option(low=0.0, high=1e4, open_low=True, unit="s", aliases=("--window",)),
+    )
+    """analysed end of each run, s"""
+    noise: float = field(default=0.0, metadata=option(low=0.0, high=10.0, unit="rad/s"))
+    """speed measurement noise, rad/s"""
+    parameters: str | None = field(
+        default=None,
+        metadata=option(
+            choices=sorted(PRESETS) + sorted(DISTRIBUTED_PRESETS), default_text="the env's"
+        ),
+    )
+    """plant preset"""
+    out: Path = field(default=Path("results"), metadata=option(parse=output_folder, metavar="DIR"))
+    """output folder"""
+    seed: int = field(default=0, metadata=option(low=0, high=BASE_SEED_HIGH))
+    """reset seed of draw 0 (draw k: seed + k)"""
+    no_plots: bool = False
+    """write the CSV files only"""
+    no_progress: bool = False
+    """no progress bar"""
+
+    def __post_init__(self) -> None:
+        try:
+            check_output_folder(self.out)
+        except ValueError as err:
+            raise ValueError(f"argument --out: {err}") from None
+        field_env = self.env_id == drill_env.FIELD_ENV_ID
+        if self.rows == "depth" and not field_env:
+            raise ValueError(
+                "argument --rows: depth needs the distributed string: add --env "
+                + drill_env.FIELD_ENV_ID
+            )
+        if self.depth is not None and not field_env:
+            raise ValueError(
+                "argument --depth: is for the distributed string: add --env "
+                + drill_env.FIELD_ENV_ID
+            )
+        presets = DISTRIBUTED_PRESETS if field_env else PRESETS
+        if self.parameters is not None and self.parameters not in presets:
+            raise ValueError(
+                f"argument --parameters: {self.parameters!r} is not a preset of {self.env_id}: "
+                f"allowed {', '.join(sorted(presets))}"
+            )
+        if self.window_s > self.duration_s:
+            raise ValueError(
+                f"argument --window-s: {self.window_s:g} is out of range: allowed (0, "
+                f"--duration-s = {self.duration_s:g}] s"
+            )
+        if abs(round(self.duration_s * 10) - self.duration_s * 10) > 1e-6:
+            raise ValueError(
+                f"argument --duration-s: {self.duration_s:g} is not a multiple of 0.1 s"
+            )
+        if self.delta_max < self.delta_min:
+            raise ValueError(
+                f"argument --delta-max: {self.delta_max:g} is below --delta-min = "
+                f"{self.delta_min:g}"
+            )
+        try:  # the grid's own checks name the option
+            self.row_values()
+            self.speeds()
+        except ValueError as err:
+            raise ValueError(f"argument {err}") from None
+
+    def row_values(self) -> np.ndarray:
+        """The WOB (N) or measured depth (m) of each row."""
+        if self.rows == "depth":
+            return grid_values("depth", self.depth_min, self.depth_max, self.depth_n, MAX_DEPTH_M)
+        return grid_values("wob", self.wob_min, self.wob_max, self.wob_n, MAX_WOB_N)
+
+    def speeds(self) -> np.ndarray:
+        """The reference bit speed of each column, rad/s."""
+        return grid_values(
+            "speed", self.speed_min, self.speed_max, self.speed_n, MAX_REFERENCE_RAD_S
+        )
+
+    def study(self, task_cells: int = PROBABILITY_TASK_CELLS) -> ProbabilityStudy:
+        """The study of these settings, ``task_cells`` cells per task."""
+        return ProbabilityStudy(
+            env_id=self.env_id,
+            controllers=tuple(dict.fromkeys(self.controllers)),
+            row_axis=self.rows,
+            rows=tuple(float(r) for r in self.row_values()),
+            reference_speed_rad_s=tuple(float(v) for v in self.speeds()),
+            draws=self.draws,
+            wob_n=self.wob,
+            depth_m=self.depth,
+            duration_s=self.duration_s,
+            window_s=self.window_s,
+            noise_std_rad_s=self.noise,
+            seed=self.seed,
+            parameters=self.parameters,
+            delta_range=(self.delta_min, self.delta_max),
+            task_cells=task_cells,
+        )
 
 
 def _parser() -> ArgumentParser:
-    p = ArgumentParser(prog="drill-gym probability-map", description=DESCRIPTION)
-    p.add_argument(
-        "--env", choices=ENVS, default=drill_env.ENV_ID, help="the environment (plant) mapped"
-    )
-    p.add_argument(
-        "--controllers",
-        nargs="+",
-        default=["stiff_pi"],
-        type=names_type(controller_names, "controller"),
-        metavar="NAME",
-        help=f"controllers to map, by registered name: {', '.join(controller_names())}",
-    )
-    p.add_argument(
-        "--rows",
-        choices=ROW_AXES,
-        default="wob",
-        help="rows of the map: WOB (at --depth on the field string) or measured depth "
-        "(DrillStringField-v0 only, at --wob)",
-    )
-    wob = number_type(0.0, MAX_WOB_N, open_low=True, unit="N")
-    speed = number_type(0.0, MAX_REFERENCE_RAD_S, open_low=True, unit="rad/s")
-    depth = number_type(1.0, 20_000.0, unit="m")
-    count = number_type(1, 1000, integer=True)
-    p.add_argument("--wob-min", type=wob, default=40e3, metavar="NEWTONS", help="lowest WOB, N")
-    p.add_argument("--wob-max", type=wob, default=200e3, metavar="NEWTONS", help="highest WOB, N")
-    p.add_argument("--wob-n", type=count, default=9, metavar="COUNT", help="number of WOB rows")
-    p.add_argument(
-        "--wob", type=wob, default=100e3, metavar="NEWTONS", help="the WOB of --rows depth, N"
-    )
-    p.add_argument(
-        "--depth-min", type=depth, default=1000.0, metavar="M", help="shallowest depth, m"
-    )
-    p.add_argument("--depth-max", type=depth, default=5000.0, metavar="M", help="deepest depth, m")
-    p.add_argument("--depth-n", type=count, default=5, metavar="COUNT", help="number of depths")
-    p.add_argument(
-        "--depth",
-        type=depth,
-        default=None,
-        metavar="M",
-        help="measured depth of --rows wob on the field string, m (default: the preset's)",
-    )
-    p.add_argument(
-        "--speed-min", type=speed, default=1.0, metavar="RAD_S", help="lowest reference, rad/s"
-    )
-    p.add_argument(
-        "--speed-max", type=speed, default=16.0, metavar="RAD_S", help="highest reference, rad/s"
-    )
-    p.add_argument(
-        "--speed-n", type=count, default=8, metavar="COUNT", help="number of reference speeds"
-    )
-    p.add_argument(
-        "--draws",
-        type=number_type(1, 100_000, integer=True),
-        default=32,
-        metavar="N",
-        help="parameter draws per cell",
-    )
-    p.add_argument(
-        "--delta-min",
-        type=number_type(-0.9, 10.0),
-        default=DEFAULT_DELTA_RANGE[0],
-        metavar="X",
-        help="lowest uncertainty Delta (DrillString-v0)",
-    )
-    p.add_argument(
-        "--delta-max",
-        type=number_type(-0.9, 10.0),
-        default=DEFAULT_DELTA_RANGE[1],
-        metavar="X",
-        help="highest uncertainty Delta (DrillString-v0)",
-    )
-    p.add_argument(
-        "--duration",
-        type=number_type(0.0, 1e4, open_low=True, unit="s"),
-        default=100.0,
-        metavar="S",
-        help="length of each run from rest, s (a multiple of 0.1 s)",
-    )
-    p.add_argument(
-        "--window",
-        type=number_type(0.0, 1e4, open_low=True, unit="s"),
-        default=DEFAULT_WINDOW_S,
-        metavar="S",
-        help="analysis window at the end of each run, s (at most --duration)",
-    )
-    p.add_argument(
-        "--noise",
-        type=number_type(0.0, 10.0, unit="rad/s"),
-        default=0.0,
-        metavar="STD",
-        help="measurement noise on the speeds, rad/s",
-    )
-    p.add_argument(
-        "--parameters",
-        default=None,
-        choices=sorted(PRESETS) + sorted(DISTRIBUTED_PRESETS),
-        help="plant preset (default: zribi2024 on DrillString-v0, field_2500m on the field env)",
-    )
-    p.add_argument(
-        "--out", type=output_folder, default="results", metavar="DIR", help="output folder"
-    )
-    seed_option(p, "draw k of every cell is reset with seed + k", base=True)
-    p.add_argument("--no-plots", action="store_true", help="write the CSV files only")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    add_sweep_options(p)
-    return p
-
-
-def study_from_args(parser: ArgumentParser, args: Any) -> ProbabilityStudy:
-    """The study of parsed options; a bad combination is a one-line parser error."""
-    field = args.env == drill_env.FIELD_ENV_ID
-    if args.rows == "depth" and not field:
-        parser.fail(
-            "--rows", f"depth needs the distributed string: add --env {drill_env.FIELD_ENV_ID}"
-        )
-    if args.depth is not None and not field:
-        parser.fail("--depth", f"is for the distributed string: add --env {drill_env.FIELD_ENV_ID}")
-    if args.parameters is not None:
-        presets = DISTRIBUTED_PRESETS if field else PRESETS
-        if args.parameters not in presets:
-            parser.fail(
-                "--parameters",
-                f"{args.parameters!r} is not a preset of {args.env}: allowed {', '.join(sorted(presets))}",
-            )
-    if args.window > args.duration:
-        parser.fail(
-            "--window",
-            f"{args.window:g} is out of range: allowed (0, --duration = {args.duration:g}] s",
-        )
-    if abs(round(args.duration * 10) - args.duration * 10) > 1e-6:
-        parser.fail("--duration", f"{args.duration:g} is not a multiple of 0.1 s")
-    if args.delta_max < args.delta_min:
-        parser.fail("--delta-max", f"{args.delta_max:g} is below --delta-min = {args.delta_min:g}")
-    try:
-        if args.rows == "depth":
-            rows = grid_values("depth", args.depth_min, args.depth_max, args.depth_n, 20_000.0)
-        else:
-            rows = grid_values("wob", args.wob_min, args.wob_max, args.wob_n, MAX_WOB_N)
-        speeds = grid_values(
-            "speed", args.speed_min, args.speed_max, args.speed_n, MAX_REFERENCE_RAD_S
-        )
-    except ValueError as err:
-        parser.error(f"argument {err}")
-    try:
-        return ProbabilityStudy(
-            env_id=args.env,
-            controllers=tuple(dict.fromkeys(args.controllers)),
-            row_axis=args.rows,
-            rows=tuple(float(r) for r in rows),
-            reference_speed_rad_s=tuple(float(v) for v in speeds),
-            draws=args.draws,
-            wob_n=args.wob,
-            depth_m=args.depth,
-            duration_s=args.duration,
-            window_s=args.window,
-            noise_std_rad_s=args.noise,
-            seed=args.seed,
-            parameters=args.parameters,
-            delta_range=(args.delta_min, args.delta_max),
-            task_cells=args.task_size or PROBABILITY_TASK_CELLS,
-        )
-    except ValueError as err:
-        parser.error(str(err))
+    parser = spec_parser("drill-gym probability-map", DESCRIPTION, ProbabilitySpec, RunnerSpec)
+    parser.usage = "drill-gym probability-map [OPTIONS]"
+    return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``drill-gym probability-map``: compute, write and plot; returns the exit code."""
     parser = _parser()
     args = parser.parse_args(argv)
-    study = study_from_args(parser, args)
-    backend = backend_from_args(args)
-    path = results_path_from_args(args, Path(args.out) / "stick_slip_probability.sqlite")
+    runner = spec_from_args(RunnerSpec, args)
+    try:
+        spec = spec_from_args(ProbabilitySpec, args)
+        study = spec.study(runner.task_size or PROBABILITY_TASK_CELLS)
+    except ValueError as err:
+        parser.error(str(err))
+    backend = runner.backend()
+    path = runner.results_path(spec.out / "stick_slip_probability.sqlite")
     started = time.perf_counter()
     outcome = run_sweep(
-        study, backend, path, args.resume, not args.no_progress, overwrite=args.overwrite
+        study, backend, path, runner.resume, not spec.no_progress, overwrite=runner.overwrite
     )
     print(
         f"{study.name} on {backend.describe()}: {len(study.items())} cells x {study.draws} draws "
@@ -766,11 +754,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     for result in study.maps(outcome):
         name = printable(result.controller)
         stem = f"stick_slip_probability_{result.controller}"
-        csv_path = output_path(args.out, stem, suffix=".csv")
+        csv_path = output_path(spec.out, stem, suffix=".csv")
         written = [write_probability_csv(result, csv_path)]
-        if not args.no_plots:
+        if not spec.no_plots:
             figure = probability_figure(result)
-            written.append(save_figure(figure, output_path(args.out, stem, suffix=".png")))
+            written.append(save_figure(figure, output_path(spec.out, stem, suffix=".png")))
         p = result.probability
         print(
             f"{name}: probability of stick-slip {p.min():.2f} to {p.max():.2f} over "

@@ -29,13 +29,12 @@ controllers also ``stick_slip_maps.png`` with all of them side by side.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import functools
 import inspect
 import math
 import time
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final, NamedTuple, Protocol, TypeAlias
@@ -61,12 +60,12 @@ from drill_env.parameters import PLANT_DT_S, PRESETS
 from drill_env.scenarios import RPM
 from drill_env.validation import printable
 from experiments.arguments import (
+    BASE_SEED_HIGH,
     ArgumentParser,
-    number_type,
+    check_output_folder,
     output_folder,
-    seed_option,
 )
-from experiments.controllers import CONTROLLERS_HELP, controller_type, refuse_on_ray
+from experiments.controllers import controller_type, refuse_on_ray
 from experiments.field import (
     ENV_IDS,
     FIELD_ENV,
@@ -83,21 +82,20 @@ from experiments.plots import (
     save_figure,
 )
 from experiments.results_db import Fields, Near, Number, Schema, Values, exactly
+from experiments.spec_cli import option, spec_from_args, spec_parser
 from experiments.sweep import (
     MAP_TASK_CELLS,
+    RunnerSpec,
     SweepOutcome,
     Task,
     TaskResult,
-    add_sweep_options,
-    backend_from_args,
+    agent_fingerprint,
     check_controllers,
     check_observations,
     check_task_size,
     chunks,
     report_outcome,
-    results_path_from_args,
     run_sweep,
-    sweep_requested,
 )
 from experiments.tables import write_csv
 
@@ -106,6 +104,7 @@ __all__ = [
     "DEFAULT_REALISM",
     "MapPolicy",
     "MapRun",
+    "MapSpec",
     "MapStudy",
     "StickSlipMap",
     "compute_map",
@@ -116,7 +115,6 @@ __all__ = [
     "map_realism",
     "map_rows_task",
     "maps_figure",
-    "run_map_sweep",
     "stick_slip",
     "write_map_csv",
 ]
@@ -549,7 +547,7 @@ def _policy_env_kwargs(policy: MapPolicy, env_id: str) -> dict[str, Any]:
     residual scale, observation mode, ...) without those the map sets; a policy trained on
     another env is refused."""
     kwargs = dict(policy.env_kwargs)
-    trained_on = kwargs.get("env_id", PAPER_ENV)
+    trained_on = getattr(policy, "env_id", None) or kwargs.get("env_id", PAPER_ENV)
     if trained_on != env_id:
         raise ValueError(
             f"policy {policy.name!r} was trained on {trained_on}: map it with env_id {trained_on}"
@@ -566,37 +564,11 @@ def write_map_csv(result: StickSlipMap, path: str | Path) -> Path:
 
 # ---------------------------------------------------------------------------- command line
 DESCRIPTION: Final = """\
-Stick-slip map of each controller over weight on bit (WOB) x reference bit speed: every cell
-is one run from rest with a constant WOB and reference; over the last --window seconds the map
-keeps the stick-slip severity (max - min) / (2 mean) of the bit speed (about 1 or more:
-stick-slip, near 0: steady rotation) and the share of time the bit is stuck. A cell is in
-stick-slip when its bit sticks in the window or its severity exceeds 0.5; the white line of the
-figures is the boundary of that region.
+Stick-slip map of each controller over weight on bit (WOB) x reference bit speed: each cell is
+one run from rest, scored by its stick-slip severity and stuck time at the end of the run; CSV
+and PNG per controller into --out (docs/reports/stick-slip-maps.md).
 
-Writes, per controller, stick_slip_map_NAME.csv and stick_slip_map_NAME.png into --out, and
-stick_slip_maps.png with every controller side by side when there are several.
-
-With --env DrillStringField-v0 the cells run on the distributed field string (--parameters
-field_2500m or deep_5000m) at each of --depths, each controller with each of --observations
-(the paper's sliding-mode controllers always with state: they need the whole state); the files are named
-stick_slip_map_NAME_OBSERVATION_DEPTHm and stick_slip_maps_DEPTHm.png. Its defaults: WOB
-50-200 kN, 40-160 rpm (4.19-16.76 rad/s), 100 s runs with the last 50 s analysed (the field
-string's stick-slip cycles last 4-11 s, so the window holds at least four of the longest).
-
-With --realism LEVEL (ideal, wired_pipe, field, surface_only) the cells get that level's
-sensors, telemetry and top drive (the field level: surface signals at 100 Hz with their noise,
-telemetry every 5 s and 5 s late, 20 ms dead time, 20 ms lag, a 100 kN m/s rate limit), every
-controller with the level's observation (the sliding-mode controllers on the surface signals
-run their state observer); the file names end in _LEVEL. Without it a map keeps the env's own
-settings (DrillString-v0: the ideal level).
-
-examples:
-  drill-gym map                                         # stiff_pi on the default grid
-  drill-gym map --controllers stiff_pi soft_speed z_torque proposed --out results/maps
-  drill-gym map --wob-n 5 --speed-n 4 --duration 40 --window 20   # a quick coarse map
-  drill-gym map --controllers z_torque proposed --models agents/models/residual_ppo
-  drill-gym map --env DrillStringField-v0 --controllers soft_speed --depths 1500 2500 4000
-  drill-gym map --controllers proposed stiff_pi --realism field --out results/maps-field
+example: drill-gym map --controllers stiff_pi proposed --wob-n 5 --speed-n 4 --duration-s 40
 """
 
 
@@ -607,149 +579,247 @@ class _Defaults(NamedTuple):
     speed_min: float
     speed_max: float
     speed_n: int
-    duration: float
     window: float
     parameters: str
 
 
 DEFAULTS: Final[dict[str, _Defaults]] = {
-    PAPER_ENV: _Defaults(40e3, 200e3, 20, 1.0, 16.0, 16, 100.0, DEFAULT_WINDOW_S, "zribi2024"),
-    FIELD_ENV: _Defaults(
-        50e3, 200e3, 16, 40 * RPM, 160 * RPM, 13, 100.0, FIELD_WINDOW_S, "field_2500m"
-    ),
+    PAPER_ENV: _Defaults(40e3, 200e3, 20, 1.0, 16.0, 16, DEFAULT_WINDOW_S, "zribi2024"),
+    FIELD_ENV: _Defaults(50e3, 200e3, 16, 40 * RPM, 160 * RPM, 13, FIELD_WINDOW_S, "field_2500m"),
 }
 """The grid and run defaults of the command line on each env."""
 
+DEFAULT_DURATION_S: Final = 100.0
+"""Length of each run of the command line's maps, s."""
 
-def _default(name: str, unit: str = "") -> str:
-    paper, field = (getattr(DEFAULTS[e], name) for e in (PAPER_ENV, FIELD_ENV))
-    return f"(default: {paper:g}{unit}; {field:g}{unit} on {FIELD_ENV})"
+
+def _on_each(name: str, digits: int = 6) -> str:
+    """The default of ``name`` on each env, as the help shows it."""
+    paper, field_value = (getattr(DEFAULTS[e], name) for e in (PAPER_ENV, FIELD_ENV))
+    if isinstance(paper, str):
+        return f"{paper}; field: {field_value}"
+    return f"{paper:.{digits}g}; field: {field_value:.{digits}g}"
+
+
+_WOB: Final = {"low": 0.0, "high": MAX_WOB_N, "open_low": True, "unit": "N", "metavar": "N"}
+_SPEED: Final = {"low": 0.0, "high": MAX_REFERENCE_RAD_S, "open_low": True, "unit": "rad/s"}
+_COUNT: Final = {"low": 1, "high": 10_000}
+
+
+@dataclass(frozen=True)
+class MapSpec:
+    """The settings of ``drill-gym map`` (its options are these fields); a grid setting left
+    ``None`` takes the env's default (:data:`DEFAULTS`)."""
+
+    controllers: tuple[str, ...] = field(
+        default=(),
+        metadata=option(
+            parse=controller_type,
+            metavar="NAME",
+            aliases=("--controller",),
+            default_text="stiff_pi, none with --models",
+        ),
+    )
+    """registered names, or MODULE:CLASS or PATH.py:CLASS"""
+    models: tuple[str, ...] = field(default=(), metadata=option(metavar="PATH"))
+    """model folders to map too"""
+    env_id: str = field(
+        default=PAPER_ENV, metadata=option(choices=ENV_IDS, flag="--env", aliases=("--env-id",))
+    )
+    """the env of the cells"""
+    depths: tuple[float, ...] = field(
+        default=(),
+        metadata=option(low=300.0, high=10_000.0, unit="m", metavar="M", default_text="preset's"),
+    )
+    """measured depths of the field string, m, one map each"""
+    observations: tuple[str, ...] = field(
+        default=OBSERVATIONS, metadata=option(choices=OBSERVATIONS)
+    )
+    """observation modes of the speed loops on the field string"""
+    wob_min: float | None = field(
+        default=None, metadata=option(**_WOB, default_text=_on_each("wob_min"))
+    )
+    """lowest WOB, N"""
+    wob_max: float | None = field(
+        default=None, metadata=option(**_WOB, default_text=_on_each("wob_max"))
+    )
+    """highest WOB, N"""
+    wob_n: int | None = field(
+        default=None, metadata=option(**_COUNT, default_text=_on_each("wob_n"))
+    )
+    """number of WOB values"""
+    speed_min: float | None = field(
+        default=None, metadata=option(**_SPEED, default_text=_on_each("speed_min", 3))
+    )
+    """lowest reference speed, rad/s"""
+    speed_max: float | None = field(
+        default=None, metadata=option(**_SPEED, default_text=_on_each("speed_max", 3))
+    )
+    """highest reference speed, rad/s"""
+    speed_n: int | None = field(
+        default=None, metadata=option(**_COUNT, default_text=_on_each("speed_n"))
+    )
+    """number of reference speeds"""
+    duration_s: float = field(
+        default=DEFAULT_DURATION_S,
+        metadata=option(low=0.0, high=1e4, open_low=True, unit="s", aliases=("--duration",)),
+    )
+    """run length, s (a multiple of 0.1 s)"""
+    window_s: float | None = field(
+        default=None,
+        metadata=option(
+            low=0.0,
+            high=1e4,
+            open_low=True,
+            unit="s",
+            aliases=("--window",),
+            default_text=_on_each("window"),
+        ),
+    )
+    """analysed end of each run, s"""
+    noise: float = field(default=0.0, metadata=option(low=0.0, high=10.0, unit="rad/s"))
+    """speed measurement noise, rad/s"""
+    parameters: str | None = field(
+        default=None,
+        metadata=option(
+            choices=sorted(PRESETS) + sorted(DISTRIBUTED_PRESETS),
+            default_text=_on_each("parameters"),
+        ),
+    )
+    """plant parameter preset"""
+    realism: str | None = field(
+        default=None, metadata=option(choices=REALISM_LEVELS, metavar="LEVEL", default_text="env's")
+    )
+    """realism of sensors and top drive"""
+    out: Path = field(default=Path("results"), metadata=option(parse=output_folder, metavar="DIR"))
+    """output folder"""
+    seed: int = field(default=0, metadata=option(low=0, high=BASE_SEED_HIGH))
+    """reset seed of cell 0 (cell i: seed + i)"""
+    no_plots: bool = False
+    """write the CSV files only"""
+    no_progress: bool = False
+    """no progress bar"""
+
+    def __post_init__(self) -> None:
+        try:
+            check_output_folder(self.out)
+        except ValueError as err:
+            raise ValueError(f"argument --out: {err}") from None
+        field_env = is_field(self.env_id)
+        presets = DISTRIBUTED_PRESETS if field_env else PRESETS
+        if self.preset not in presets:
+            raise ValueError(
+                f"argument --parameters: {self.preset} is not a preset of {self.env_id}: allowed "
+                + ", ".join(sorted(presets))
+            )
+        if self.depths and not field_env:
+            raise ValueError(f"argument --depths: is an option of the field string ({FIELD_ENV})")
+        for depth in self.depths:
+            bha = DISTRIBUTED_PRESETS[self.preset].bha_length_m
+            if depth <= bha:
+                raise ValueError(
+                    f"argument --depths: {depth:g} is out of range: allowed > BHA length {bha} m"
+                )
+        try:  # the grid's own checks name the option
+            self.wobs()
+            self.speeds()
+        except ValueError as err:
+            raise ValueError(f"argument {err}") from None
+        if abs(round(self.duration_s * 10) - self.duration_s * 10) > 1e-6:
+            raise ValueError(
+                f"argument --duration-s: {self.duration_s:g} is not a multiple of 0.1 s"
+            )
+        if self.window > self.duration_s:
+            raise ValueError(
+                f"argument --window-s: {self.window:g} is out of range: allowed (0, --duration-s = "
+                f"{self.duration_s:g}] s"
+            )
+
+    def _grid(self, name: str) -> Any:
+        value = getattr(self, name)
+        return getattr(DEFAULTS[self.env_id], name) if value is None else value
+
+    @property
+    def preset(self) -> str:
+        """The plant preset (default: the env's)."""
+        return str(self._grid("parameters"))
+
+    @property
+    def window(self) -> float:
+        """The analysis window, s (default: the env's)."""
+        return float(self.window_s if self.window_s is not None else DEFAULTS[self.env_id].window)
+
+    def wobs(self) -> np.ndarray:
+        """The WOB of each grid row, N."""
+        return grid_values(
+            "wob", self._grid("wob_min"), self._grid("wob_max"), self._grid("wob_n"), MAX_WOB_N
+        )
+
+    def speeds(self) -> np.ndarray:
+        """The reference bit speed of each grid column, rad/s."""
+        return grid_values(
+            "speed",
+            self._grid("speed_min"),
+            self._grid("speed_max"),
+            self._grid("speed_n"),
+            MAX_REFERENCE_RAD_S,
+        )
+
+    @property
+    def controller_names(self) -> tuple[str, ...]:
+        """The controllers, each once (default: ``stiff_pi``, none with models)."""
+        return tuple(dict.fromkeys(self.controllers or (() if self.models else ("stiff_pi",))))
+
+    @property
+    def cells(self) -> int:
+        """Cells of one map."""
+        return int(self.wobs().size * self.speeds().size)
+
+    def study(self, models: Sequence[MapPolicy] = (), task_cells: int = MAP_TASK_CELLS) -> MapStudy:
+        """The study of these settings: the maps of the controllers and of ``models`` (the
+        policies of :attr:`models`, loaded), ``task_cells`` cells per task."""
+        depths: tuple[float, ...] = ()
+        if is_field(self.env_id):
+            string = DISTRIBUTED_PRESETS[self.preset]
+            depths = tuple(dict.fromkeys(self.depths or (string.measured_depth_m,)))
+        level = map_realism(self.env_id, self.realism)
+        return MapStudy(
+            self.controller_names,
+            tuple(float(w) for w in self.wobs()),
+            tuple(float(v) for v in self.speeds()),
+            duration_s=self.duration_s,
+            window_s=self.window,
+            noise_std_rad_s=self.noise,
+            seed=self.seed,
+            parameters=self.parameters,
+            task_cells=task_cells,
+            env_id=self.env_id,
+            observations=tuple(dict.fromkeys(self.observations)),
+            depths_m=depths,
+            # one entry per further compute_map option (none for the default map, so that
+            # its settings hash, and the results written for it, stay as they were)
+            keywords={} if level is None else {"realism": level},
+            models=tuple(models),
+        )
 
 
 def _parser() -> ArgumentParser:
-    parser = ArgumentParser(prog="drill-gym map", description=DESCRIPTION)
-    controllers = controller_type
-    parser.add_argument(
-        "--controllers",
-        nargs="+",
-        default=None,
-        type=controllers,
-        metavar="NAME",
-        help=f"controllers to map, by registered name: {', '.join(controller_names())} "
-        f"(default: stiff_pi, or none when --models are given), {CONTROLLERS_HELP}",
-    )
-    parser.add_argument(
-        "--models",
-        nargs="+",
-        default=[],
-        metavar="PATH",
-        help="learned controllers to map too: model folders in the project's format (e.g. "
-        "agents/models/residual_ppo), each run with its own env keywords and its deterministic "
-        "action at every decision (maps of models run serially)",
-    )
-    parser.add_argument(  # the earlier name, still accepted
-        "--controller", dest="controllers", nargs="+", type=controllers, help=argparse.SUPPRESS
-    )
-    parser.add_argument(
-        "--env",
-        choices=ENV_IDS,
-        default=PAPER_ENV,
-        help="the env of the cells: the paper's 4-DOF string or the distributed field string",
-    )
-    parser.add_argument(
-        "--depths",
-        nargs="+",
-        type=number_type(300.0, 10_000.0, unit="m"),
-        default=None,
-        metavar="M",
-        help="measured depths of the field string, m, one map each (default: the preset's)",
-    )
-    parser.add_argument(
-        "--observations",
-        nargs="+",
-        choices=OBSERVATIONS,
-        default=list(OBSERVATIONS),
-        help="observation modes of the controllers on the field string (the paper's "
-        "controllers always run with state)",
-    )
-    wob = number_type(0.0, MAX_WOB_N, open_low=True, unit="N")
-    speed = number_type(0.0, MAX_REFERENCE_RAD_S, open_low=True, unit="rad/s")
-    count = number_type(1, 10_000, integer=True)
-    parser.add_argument(
-        "--wob-min", type=wob, metavar="NEWTONS", help="lowest WOB, N " + _default("wob_min")
-    )
-    parser.add_argument(
-        "--wob-max", type=wob, metavar="NEWTONS", help="highest WOB, N " + _default("wob_max")
-    )
-    parser.add_argument(
-        "--wob-n", type=count, metavar="COUNT", help="number of WOB values " + _default("wob_n")
-    )
-    parser.add_argument(
-        "--speed-min",
-        type=speed,
-        metavar="RAD_S",
-        help="lowest reference bit speed, rad/s " + _default("speed_min"),
-    )
-    parser.add_argument(
-        "--speed-max",
-        type=speed,
-        metavar="RAD_S",
-        help="highest reference bit speed, rad/s " + _default("speed_max"),
-    )
-    parser.add_argument(
-        "--speed-n",
-        type=count,
-        metavar="COUNT",
-        help="number of reference speeds " + _default("speed_n"),
-    )
-    parser.add_argument(
-        "--duration",
-        type=number_type(0.0, 1e4, open_low=True, unit="s"),
-        metavar="S",
-        help="length of each run from rest, s (a multiple of 0.1 s) " + _default("duration"),
-    )
-    parser.add_argument(
-        "--window",
-        type=number_type(0.0, 1e4, open_low=True, unit="s"),
-        metavar="S",
-        help="analysis window at the end of each run, s (at most --duration) " + _default("window"),
-    )
-    parser.add_argument(
-        "--noise",
-        type=number_type(0.0, 10.0, unit="rad/s"),
-        default=0.0,
-        metavar="STD",
-        help="standard deviation of the measurement noise on the speeds, rad/s (0: the map is "
-        "deterministic; on the field string the surface torque and telemetry are then exact, "
-        "else they carry the env's noise)",
-    )
-    parser.add_argument(
-        "--parameters",
-        choices=sorted(PRESETS) + sorted(DISTRIBUTED_PRESETS),
-        help="plant parameter preset: a 4-DOF one on DrillString-v0, a distributed one on "
-        f"{FIELD_ENV} (default: zribi2024; field_2500m on {FIELD_ENV})",
-    )
-    parser.add_argument(
-        "--realism",
-        choices=REALISM_LEVELS,
-        default=None,
-        metavar="LEVEL",
-        help=f"level of realism of the sensors, telemetry and top drive: {', '.join(REALISM_LEVELS)}"
-        " (every controller then runs with the level's observation, --observations is not "
-        f"used; files end in _LEVEL; default: the env's own, which is ideal on {PAPER_ENV})",
-    )
-    parser.add_argument(
-        "--out", type=output_folder, default="results", metavar="DIR", help="output folder"
-    )
-    seed_option(
-        parser,
-        "reset seed of the first cell (cell i uses seed + i; it drives the noise)",
-        base=True,
-    )
-    parser.add_argument("--no-plots", action="store_true", help="write the CSV files only")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    add_sweep_options(parser)
+    parser = spec_parser("drill-gym map", DESCRIPTION, MapSpec, RunnerSpec)
+    parser.usage = "drill-gym map [OPTIONS]"
     return parser
+
+
+def _map_line(result: StickSlipMap, depth: float | None, written: Sequence[Path]) -> str:
+    """The line printed for one map."""
+    simulated = result.cells * result.duration_s
+    return (
+        f"{printable(result.label)}{'' if depth is None else f' at {depth:g} m'}: "
+        f"{result.cells} cells "
+        f"x {result.duration_s:g} s in {result.wall_time_s:.1f} s "
+        f"({simulated / result.wall_time_s:,.0f} simulated s per wall s); "
+        f"{int(result.unstable().sum())} cells in stick-slip; wrote "
+        + " and ".join(str(p) for p in written)
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -759,128 +829,55 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     parser = _parser()
     args = parser.parse_args(argv)
-    field = is_field(args.env)
-    defaults = DEFAULTS[args.env]
-    for name in defaults._fields:
-        if getattr(args, name) is None:
-            setattr(args, name, getattr(defaults, name))
-    presets = DISTRIBUTED_PRESETS if field else PRESETS
-    if args.parameters not in presets:
-        parser.fail(
-            "--parameters",
-            f"{args.parameters} is not a preset of {args.env}: allowed {', '.join(sorted(presets))}",
-        )
-    if not field and args.depths is not None:
-        parser.fail("--depths", f"is an option of the field string ({FIELD_ENV})")
+    runner = spec_from_args(RunnerSpec, args)
     try:
-        wobs = grid_values("wob", args.wob_min, args.wob_max, args.wob_n, MAX_WOB_N)
-        speeds = grid_values(
-            "speed", args.speed_min, args.speed_max, args.speed_n, MAX_REFERENCE_RAD_S
-        )
+        spec = spec_from_args(MapSpec, args)
     except ValueError as err:
-        parser.error(f"argument {err}")
-    if args.window > args.duration:
-        parser.fail(
-            "--window",
-            f"{args.window:g} is out of range: allowed (0, --duration = {args.duration:g}] s",
-        )
-    if abs(round(args.duration * 10) - args.duration * 10) > 1e-6:
-        parser.fail("--duration", f"{args.duration:g} is not a multiple of 0.1 s")
-    level = map_realism(args.env, args.realism)
-    if args.controllers is None:
-        args.controllers = [] if args.models else ["stiff_pi"]
-    refuse_on_ray(parser.fail, args, args.controllers)
+        parser.error(str(err))
+    level = map_realism(spec.env_id, spec.realism)
+    refuse_on_ray(parser.fail, args, spec.controller_names)
     policies: list[MapPolicy] = []
-    if args.models:
-        if sweep_requested(args):
-            parser.fail(
-                "--models",
-                "maps of models run serially: without --workers, --ray, "
-                "--address, --results, --resume and --overwrite",
-            )
-
-        for path in args.models:
-            try:
-                policy = load_policy(path)
-                _policy_env_kwargs(policy, args.env)
-            except (OSError, ValueError) as err:
-                parser.fail("--models", f"{path}: {err}")
-            policies.append(policy)
-    runs: list[tuple[str | MapPolicy, str | None, float | None]] = []
-    if field:
-        string = DISTRIBUTED_PRESETS[args.parameters]
-        depths = list(dict.fromkeys(args.depths or [string.measured_depth_m]))
-        for depth in depths:
-            if depth <= string.bha_length_m:
-                parser.fail(
-                    "--depths",
-                    f"{depth:g} is out of range: allowed > BHA length {string.bha_length_m} m",
-                )
-        for name in dict.fromkeys(args.controllers):
-            modes = (
-                observations_of(name, args.observations)
-                if level is None
-                else (str(realism_keywords(level)["observation"]),)
-            )
-            runs += [(name, obs, depth) for depth in depths for obs in modes]
-        runs += [(policy, None, depth) for depth in depths for policy in policies]
-    else:
-        runs = [(name, None, None) for name in dict.fromkeys(args.controllers)]
-        runs += [(policy, None, None) for policy in policies]
-    computed: Iterable[tuple[StickSlipMap, float | None]]
-    if sweep_requested(args):  # on the sweep runner: Ray, a results database, a resume
-        named = [(name, obs, depth) for name, obs, depth in runs if isinstance(name, str)]
-        computed = ((m, m.measured_depth_m) for m in run_map_sweep(args, named, wobs, speeds))
-    else:
-        computed = (
-            (
-                compute_map(
-                    name,
-                    wobs,
-                    speeds,
-                    duration_s=args.duration,
-                    window_s=args.window,
-                    noise_std_rad_s=args.noise,
-                    seed=args.seed,
-                    parameters=args.parameters,
-                    progress=not args.no_progress,
-                    env_id=args.env,
-                    observation=observation,
-                    measured_depth_m=depth,
-                    realism=level,
-                ),
-                depth,
-            )
-            for name, observation, depth in runs
-        )
+    for folder in spec.models:
+        try:
+            loaded = load_policy(folder)
+            _policy_env_kwargs(loaded, spec.env_id)
+        except (OSError, ValueError) as err:
+            parser.fail("--models", f"{folder}: {err}")
+        policies.append(loaded)
+    # a plain serial run: each map one task, the whole grid at once (one vector env, as fast
+    # as it gets in one process); on Ray or into a database: MAP_TASK_CELLS
+    task_cells = runner.task_size or (MAP_TASK_CELLS if runner.requested else spec.cells)
+    try:
+        study = spec.study(tuple(policies), task_cells)
+    except ValueError as err:
+        parser.error(str(err))
+    backend = runner.backend()
+    outcome = run_sweep(
+        study,
+        backend,
+        runner.results_path(spec.out / "stick_slip_map.sqlite"),
+        runner.resume,
+        not spec.no_progress,
+        overwrite=runner.overwrite,
+    )
+    if runner.requested:
+        report_outcome(study.name, outcome, backend)
     results: dict[float | None, list[StickSlipMap]] = {}
-    for result, depth in computed:
+    for result in study.maps(outcome):
         stem = result.file_stem()
-        written = [write_map_csv(result, output_path(args.out, stem, suffix=".csv"))]
-        if not args.no_plots:
+        written = [write_map_csv(result, output_path(spec.out, stem, suffix=".csv"))]
+        if not spec.no_plots:
             figure = map_figure(result)
-            written.append(save_figure(figure, output_path(args.out, stem, suffix=".png")))
-        simulated = result.cells * result.duration_s
-        print(
-            f"{printable(result.label)}{'' if depth is None else f' at {depth:g} m'}: "
-            f"{result.cells} cells "
-            f"x {result.duration_s:g} s in {result.wall_time_s:.1f} s "
-            f"({simulated / result.wall_time_s:,.0f} simulated s per wall s); "
-            f"{int(result.unstable().sum())} cells in stick-slip; wrote "
-            + " and ".join(str(p) for p in written)
-        )
-        results.setdefault(depth, []).append(result)
+            written.append(save_figure(figure, output_path(spec.out, stem, suffix=".png")))
+        print(_map_line(result, result.measured_depth_m, written))
+        results.setdefault(result.measured_depth_m, []).append(result)
     for depth, maps in results.items():
-        if len(maps) > 1 and not args.no_plots:
+        if len(maps) > 1 and not spec.no_plots:
             name = "stick_slip_maps" + ("" if depth is None else f"_{depth:g}m")
             name += "" if level is None else f"_{level}"
-            path = output_path(args.out, name, suffix=".png")
+            path = output_path(spec.out, name, suffix=".png")
             print(f"wrote {save_figure(maps_figure(maps), path)}")
     return 0
-
-
-if __name__ == "__main__":  # pragma: no cover
-    raise SystemExit(main())
 
 
 # ------------------------------------------------------------------- sweep adapter
@@ -906,7 +903,7 @@ def map_key(controller: str, observation: str | None = None, depth_m: float | No
 
 
 def map_rows_task(
-    controller: str,
+    controller: str | MapPolicy,
     rows: Sequence[int],
     wob_n: Sequence[float],
     reference_speed_rad_s: Sequence[float],
@@ -921,8 +918,9 @@ def map_rows_task(
     keywords: Mapping[str, Any] | None = None,
 ) -> TaskResult:
     """The WOB rows ``rows`` (consecutive indices into the whole grid; ``wob_n`` their WOB
-    values) of one map: one :func:`compute_map` over them (on ``env_id``, with ``observation``,
-    ``measured_depth_m`` and the further compute_map ``keywords``), cell ``i`` of the grid
+    values) of one map of ``controller`` (a registered name or a learned policy): one
+    :func:`compute_map` over them (on ``env_id``, with ``observation``, ``measured_depth_m``
+    and the further compute_map ``keywords``), cell ``i`` of the grid
     reset with ``seed + i``. Records ``{map_key}/row{r}``: ``severity`` and ``stuck_fraction``
     per reference speed (``None``: diverged) and ``map``, the map's settings as compute_map
     reports them (every field of :class:`StickSlipMap` but its arrays and wall time)."""
@@ -949,7 +947,7 @@ def map_rows_task(
         if f.name not in (*_ARRAY_FIELDS, "wall_time_s")
     }
     settings["seed"] = int(seed)  # the map's cell 0, not this block's
-    prefix = map_key(controller, observation, measured_depth_m)
+    prefix = map_key(result.controller, result.observation, result.measured_depth_m)
     records = {
         f"{prefix}/row{r}": {
             "severity": result.severity[k].tolist(),
@@ -968,7 +966,8 @@ def _floats(values: Sequence[Any]) -> np.ndarray:
 
 @dataclass(frozen=True)
 class MapStudy:
-    """Stick-slip maps of ``controllers`` over the same grid on the sweep runner.
+    """Stick-slip maps of ``controllers`` (and learned ``models``) over the same grid on the
+    sweep runner.
 
     On ``DrillString-v0`` one map per controller; on ``DrillStringField-v0`` one per
     controller, measured depth and observation mode it can use (:meth:`runs`, the order of
@@ -995,6 +994,9 @@ class MapStudy:
         keywords: Further keywords of :func:`compute_map`, the same for every map (any it
             accepts but those the study sets itself); passed to every call and part of the
             spec.
+        models: Learned policies (:class:`MapPolicy`) to map after the controllers, each with
+            its own env keywords; a model's map is one task (the whole grid in one batch, as
+            :func:`compute_map` runs it). Their fingerprints are part of the spec.
     """
 
     controllers: tuple[str, ...]
@@ -1011,9 +1013,16 @@ class MapStudy:
     observations: tuple[str, ...] = OBSERVATIONS
     depths_m: tuple[float, ...] = ()
     keywords: Mapping[str, Any] = field(default_factory=dict)
+    models: tuple[MapPolicy, ...] = field(default=(), compare=False)
 
     def __post_init__(self) -> None:
-        check_controllers(self.controllers)
+        if self.controllers or not self.models:
+            check_controllers(self.controllers)
+        names = [m.name for m in self.models]
+        if len(set(names)) != len(names) or set(names) & set(self.controllers):
+            raise ValueError(f"models {names!r}: each model needs a name of its own")
+        for model in self.models:
+            _policy_env_kwargs(model, self.env_id)
         for label, values in (
             ("wob_n", self.wob_n),
             ("reference_speed_rad_s", self.reference_speed_rad_s),
@@ -1070,20 +1079,32 @@ class MapStudy:
     def runs(self) -> list[MapRun]:
         """The maps, in the order of ``drill-gym map``: each controller, then (on the field
         string) each depth, then each observation mode the controller can use (with a level
-        of realism in :attr:`keywords`, the level's observation for every controller)."""
+        of realism in :attr:`keywords`, the level's observation for every controller); then
+        each depth and each model (with the observation it was trained on)."""
+        named: list[MapRun]
         if not self.field:
-            return list(dict.fromkeys((c, None, None) for c in self.controllers))
+            named = [(c, None, None) for c in self.controllers]
+            return list(dict.fromkeys([*named, *((m.name, None, None) for m in self.models)]))
         depths = self.depths_m or (DISTRIBUTED_PRESETS[self.preset].measured_depth_m,)
         level = map_realism(self.env_id, self.keywords.get("realism"))
         fixed = None if level is None else (str(realism_keywords(level)["observation"]),)
-        return list(
-            dict.fromkeys(
-                (c, o, float(d))
-                for c in self.controllers
-                for d in depths
-                for o in (fixed or observations_of(c, self.observations))
-            )
-        )
+        named = [
+            (c, o, float(d))
+            for c in self.controllers
+            for d in depths
+            for o in (fixed or observations_of(c, self.observations))
+        ]
+        learned = [
+            (m.name, fixed[0] if fixed else self._trained_observation(m), float(d))
+            for d in depths
+            for m in self.models
+        ]
+        return list(dict.fromkeys([*named, *learned]))
+
+    @staticmethod
+    def _trained_observation(model: MapPolicy) -> str:
+        """The field env's observation mode ``model`` runs with in a map."""
+        return str(dict(model.env_kwargs).get("observation") or "state")
 
     def spec(self) -> dict[str, Any]:
         """The map's settings (not the task size)."""
@@ -1098,6 +1119,8 @@ class MapStudy:
             "seed": int(self.seed),
             "parameters": self.preset,
             "keywords": dict(self.keywords),
+            # only with models, so that the spec of a map of controllers stays as it was
+            **({"models": [agent_fingerprint(m) for m in self.models]} if self.models else {}),
         }
 
     def items(self) -> list[str]:
@@ -1138,11 +1161,15 @@ class MapStudy:
         )
 
     def tasks(self, missing: Sequence[str]) -> list[Task]:
-        """Blocks of consecutive missing rows of one map, ``task_cells`` cells each."""
-        per_task = max(1, self.task_cells // len(self.reference_speed_rad_s))
+        """Blocks of consecutive missing rows of one map, ``task_cells`` cells each (a
+        model's: all of them)."""
+        per_cells = max(1, self.task_cells // len(self.reference_speed_rad_s))
+        models = {m.name: m for m in self.models}
         wanted = set(missing)
         tasks: list[Task] = []
         for controller, observation, depth in self.runs():
+            model = models.get(controller)
+            per_task = per_cells if model is None else len(self.wob_n)
             prefix = map_key(controller, observation, depth)
             rows = [r for r in range(len(self.wob_n)) if f"{prefix}/row{r}" in wanted]
             blocks: list[list[int]] = []
@@ -1158,7 +1185,7 @@ class MapStudy:
                             key=f"{prefix}/rows{block[0]}-{block[-1]}",
                             function=map_rows_task,
                             kwargs={
-                                "controller": controller,
+                                "controller": controller if model is None else model,
                                 "rows": block,
                                 "wob_n": [self.wob_n[r] for r in block],
                                 "reference_speed_rad_s": list(self.reference_speed_rad_s),
@@ -1168,7 +1195,7 @@ class MapStudy:
                                 "seed": self.seed,
                                 "parameters": self.preset,
                                 "env_id": self.env_id,
-                                "observation": observation,
+                                "observation": observation if model is None else None,
                                 "measured_depth_m": depth,
                                 "keywords": dict(self.keywords),
                             },
@@ -1195,41 +1222,6 @@ class MapStudy:
                 )
             )
         return maps
-
-
-def run_map_sweep(
-    args: Any, runs: Sequence[MapRun], wobs: Iterable[float], speeds: Iterable[float]
-) -> list[StickSlipMap]:
-    """``drill-gym map`` on the sweep runner (its parsed options ``args``): the maps of
-    ``runs`` (controller, observation mode, depth; in this order), on ``args.env``."""
-
-    # Further compute_map keywords of the command line: one entry per option (none for the
-    # default map, so that its spec, and the results files written for it, stay as they were).
-    level = map_realism(args.env, args.realism)
-    keywords: dict[str, Any] = {} if level is None else {"realism": level}
-    study = MapStudy(
-        tuple(dict.fromkeys(run[0] for run in runs)),
-        tuple(float(w) for w in wobs),
-        tuple(float(v) for v in speeds),
-        duration_s=args.duration,
-        window_s=args.window,
-        noise_std_rad_s=args.noise,
-        seed=args.seed,
-        parameters=args.parameters,
-        task_cells=args.task_size or MAP_TASK_CELLS,
-        env_id=args.env,
-        observations=tuple(dict.fromkeys(args.observations)),
-        depths_m=tuple(dict.fromkeys(float(run[2]) for run in runs if run[2] is not None)),
-        keywords=keywords,
-    )
-    assert study.runs() == [tuple(run) for run in runs], "the maps of drill-gym map, in order"
-    backend = backend_from_args(args)
-    path = results_path_from_args(args, Path(args.out) / "stick_slip_map.sqlite")
-    outcome = run_sweep(
-        study, backend, path, args.resume, not args.no_progress, overwrite=args.overwrite
-    )
-    report_outcome(study.name, outcome, backend)
-    return study.maps(outcome)
 
 
 # ------------------------------------------------------------------- stick-slip maps
@@ -1340,3 +1332,7 @@ def _caption(result: StickSlipMap) -> str:
         f"{plant}, runs of {result.duration_s:g} s from rest, last "
         f"{result.window_s:g} s analysed, {noise}"
     )
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

@@ -92,7 +92,6 @@ __all__ = [
     "run_sweep",
     "runner_from_args",
     "spec_hash",
-    "sweep_requested",
 ]
 
 WORKER_ENV: Final[dict[str, str]] = {
@@ -472,42 +471,38 @@ class RunnerSpec:
     """
 
     workers: int = field(default=1, metadata=option(low=1, high=4096, group=SWEEP_GROUP))
-    """tasks at a time: 1 runs serially in this process; N > 1 runs on Ray (a local cluster of N
-    CPUs, or at most N tasks in flight on the cluster of ``address``)"""
+    """tasks at a time: 1 serially here, N > 1 on Ray"""
     ray: bool = field(default=False, metadata=option(group=SWEEP_GROUP))
-    """run on Ray even with ``workers`` 1 (default: serially)"""
+    """run on Ray even with one worker"""
     address: str | None = field(
         default=None,
         metadata=option(
-            metavar="ADDR",
-            group=SWEEP_GROUP,
-            default_text=f"${ADDRESS_VARIABLE}, else a local cluster",
+            metavar="ADDR", group=SWEEP_GROUP, default_text=f"${ADDRESS_VARIABLE} or a new one"
         ),
     )
-    """join the running Ray cluster at ADDR (host:port or 'auto')"""
+    """join the Ray cluster at ADDR (host:port or 'auto')"""
     task_size: int | None = field(
         default=None,
         metadata=option(low=1, high=10**6, group=SWEEP_GROUP, default_text="the study's"),
     )
-    """items per task on Ray (rows of a map, runs of a comparison)"""
+    """items per task (rows of a map, runs of a comparison)"""
     results: Path | None = field(
         default=None,
         metadata=option(
             metavar="FILE",
             group=SWEEP_GROUP,
-            default_text="a file in --out on Ray or with --resume/--overwrite, else none",
+            default_text="none; in --out on Ray, with --resume or --overwrite",
         ),
     )
-    """SQLite results database each finished task is written to; several studies may share one"""
+    """SQLite results database (studies may share one)"""
     resume: bool = field(default=False, metadata=option(group=SWEEP_GROUP))
-    """keep the items of the same settings already in the results database; run the others"""
+    """keep this study's results already in the database"""
     overwrite: bool = field(default=False, metadata=option(group=SWEEP_GROUP))
-    """delete this study's results of the same settings from the database and run them again
-    (without it or ``resume`` such results are an error; other rows stay)"""
+    """delete this study's results of these settings first"""
     max_retries: int = field(
         default=DEFAULT_MAX_RETRIES, metadata=option(low=0, high=100, group=SWEEP_GROUP)
     )
-    """times a task is run again when its worker process dies"""
+    """reruns of a task whose worker dies"""
 
     @property
     def requested(self) -> bool:
@@ -549,11 +544,6 @@ def add_sweep_options(parser: argparse.ArgumentParser) -> None:
 def runner_from_args(args: argparse.Namespace) -> RunnerSpec:
     """The :class:`RunnerSpec` of parsed options."""
     return spec_from_args(RunnerSpec, args)
-
-
-def sweep_requested(args: argparse.Namespace) -> bool:
-    """Whether the options ask for the sweep runner (Ray, a results database, a resume)."""
-    return runner_from_args(args).requested
 
 
 def backend_from_args(args: argparse.Namespace) -> Backend:

@@ -139,7 +139,7 @@ def test_evaluate_the_shipped_models(command: list[str], tmp_path: Path) -> None
 def test_compare_one_controller(command: list[str], tmp_path: Path) -> None:
     result = drill_gym(
         command, tmp_path, "compare", "--controllers", "csmc", "--conditions", "nominal",
-        "--noise", "0", "--duration", "2",
+        "--noise", "0", "--duration-s", "2",
     )  # fmt: skip
     out = tmp_path / "results"
     rows = json.loads((out / "compare.json").read_text())
@@ -155,8 +155,8 @@ def test_compare_one_controller(command: list[str], tmp_path: Path) -> None:
 
 def test_map_a_tiny_grid(command: list[str], tmp_path: Path) -> None:
     result = drill_gym(
-        command, tmp_path, "map", "--wob-n", "2", "--speed-n", "2", "--duration", "2",
-        "--window", "1",
+        command, tmp_path, "map", "--wob-n", "2", "--speed-n", "2", "--duration-s", "2",
+        "--window-s", "1",
     )  # fmt: skip
     out = tmp_path / "results"
     assert (out / "stick_slip_map_stiff_pi.csv").read_text().count("\n") == 5

@@ -18,7 +18,7 @@ from experiments import compare
 from experiments.cli import main as cli_main
 from experiments.compare import ROW_KEYS, decision_period, default_controllers, main
 
-SHORT = ["--duration", "2", "--conditions", "nominal", "--no-agent", "--no-progress"]
+SHORT = ["--duration-s", "2", "--conditions", "nominal", "--no-agent", "--no-progress"]
 
 FIGURES = (
     "speed_torque_csmc.png",
@@ -144,7 +144,7 @@ class FakeAgent:
 
 
 def test_agent_row(tmp_path: Path) -> None:
-    argv = ["--controllers", "proposed", "--noise", "0", "--no-plots", "--duration", "2"]
+    argv = ["--controllers", "proposed", "--noise", "0", "--no-plots", "--duration-s", "2"]
     argv += ["--conditions", "nominal", "--out", str(tmp_path)]
     assert main(argv, agent_loader=FakeAgent) == 0
     rows = json.loads((tmp_path / "compare.json").read_text())
@@ -156,7 +156,7 @@ def test_agent_row(tmp_path: Path) -> None:
 
 
 def test_no_agent_when_none_shipped(tmp_path: Path) -> None:
-    argv = ["--controllers", "csmc", "--noise", "0", "--no-plots", "--duration", "1"]
+    argv = ["--controllers", "csmc", "--noise", "0", "--no-plots", "--duration-s", "1"]
     argv += ["--conditions", "nominal", "--out", str(tmp_path)]
     assert main(argv, agent_loader=lambda: None) == 0
     assert len(json.loads((tmp_path / "compare.json").read_text())) == 1
@@ -174,7 +174,7 @@ def test_command_line_passes_the_agent_loader(
 
     monkeypatch.setattr(compare, "shipped_agent", shipped)
     argv = ["compare", "--controllers", "proposed", "--noise", "0", "--no-plots"]
-    argv += ["--duration", "1", "--conditions", "nominal", "--out", str(tmp_path)]
+    argv += ["--duration-s", "1", "--conditions", "nominal", "--out", str(tmp_path)]
     assert cli_main(argv) == 0
     rows = json.loads((tmp_path / "compare.json").read_text())
     assert [r["controller"] for r in rows] == ["proposed", "fake_agent"]
@@ -229,12 +229,14 @@ class TestArguments:
         ("argv", "message"),
         [
             (["--controllers", "pid"], "argument --controllers: unknown controller 'pid': allowed csmc, msmc, asmc, proposed"),
-            (["--conditions", "condition4"], "argument --conditions: invalid choice: 'condition4'"),
+            (["--conditions", "condition4"], "argument --conditions: unknown condition 'condition4': allowed nominal, condition1"),
+            (["--conditions", "severe"], "argument --conditions: severe is not a condition of DrillString-v0: allowed nominal, condition1"),
             (["--noise", "-0.1"], "argument --noise: -0.1 is out of range: allowed [0, 10] rad/s"),
             (["--noise", "nan"], "argument --noise: nan is out of range"),
+            (["--duration-s", "0"], "argument --duration-s: 0 is out of range: allowed (0, 100000] s"),
             (["--duration", "0"], "argument --duration: 0 is out of range: allowed (0, 100000] s"),
-            (["--duration", "-5"], "argument --duration: -5 is out of range"),
-            (["--duration", "0.0005"], "argument --duration: 0.0005 is not a multiple of the 0.001 s plant step"),
+            (["--duration-s", "-5"], "argument --duration-s: -5 is out of range"),
+            (["--duration-s", "0.0005"], "argument --duration-s: 0.0005 is not a multiple of the 0.001 s plant step"),
             (["--seed", "-1"], "argument --seed: -1 is out of range: allowed [0, 4294967295]"),
         ],
     )  # fmt: skip
@@ -260,7 +262,7 @@ def test_field_comparison_includes_the_field_agent(
 ) -> None:
     argv = [
         "--env", "DrillStringField-v0", "--controllers", "soft_speed", "--depths", "1500",
-        "--conditions", "nominal", "--noise", "0", "--duration", "2", "--observations",
+        "--conditions", "nominal", "--noise", "0", "--duration-s", "2", "--observations",
         "surface", "--no-plots", "--no-progress", "--out", str(tmp_path),
     ]  # fmt: skip
     assert main(argv) == 0

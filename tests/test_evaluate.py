@@ -126,4 +126,23 @@ def test_evaluate_command_on_the_corner_set(
     with pytest.raises(SystemExit) as err:
         main(["--scenario-set", "corners", "--scenarios", "h01", "--out", str(tmp_path)])
     assert err.value.code == 2
-    assert "h01 is not a scenario of the corners set" in capsys.readouterr().err
+    assert (
+        "argument --scenarios: h01 is not a scenario of the corners set" in capsys.readouterr().err
+    )
+    with pytest.raises(SystemExit) as err:
+        main(["--env", "DrillStringField-v0", "--scenario-set", "corners"])
+    assert err.value.code == 2
+    assert "--scenario-set: corners is not a held-out set of DrillStringField-v0" in (
+        capsys.readouterr().err
+    )
+
+
+def test_models_as_arguments_or_as_an_option() -> None:
+    from experiments.evaluate import EvaluateSpec, _parser
+
+    parser = _parser()
+    for argv in (["a", "b"], ["--models", "a", "b"], ["a", "--models", "b"]):
+        args = parser.parse_args(argv)
+        assert sorted([*args.model_folders, *args.models]) == ["a", "b"]
+    assert EvaluateSpec().output.parts[-2:] == ("results", "evaluate")
+    assert EvaluateSpec(scenario_set="corners").output.name == "evaluate_corners"

@@ -17,12 +17,15 @@ from drill_env.evaluation import ZeroAction, rollout
 from experiments.cli import main as cli_main
 from experiments.stick_slip_map import (
     CSV_COLUMNS,
+    MapSpec,
+    MapStudy,
     StickSlipMap,
     compute_map,
     grid_values,
     main,
     write_map_csv,
 )
+from experiments.sweep import run_sweep
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -150,9 +153,12 @@ def test_map_is_deterministic_without_noise_and_seeded_with_noise() -> None:
         (["--speed-max", "-3"], r"argument --speed-max: -3 is out of range"),
         (["--speed-min", "9", "--speed-max", "2"], r"--speed-min = 9.0 and --speed-max = 2.0: the range is inverted"),
         (["--speed-n", "-2"], r"argument --speed-n: -2 is out of range"),
+        (["--duration-s", "0"], r"argument --duration-s: 0 is out of range: allowed \(0, 10000\] s"),
         (["--duration", "0"], r"argument --duration: 0 is out of range: allowed \(0, 10000\] s"),
-        (["--duration", "10", "--window", "20"], r"argument --window: 20 is out of range: allowed \(0, --duration = 10\] s"),
-        (["--duration", "10.05", "--window", "5"], r"argument --duration: 10.05 is not a multiple of 0.1 s"),
+        (["--duration-s", "10", "--window-s", "20"], r"argument --window-s: 20 is out of range: allowed \(0, --duration-s = 10\] s"),
+        (["--duration-s", "10.05", "--window-s", "5"], r"argument --duration-s: 10.05 is not a multiple of 0.1 s"),
+        (["--depths", "1500"], r"argument --depths: is an option of the field string"),
+        (["--parameters", "field_2500m"], r"argument --parameters: field_2500m is not a preset of DrillString-v0: allowed navarro_lopez2007, zribi2024"),
         (["--noise", "-1"], r"argument --noise: -1 is out of range: allowed \[0, 10\] rad/s"),
         (["--wob-n", "two"], r"argument --wob-n: 'two' is not an integer"),
         (["--parameters", "nope"], r"argument --parameters: invalid choice: 'nope'"),
@@ -178,7 +184,7 @@ def test_cli_smoke_run_writes_csv_and_png(
         "--controllers", "stiff_pi", "z_torque",
         "--wob-min", "60000", "--wob-max", "180000", "--wob-n", "2",
         "--speed-min", "3", "--speed-max", "12", "--speed-n", "2",
-        "--duration", "2", "--window", "1",
+        "--duration-s", "2", "--window-s", "1",
         "--out", str(tmp_path),
         "--no-progress",
     ]  # fmt: skip
@@ -198,7 +204,7 @@ def test_cli_single_cell_grid(tmp_path: Path) -> None:
     argv = [
         "--wob-min", "1e5", "--wob-max", "1e5", "--wob-n", "1",
         "--speed-min", "5", "--speed-max", "5", "--speed-n", "1",
-        "--duration", "1", "--window", "0.5", "--out", str(tmp_path), "--no-progress",
+        "--duration-s", "1", "--window-s", "0.5", "--out", str(tmp_path), "--no-progress",
     ]  # fmt: skip
     assert main(argv) == 0
     assert (tmp_path / "stick_slip_map_stiff_pi.png").exists()
@@ -208,7 +214,7 @@ def test_cli_single_cell_grid(tmp_path: Path) -> None:
 def test_cli_no_plots_writes_only_csv(tmp_path: Path) -> None:
     argv = [
         "--controller", "soft_speed", "csmc", "--wob-n", "2", "--speed-n", "2",
-        "--duration", "1", "--window", "0.5", "--out", str(tmp_path), "--no-progress", "--no-plots",
+        "--duration-s", "1", "--window-s", "0.5", "--out", str(tmp_path), "--no-progress", "--no-plots",
     ]  # fmt: skip
     assert main(argv) == 0
     assert sorted(p.name for p in tmp_path.iterdir()) == [
@@ -280,8 +286,6 @@ def test_a_model_of_another_env_or_period_is_refused() -> None:
     ("argv", "message"),
     [
         (["--models", "no/such/model"], r"argument --models: no/such/model: "),
-        (["--models", "agents/models/residual_ppo", "--workers", "2"],
-         r"argument --models: maps of models run serially"),
     ],
 )  # fmt: skip
 def test_cli_bad_models_name_the_argument(
@@ -293,3 +297,57 @@ def test_cli_bad_models_name_the_argument(
     err = capsys.readouterr().err
     assert err.startswith("drill-gym map: error: ") and err.count("\n") == 1, err
     assert re.search(message, err), err
+
+
+def test_a_model_map_on_the_runner_is_its_compute_map(tmp_path: Path) -> None:
+    """A model's map is one task over the whole grid: the cells of compute_map, bit for bit,
+    written to the results database and read back on resume; the model is part of the
+    settings."""
+    grid = ((60e3, 170e3), (2.0, 10.0))
+    study = MapStudy(("proposed",), *grid, duration_s=3.0, window_s=1.0, models=(_ZeroResidual(),))
+    assert [run[0] for run in study.runs()] == ["proposed", "zero_residual"]
+    assert [t.key for t in study.tasks(study.items())] == [
+        "proposed/rows0-1",
+        "zero_residual/rows0-1",
+    ]
+    path = tmp_path / "map.sqlite"
+    maps = study.maps(run_sweep(study, results_path=path, progress=False))
+    plain = compute_map(_ZeroResidual(), *grid, duration_s=3.0, window_s=1.0, progress=False)
+    assert maps[1].severity.tobytes() == plain.severity.tobytes()
+    assert maps[1].stuck_fraction.tobytes() == plain.stuck_fraction.tobytes()
+    resumed = run_sweep(study, results_path=path, resume=True, progress=False)
+    assert resumed.loaded == 4 and not resumed.ran
+    without = MapStudy(("proposed",), *grid, duration_s=3.0, window_s=1.0)
+    assert "models" not in without.spec() and "models" in study.spec()
+    with pytest.raises(ValueError, match="each model needs a name of its own"):
+        MapStudy(("proposed",), *grid, models=(_ZeroResidual(), _ZeroResidual()))
+
+
+class _FieldModel(_ZeroResidual):
+    """A model of the field string: its env is an attribute, not one of its env keywords."""
+
+    name = "field_model"
+    env_id = "DrillStringField-v0"
+    env_kwargs = {"base_controller": "stiff_pi", "control_dt_s": 0.1, "observation": "surface"}
+
+
+def test_a_model_is_mapped_on_the_env_it_was_trained_on() -> None:
+    cells: dict[str, Any] = {"duration_s": 2.0, "window_s": 1.0}
+    field = MapStudy((), (1e5,), (5.0,), env_id="DrillStringField-v0", depths_m=(1500.0,),
+                     models=(_FieldModel(),), **cells)  # fmt: skip
+    assert field.runs() == [("field_model", "surface", 1500.0)]
+    with pytest.raises(ValueError, match="was trained on DrillStringField-v0"):
+        MapStudy((), (1e5,), (5.0,), models=(_FieldModel(),), **cells)
+
+
+def test_the_command_settings_make_the_study() -> None:
+    """``MapSpec`` (the options of ``drill-gym map``) resolves each env's defaults."""
+    paper = MapSpec(wob_n=2, speed_n=3, duration_s=2.0, window_s=1.0).study()
+    assert paper.controllers == ("stiff_pi",) and paper.preset == "zribi2024"
+    assert paper.wob_n == (40e3, 200e3) and paper.reference_speed_rad_s == (1.0, 8.5, 16.0)
+    assert paper.items() == ["stiff_pi/row0", "stiff_pi/row1"]
+    field = MapSpec(env_id="DrillStringField-v0", controllers=("csmc",), wob_n=1).study()
+    assert field.window_s == 50.0 and field.preset == "field_2500m"
+    assert field.runs() == [("csmc", "state", 2500.0)]  # the preset's depth, state only
+    assert MapSpec(realism="field").study().keywords == {"realism": "field"}
+    assert MapSpec(realism="ideal").study().keywords == {}  # the env's own level

@@ -304,7 +304,8 @@ def test_map_command_killed_mid_sweep_resumes_to_the_plain_csv(tmp_path: Path) -
     """``drill-gym map --resume`` in a process killed with SIGKILL after a few of its tasks,
     then run again: every WOB row once in the database, the CSV of a plain run."""
     base = ["map", "--controllers", "soft_speed", "--wob-n", "30", "--speed-n", "2"]
-    base += ["--duration", "4", "--window", "2", "--noise", "0.1", "--no-plots", "--no-progress"]
+    base += ["--duration-s", "4", "--window-s", "2", "--noise", "0.1"]
+    base += ["--no-plots", "--no-progress"]
     swept = tmp_path / "swept"
     path = swept / "stick_slip_map.sqlite"
     argv = [sys.executable, "-m", "experiments.cli", *base, "--task-size", "2", "--resume"]
@@ -400,8 +401,11 @@ def test_resume_needs_a_results_file() -> None:
         (["probability-map", "--workers", "0"], r"argument --workers: 0 is out of range"),
         (["probability-map", "--speed-min", "5", "--speed-max", "5"], r"--speed-min = --speed-max = 5.0: the range is empty"),
         (["probability-map", "--rows", "depth"], r"argument --rows: depth needs the distributed string: add --env DrillStringField-v0"),
+        (["probability-map", "--depth", "2000"], r"argument --depth: is for the distributed string"),
         (["probability-map", "--parameters", "field_2500m"], r"argument --parameters: 'field_2500m' is not a preset of DrillString-v0"),
         (["probability-map", "--delta-min", "0.5", "--delta-max", "0.1"], r"argument --delta-max: 0.1 is below --delta-min = 0.5"),
+        (["probability-map", "--duration-s", "10", "--window-s", "20"], r"argument --window-s: 20 is out of range: allowed \(0, --duration-s = 10\] s"),
+        (["probability-map", "--duration", "10.05", "--window", "5"], r"argument --duration-s: 10.05 is not a multiple of 0.1 s"),
         (["probability-map", "--env", "CartPole-v1"], r"argument --env: invalid choice: 'CartPole-v1'"),
     ],
 )  # fmt: skip
@@ -420,7 +424,7 @@ def test_results_of_the_same_settings_on_the_command_line(
 ) -> None:
     """A second run of the same settings into one database is refused (one line naming
     --resume and --overwrite); other settings share the file."""
-    base = ["map", "--wob-n", "2", "--speed-n", "2", "--duration", "2", "--window", "1"]
+    base = ["map", "--wob-n", "2", "--speed-n", "2", "--duration-s", "2", "--window-s", "1"]
     base += ["--no-plots", "--no-progress", "--out", str(tmp_path)]
     results = ["--results", str(tmp_path / "r.sqlite")]
     assert cli_main([*base, *results]) == 0
@@ -439,7 +443,8 @@ def test_results_of_the_same_settings_on_the_command_line(
 
 def test_map_command_resumes_to_the_same_csv(tmp_path: Path) -> None:
     base = ["map", "--controllers", "soft_speed", "--wob-n", "3", "--speed-n", "2"]
-    base += ["--duration", "2", "--window", "1", "--noise", "0.1", "--no-plots", "--no-progress"]
+    base += ["--duration-s", "2", "--window-s", "1", "--noise", "0.1"]
+    base += ["--no-plots", "--no-progress"]
     assert cli_main([*base, "--out", str(tmp_path / "plain")]) == 0
     path = tmp_path / "swept" / "stick_slip_map.sqlite"
     assert cli_main([*base, "--out", str(tmp_path / "swept"), "--task-size", "2", "--resume"]) == 0
@@ -472,7 +477,7 @@ def test_a_sweep_on_ray_without_the_scale_extra_is_one_line(
         return real_import(name, *args, **kwargs)
 
     monkeypatch.setattr(builtins, "__import__", no_ray)
-    argv = ["map", "--wob-n", "1", "--speed-n", "1", "--duration", "1", "--window", "1"]
+    argv = ["map", "--wob-n", "1", "--speed-n", "1", "--duration-s", "1", "--window-s", "1"]
     assert cli_main([*argv, "--workers", "2", "--no-progress", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err == (

@@ -197,10 +197,11 @@ def field_compare(**kwargs: Any) -> CompareStudy:
 
 
 PAPER_AGENT = SimpleNamespace(name="paper_agent", env_id=PAPER_ENV, env_kwargs={})
-"""An agent of the other env: neither run_comparison nor the study runs it on the field."""
+"""An agent of the other env: the comparison does not run it on the field."""
 
 
-def test_field_compare_on_the_runner_equals_run_comparison() -> None:
+def test_field_compare_does_not_depend_on_the_task_size() -> None:
+    """Three runs per task, or one (``run_comparison``): the same rows and traces."""
     study = field_compare(agent=PAPER_AGENT, task_runs=3)
     assert not study.agent_runs and study.spec()["agent"] is None
     outcome = run_sweep(study, progress=False)
@@ -353,7 +354,7 @@ def _same_files(a: Path, b: Path, names: list[str]) -> None:
 
 def test_field_map_command_on_the_runner_writes_the_plain_files(tmp_path: Path) -> None:
     base = ["map", "--env", FIELD_ENV, "--controllers", "soft_speed", "csmc", "--depths", "1500"]
-    base += ["--wob-n", "3", "--speed-n", "1", "--duration", "2", "--window", "1"]
+    base += ["--wob-n", "3", "--speed-n", "1", "--duration-s", "2", "--window-s", "1"]
     base += ["--noise", "0.05", "--no-plots", "--no-progress"]
     assert cli_main([*base, "--out", str(tmp_path / "plain")]) == 0
     swept = tmp_path / "swept"
@@ -376,7 +377,7 @@ def test_field_compare_command_on_the_runner_writes_the_plain_files(
 ) -> None:
     base = ["compare", "--env", FIELD_ENV, "--controllers", "stiff_pi", "proposed", "--depths"]
     base += ["1500", "--conditions", "nominal", "--observations", "surface", "--noise", "0.05"]
-    base += ["--duration", "2", "--no-agent", "--no-progress", "--no-plots"]
+    base += ["--duration-s", "2", "--no-agent", "--no-progress", "--no-plots"]
     assert cli_main([*base, "--out", str(tmp_path / "plain")]) == 0
     plain = capsys.readouterr().out
     assert cli_main([*base, "--out", str(tmp_path / "swept"), "--task-size", "3", "--results",

@@ -78,8 +78,8 @@ def test_probability_is_the_share_of_draws_in_stick_slip() -> None:
 
 def test_command_writes_csv_and_png(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     argv = [
-        "probability-map", "--wob-n", "2", "--speed-n", "3", "--draws", "3", "--duration", "3",
-        "--window", "1.5", "--out", str(tmp_path), "--no-progress",
+        "probability-map", "--wob-n", "2", "--speed-n", "3", "--draws", "3", "--duration-s", "3",
+        "--window-s", "1.5", "--out", str(tmp_path), "--no-progress",
     ]  # fmt: skip
     assert cli_main(argv) == 0
     assert "probability-map on serial: 6 cells x 3 draws x 3 s" in capsys.readouterr().out
@@ -98,7 +98,7 @@ def test_field_string_over_measured_depth(tmp_path: Path) -> None:
         "probability-map", "--env", "DrillStringField-v0", "--rows", "depth",
         "--depth-min", "1500", "--depth-max", "4000", "--depth-n", "2", "--wob", "120000",
         "--speed-min", "4", "--speed-max", "12", "--speed-n", "2", "--draws", "2",
-        "--duration", "3", "--window", "1.5", "--out", str(tmp_path), "--no-progress",
+        "--duration-s", "3", "--window-s", "1.5", "--out", str(tmp_path), "--no-progress",
     ]  # fmt: skip
     assert cli_main(argv) == 0
     with (tmp_path / "stick_slip_probability_stiff_pi.csv").open() as f:

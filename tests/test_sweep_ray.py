@@ -141,7 +141,8 @@ def test_compare_table_on_ray_equals_the_serial_one() -> None:
 
 def test_map_command_with_workers_writes_the_serial_csv(tmp_path: Path) -> None:
     base = ["map", "--controllers", "z_torque", "--wob-n", "3", "--speed-n", "2"]
-    base += ["--duration", "2", "--window", "1", "--noise", "0.1", "--no-plots", "--no-progress"]
+    base += ["--duration-s", "2", "--window-s", "1", "--noise", "0.1"]
+    base += ["--no-plots", "--no-progress"]
     assert cli_main([*base, "--out", str(tmp_path / "serial")]) == 0
     assert (
         cli_main([*base, "--out", str(tmp_path / "ray"), "--workers", "2", "--task-size", "2"]) == 0
@@ -223,7 +224,7 @@ def test_compare_and_evaluate_commands_with_workers_write_the_serial_files(tmp_p
     """Through the command line: the same CSV as the serial run, and the figures drawn from
     the traces that came back from the workers."""
     base = ["compare", "--controllers", "csmc", "proposed", "--conditions", "nominal"]
-    base += ["--noise", "0.1", "--duration", "2", "--no-agent", "--no-progress"]
+    base += ["--noise", "0.1", "--duration-s", "2", "--no-agent", "--no-progress"]
     assert cli_main([*base, "--no-plots", "--out", str(tmp_path / "c1")]) == 0
     assert cli_main([*base, "--workers", "2", "--out", str(tmp_path / "c2")]) == 0
     assert (tmp_path / "c2" / "compare.csv").read_text() == (
