@@ -61,7 +61,7 @@ from experiments.arguments import (
     one_line,
     output_folder,
 )
-from experiments.controllers import controller_type, refuse_on_ray
+from experiments.controllers import CONTROLLERS_OPTION_HELP, controller_type, refuse_on_ray
 from experiments.field import (
     COMPARE_CONDITIONS,
     COMPARE_DEPTHS_M,
@@ -843,9 +843,14 @@ class CompareSpec:
     """the env of every run"""
     controllers: tuple[str, ...] = field(
         default=(),
-        metadata=option(parse=controller_type, metavar="NAME", default_text="all registered"),
+        metadata=option(
+            parse=controller_type,
+            help=CONTROLLERS_OPTION_HELP,
+            metavar="NAME",
+            default_text="all registered",
+        ),
     )
-    """registered names, or MODULE:CLASS or PATH.py:CLASS"""
+    # help: CONTROLLERS_OPTION_HELP (user classes are the same in every study)
     conditions: tuple[str, ...] = field(
         default=(),
         metadata=option(
@@ -958,7 +963,7 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
         spec = spec_from_args(CompareSpec, args)
     except ValueError as err:
         parser.error(str(err))
-    refuse_on_ray(parser.fail, args, spec.controller_names)
+    refuse_on_ray(parser.fail, runner.backend(), spec.controller_names)
     agent = load_agent(agent_loader, spec.env_id) if not spec.no_agent else None
     try:
         study = CompareStudy.from_spec(

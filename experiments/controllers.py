@@ -35,10 +35,11 @@ from pathlib import Path
 from typing import Any, Final
 
 from drill_env.control import controller_names, register_controller
-from experiments.sweep import backend_from_args
+from experiments.sweep import Backend
 
 __all__ = [
     "CONTROLLERS_HELP",
+    "CONTROLLERS_OPTION_HELP",
     "controller_type",
     "is_user_controller",
     "load_controller",
@@ -56,6 +57,11 @@ CONTROLLERS_HELP: Final = (
     "examples/compiled_controller.py)"
 )
 """The help of the ``--controllers`` options on user classes (after the registered names)."""
+CONTROLLERS_OPTION_HELP: Final = (
+    "registered names, or your class as MODULE:CLASS or PATH.py:CLASS (naming it runs its "
+    "code: name only code you trust)"
+)
+"""The short help of a study's ``--controllers`` option."""
 
 _LOADED: dict[str, str] = {}
 """Spec as typed -> the name it was registered under (a spec is loaded once per process)."""
@@ -273,14 +279,12 @@ def controller_type(text: str) -> str:
 controller_type.__name__ = "controller"
 
 
-def refuse_on_ray(
-    fail: Callable[[str, str], Any], args: argparse.Namespace, names: Sequence[str]
-) -> None:
+def refuse_on_ray(fail: Callable[[str, str], Any], backend: Backend, names: Sequence[str]) -> None:
     """``fail("--controllers", message)`` when a user's class is to run on Ray: it is
     registered in this process only, and Ray's workers are other processes."""
 
     mine = user_controllers(names)
-    if mine and backend_from_args(args).distributed:
+    if mine and backend.distributed:
         fail(
             "--controllers",
             f"{', '.join(mine)} is your own class, registered in this process only: run it "

@@ -53,7 +53,7 @@ from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
 from drill_env.validation import printable
 from experiments.arguments import ArgumentParser, check_output_folder, names_type, output_folder
-from experiments.controllers import controller_type, refuse_on_ray
+from experiments.controllers import CONTROLLERS_OPTION_HELP, controller_type, refuse_on_ray
 from experiments.field import (
     ENV_IDS,
     FIELD_ENV,
@@ -624,9 +624,12 @@ class EvaluateSpec:
     )
     """observation modes of the speed loops on the field string"""
     controllers: tuple[str, ...] = field(
-        default=(), metadata=option(parse=controller_type, metavar="NAME", default_text="all")
+        default=(),
+        metadata=option(
+            parse=controller_type, help=CONTROLLERS_OPTION_HELP, metavar="NAME", default_text="all"
+        ),
     )
-    """registered names, or MODULE:CLASS or PATH.py:CLASS"""
+    # help: CONTROLLERS_OPTION_HELP (user classes are the same in every study)
     scenario_set: str = field(
         default="heldout",
         metadata=option(
@@ -737,7 +740,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     controllers = None
     if spec.controllers:
         controllers = list(dict.fromkeys([*spec.controllers, *base_names]))
-        refuse_on_ray(parser.fail, args, controllers)
+        refuse_on_ray(parser.fail, runner.backend(), controllers)
     base_label = BASE_CONTROLLER
     bases = base_names
     if field_env:  # a run's label is its controller and observation mode

@@ -59,6 +59,8 @@ class Option:
             number of values, others one or none).
         repeat: An option given once per value (``--grid a=1,2 --grid b=3``) instead of one
             option with several values (tuple fields).
+        help: The help of an option whose text has its home elsewhere (default: the field's
+            docstring).
     """
 
     low: float | None = None
@@ -74,6 +76,7 @@ class Option:
     group: str | None = None
     positional: bool = False
     repeat: bool = False
+    help: str | None = None
 
 
 def option(**kwargs: Any) -> dict[str, Option]:
@@ -166,7 +169,7 @@ def spec_options(
             groups[spec.group] = parser.add_argument_group(spec.group)
         target = groups[spec.group]
         flag = spec.flag or option_name(f.name)
-        doc = plain_text(docs.get(f.name, ""), names)
+        doc = plain_text(spec.help or docs.get(f.name, ""), names)
         hint, optional = _unwrap_optional(hints[f.name])
         if hint is bool:
             switch = {

@@ -65,7 +65,7 @@ from experiments.arguments import (
     check_output_folder,
     output_folder,
 )
-from experiments.controllers import controller_type, refuse_on_ray
+from experiments.controllers import CONTROLLERS_OPTION_HELP, controller_type, refuse_on_ray
 from experiments.field import (
     ENV_IDS,
     FIELD_ENV,
@@ -615,12 +615,13 @@ class MapSpec:
         default=(),
         metadata=option(
             parse=controller_type,
+            help=CONTROLLERS_OPTION_HELP,
             metavar="NAME",
             aliases=("--controller",),
             default_text="stiff_pi, none with --models",
         ),
     )
-    """registered names, or MODULE:CLASS or PATH.py:CLASS"""
+    # help: CONTROLLERS_OPTION_HELP (user classes are the same in every study)
     models: tuple[str, ...] = field(default=(), metadata=option(metavar="PATH"))
     """model folders to map too"""
     env_id: str = field(
@@ -835,7 +836,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as err:
         parser.error(str(err))
     level = map_realism(spec.env_id, spec.realism)
-    refuse_on_ray(parser.fail, args, spec.controller_names)
+    refuse_on_ray(parser.fail, runner.backend(), spec.controller_names)
     policies: list[MapPolicy] = []
     for folder in spec.models:
         try:

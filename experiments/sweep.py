@@ -58,11 +58,11 @@ import numpy as np
 from drill_env.control import controller_names
 from experiments.field import OBSERVATIONS
 from experiments.results_db import ResultsDatabase, Schema, SchemaError, as_json
-from experiments.spec_cli import option, spec_from_args, spec_options
+from experiments.spec_cli import option
 from experiments.tables import json_clean
 
 if TYPE_CHECKING:  # pragma: no cover
-    import argparse
+    pass
 
 __all__ = [
     "ADDRESS_VARIABLE",
@@ -78,9 +78,7 @@ __all__ = [
     "SweepOutcome",
     "Task",
     "TaskResult",
-    "add_sweep_options",
     "agent_fingerprint",
-    "backend_from_args",
     "check_controllers",
     "check_observations",
     "check_task_size",
@@ -88,9 +86,7 @@ __all__ = [
     "ray_session",
     "read_results",
     "report_outcome",
-    "results_path_from_args",
     "run_sweep",
-    "runner_from_args",
     "spec_hash",
 ]
 
@@ -534,26 +530,6 @@ class RunnerSpec:
         if self.resume or self.overwrite or self.backend().distributed:
             return default
         return None
-
-
-def add_sweep_options(parser: argparse.ArgumentParser) -> None:
-    """Add the runner's options (the fields of :class:`RunnerSpec`) to ``parser``."""
-    spec_options(parser, RunnerSpec)
-
-
-def runner_from_args(args: argparse.Namespace) -> RunnerSpec:
-    """The :class:`RunnerSpec` of parsed options."""
-    return spec_from_args(RunnerSpec, args)
-
-
-def backend_from_args(args: argparse.Namespace) -> Backend:
-    """The :class:`Backend` of parsed runner options."""
-    return runner_from_args(args).backend()
-
-
-def results_path_from_args(args: argparse.Namespace, default: Path) -> Path | None:
-    """The results database of parsed runner options (:meth:`RunnerSpec.results_path`)."""
-    return runner_from_args(args).results_path(default)
 
 
 # ------------------------------------------------------------- checks of the studies

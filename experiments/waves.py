@@ -590,7 +590,9 @@ class WavesSpec:
     """length of each run from rest, s (a multiple of 0.02 s)"""
     window_s: float = field(
         default=WINDOW_S,
-        metadata=option(low=0.0, high=1e4, open_low=True, unit="s", metavar="S", flag="--window"),
+        metadata=option(
+            low=0.0, high=1e4, open_low=True, unit="s", metavar="S", aliases=("--window",)
+        ),
     )
     """analysis window at the end of each run, s"""
     seed: int = field(default=0, metadata=option(low=0, high=SEED_HIGH))

@@ -260,22 +260,30 @@ def test_train_help_is_short_and_help_all_lists_every_setting(
     assert train.parse_args(["--no-anneal-lr"]).anneal_lr is False
 
 
-@pytest.mark.parametrize(
-    "name",
-    [
-        "waves",
-        "realism",
-        "tune",
-        "coupled",
-        "coupled-controllers",
-        "benchmark",
-        "sweep-train",
-        "train",
-    ],
-)
+@pytest.mark.parametrize("name", list(SUBCOMMANDS))
 def test_help_fits_on_a_screen(
     name: str, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     monkeypatch.setenv("COLUMNS", "80")
     code, out, _ = run([name, "--help"], capsys)
     assert code == 0 and len(out.splitlines()) < 60, (name, len(out.splitlines()))
+
+
+OLD_NAMES = ("--duration", "--episode", "--episode-s", "--env-id", "--run-dir")
+"""Option names replaced by one name per meaning (--duration-s, --env, --out)."""
+WINDOW_INTERVAL = ("coupled", "calibrate", "replay")
+"""Commands whose --window is a time interval (START END, A:B); elsewhere the analysis window
+at the end of a run is its length, --window-s."""
+
+
+@pytest.mark.parametrize("name", list(SUBCOMMANDS))
+def test_one_name_per_meaning(name: str) -> None:
+    shown = {
+        s
+        for action in parser_of(name)._actions
+        if action.help != argparse.SUPPRESS
+        for s in action.option_strings
+    }
+    assert not shown & set(OLD_NAMES), (name, shown & set(OLD_NAMES))
+    if name not in WINDOW_INTERVAL:
+        assert "--window" not in shown, name

@@ -92,15 +92,16 @@ def test_map_and_evaluate_take_a_user_controller(tmp_path: Path) -> None:
     assert "compiled_controller.CompiledSpeedPI" in labels
 
 
-def test_help_says_how_to_name_your_own_class_and_compile_it(
+def test_help_says_how_to_name_your_own_class_and_the_guide_how_to_compile_it(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     for name in ("compare", "map", "evaluate", "benchmark"):
         assert main([name, "--help"]) == 0
         out = " ".join(capsys.readouterr().out.split())
         assert "MODULE:CLASS" in out and "PATH.py:CLASS" in out, name
-        assert "runs its code" in out and "compiled_law()" in out, name
-        assert "examples/compiled_controller.py" in out, name
+        assert "runs its code" in out and "only code you trust" in out, name
+    guide = (ROOT / "docs" / "controllers.md").read_text()
+    assert "compiled_law(" in guide and "examples/compiled_controller.py" in guide
 
 
 BAD_CLASSES = """
