@@ -32,6 +32,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import shlex
 import shutil
 import sys
 import time
@@ -348,13 +349,7 @@ def _prepare_run_dir(config: TrainConfig, run_dir: Path) -> Checkpoint | None:
                 f"folders {PREFIX}<decisions>/ written by drill-gym train); check --run-dir, "
                 "--exp-name and --seed, or start a new run without --resume"
             )
-        if last.legacy and not config.trust_pickle:
-            raise ValueError(
-                f"--resume: the last checkpoint {str(last.path)!r} is a pickled "
-                f"Stable-Baselines3 checkpoint of an older version: {PICKLE_RISK}; pass "
-                "--trust-pickle only if you wrote it yourself"
-            )
-        return last
+        return _trusted(config, last)
     if run_dir.exists() and not run_dir.is_dir():
         raise ValueError(f"--run-dir {str(run_dir)!r} is a file: expected a folder")
     if run_dir.is_dir() and any(run_dir.iterdir()):
@@ -372,6 +367,52 @@ def _prepare_run_dir(config: TrainConfig, run_dir: Path) -> Checkpoint | None:
             )
         shutil.rmtree(run_dir)
     return None
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):
+        return False
+
+
+def _trusted(config: TrainConfig, last: Checkpoint) -> Checkpoint:
+    """``last`` to resume from: a checkpoint folder as it is; an old pickled checkpoint only
+    when ``--trust-pickle`` names exactly its files (the checkpoint and its VecNormalize
+    statistics), and then read through the names the user gave."""
+
+    named = [Path(name) for name in config.trust_pickle]
+    needed = last.pickles
+    option = "--trust-pickle " + " ".join(shlex.quote(str(p)) for p in needed)
+    if not needed:
+        if named:
+            raise ValueError(
+                f"--trust-pickle names {', '.join(repr(str(n)) for n in named)}, but the last "
+                f"checkpoint {str(last.path)!r} is a checkpoint folder, read without pickle: "
+                "nothing to trust; leave --trust-pickle out"
+            )
+        return last
+    for name in named:
+        if not name.is_file():
+            raise ValueError(f"--trust-pickle {str(name)!r}: no such file")
+    missing = [p for p in needed if not any(_same_file(p, n) for n in named)]
+    if missing:
+        raise ValueError(
+            f"--resume: the last checkpoint {str(last.path)!r} is a pickled Stable-Baselines3 "
+            f"checkpoint of an older version: {PICKLE_RISK}; pass --trust-pickle only if you "
+            f"wrote it yourself, naming its files: {option}"
+        )
+    extra = [n for n in named if not any(_same_file(n, p) for p in needed)]
+    if extra:
+        raise ValueError(
+            f"--trust-pickle names {', '.join(repr(str(n)) for n in extra)}, which --resume "
+            f"does not read: it reads only the last checkpoint's files, {option}"
+        )
+    path = next(n for n in named if _same_file(n, last.path))
+    norm = None
+    if last.legacy_norm is not None:
+        norm = next(n for n in named if _same_file(n, last.legacy_norm))
+    return Checkpoint(path, last.steps, norm, pickled=True)
 
 
 def _start_line(config: TrainConfig, total: int, last: Checkpoint | None) -> str:
@@ -447,7 +488,7 @@ def train(config: TrainConfig, progress: bool = True) -> Path:
     # ---- agent: PPO with a zero-initialised residual, or the checkpoint to resume
     if last is None:
         model = make_model(config, venv)
-    elif last.legacy:  # an older run's pickled SB3 checkpoint (--trust-pickle)
+    elif last.legacy:  # an older run's pickled SB3 checkpoint, the file --trust-pickle names
         model = PPO.load(
             last.path,
             env=venv,

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, Final, NoReturn
 
 from drill_env.validation import printable, shown
+from experiments.preflight import USAGE_ERROR, error_line_format
 
 __all__ = [
     "BASE_SEED_HIGH",
@@ -34,8 +35,6 @@ __all__ = [
     "seed_type",
 ]
 
-USAGE_ERROR: int = 2
-"""Exit code of a user error (the argparse convention)."""
 SEED_HIGH: Final = 2**32 - 1
 """Largest seed a command takes when it uses the seed as it is (a reset or training seed)."""
 BASE_SEED_HIGH: Final = 2**31 - 1
@@ -56,7 +55,7 @@ def one_line(text: str) -> str:
 
 def error_line(prog: str, message: str) -> str:
     """The one line that reports a user error of the command ``prog``."""
-    return f"{prog}: error: {one_line(message)} (see {prog} --help)"
+    return error_line_format.format(prog=prog, message=one_line(message))
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter):

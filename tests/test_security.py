@@ -1,0 +1,358 @@
+"""Trust covers the named file only, messages of hostile keywords stay safe through Gymnasium,
+and paths no command can use are refused before the study is imported.
+
+``tests/test_hostile_inputs.py`` generates hostile inputs for every loader and command; this
+file pins the three rules that live at the edges: ``train --resume --trust-pickle FILE``,
+Gymnasium's re-raise of an env's ``TypeError`` with the raw keywords, and
+:mod:`experiments.preflight`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pickle
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import drill_env  # noqa: F401  (registers the envs)
+from agents.checkpoints import find_last_checkpoint
+from agents.config import TrainConfig, parse_config
+from agents.train import _prepare_run_dir
+from drill_env.validation import (
+    MAX_MESSAGE_CHARS,
+    InputTypeError,
+    input_type_errors,
+    printable,
+)
+from experiments.cli import main as cli_main
+from experiments.preflight import refused_path
+
+ROOT = Path(__file__).resolve().parents[1]
+SMALL = settings(
+    deadline=None,
+    max_examples=60,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+
+
+class _Payload:
+    """Unpickled, creates the file ``path`` (proof that code ran)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def __reduce__(self) -> Any:
+        return (Path.touch, (self.path,))
+
+
+@pytest.fixture
+def marker(tmp_path: Path) -> Iterator[Path]:
+    path = tmp_path / "MARKER"
+    yield path
+    assert not path.exists(), "a pickle was opened"
+
+
+def _old_run(tmp_path: Path, marker: Path, norm: bool = True) -> Path:
+    """A run folder of an older version: a pickled checkpoint (and its VecNormalize file)
+    holding a payload, plus a decoy pickle with more decisions under another name."""
+    run_dir = tmp_path / "run"
+    folder = run_dir / "checkpoints"
+    folder.mkdir(parents=True)
+    (run_dir / "config.json").write_text(
+        json.dumps({"exp_name": "x", "total_timesteps": 1, "n_steps": 1})
+    )
+    evil = pickle.dumps(_Payload(marker))
+    (folder / "rl_model_1024_steps.zip").write_bytes(evil)
+    if norm:
+        (folder / "rl_model_vecnormalize_1024_steps.pkl").write_bytes(evil)
+    (folder / "trusted.zip").write_bytes(evil)  # named like nothing resume reads
+    return run_dir
+
+
+def _resume(run_dir: Path, *trusted: Path | str) -> Any:
+    config = TrainConfig(
+        run_dir=str(run_dir), resume=True, trust_pickle=tuple(str(t) for t in trusted)
+    )
+    return _prepare_run_dir(config, run_dir)
+
+
+# ------------------------------------------------------------------ trust: the named files
+def test_resume_refuses_an_old_checkpoint_without_its_files_named(
+    tmp_path: Path, marker: Path
+) -> None:
+    run_dir = _old_run(tmp_path, marker)
+    folder = run_dir / "checkpoints"
+    zip_file, norm = (
+        folder / "rl_model_1024_steps.zip",
+        folder / "rl_model_vecnormalize_1024_steps.pkl",
+    )
+    with pytest.raises(
+        ValueError, match=r"naming its files: --trust-pickle .*1024_steps.zip .*pkl"
+    ):
+        _resume(run_dir)
+    with pytest.raises(ValueError, match=r"naming its files"):
+        _resume(run_dir, zip_file)  # the VecNormalize file is a second pickle
+    with pytest.raises(ValueError, match=r"naming its files"):
+        _resume(run_dir, folder / "trusted.zip", norm)  # another file of the folder
+    lone = _old_run(tmp_path / "lone", marker, norm=False) / "checkpoints"
+    with pytest.raises(ValueError, match=r"names '.*trusted.zip', which --resume does not read"):
+        _resume(lone.parent, lone / "rl_model_1024_steps.zip", lone / "trusted.zip")
+    with pytest.raises(ValueError, match=r"no such file"):
+        _resume(run_dir, zip_file, tmp_path / "missing.pkl")
+    with pytest.raises(ValueError, match=r"no such file"):
+        _resume(run_dir, folder)  # a folder never stands for the files in it
+
+
+def test_resume_reads_the_old_checkpoint_through_the_names_given(
+    tmp_path: Path, marker: Path
+) -> None:
+    run_dir = _old_run(tmp_path, marker)
+    folder = run_dir / "checkpoints"
+    link = tmp_path / "mine.zip"
+    link.symlink_to(folder / "rl_model_1024_steps.zip")
+    last = _resume(run_dir, folder / "rl_model_vecnormalize_1024_steps.pkl", link)
+    assert last.legacy and last.steps == 1024
+    assert last.path == link  # the name the user gave, not one found in the folder
+    assert last.legacy_norm == folder / "rl_model_vecnormalize_1024_steps.pkl"
+    without_norm = _old_run(tmp_path / "b", marker, norm=False)
+    only = without_norm / "checkpoints" / "rl_model_1024_steps.zip"
+    assert _resume(without_norm, only).pickles == (only,)
+
+
+def test_trust_on_a_checkpoint_folder_is_refused(tmp_path: Path, marker: Path) -> None:
+    run_dir = tmp_path / "run"
+    ck = run_dir / "checkpoints" / "steps_64"
+    ck.mkdir(parents=True)
+    (ck / "training.json").write_text("{}")
+    last = find_last_checkpoint(run_dir)
+    assert last is not None and not last.legacy and last.pickles == ()
+    decoy = tmp_path / "x.zip"
+    decoy.write_bytes(pickle.dumps(_Payload(marker)))
+    with pytest.raises(ValueError, match=r"is a checkpoint folder, read without pickle"):
+        _resume(run_dir, decoy)
+    assert _resume(run_dir).path == ck
+
+
+@pytest.mark.parametrize(
+    ("value", "match"),
+    [
+        (True, r"--trust-pickle = True is not valid: name the pickled checkpoint files"),
+        ("a.zip", r"expected a list of file names"),
+        (("a", "b", "c"), r"names 3 files: allowed at most 2"),
+        (("",), r"expected a file name"),
+        (("a\x00b",), r"expected a file name"),
+        ((5,), r"expected a file name"),
+    ],
+    ids=repr,
+)
+def test_trust_pickle_names_files(value: Any, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        TrainConfig(resume=True, trust_pickle=value)
+
+
+def test_trust_needs_resume_and_is_never_read_from_a_record() -> None:
+    with pytest.raises(ValueError, match=r"--trust-pickle .* it needs --resume"):
+        TrainConfig(trust_pickle=("a.zip",))
+    assert parse_config(["--resume", "--trust-pickle", "a.zip", "b.pkl"]).trust_pickle == (
+        "a.zip",
+        "b.pkl",
+    )
+    shipped = json.loads((ROOT / "agents/models/residual_ppo/config.json").read_text())
+    assert shipped["train_config"]["trust_pickle"] is False  # what earlier versions wrote
+    assert TrainConfig.from_dict(shipped["train_config"]).trust_pickle == ()
+    record = {**shipped["train_config"], "resume": True, "trust_pickle": ["x.zip"]}
+    assert TrainConfig.from_dict(record).trust_pickle == ()  # a file never grants trust
+
+
+def test_train_command_refuses_an_unnamed_pickle_on_one_line(
+    tmp_path: Path, marker: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    run_dir = _old_run(tmp_path, marker)
+    decoy = run_dir / "checkpoints" / "trusted.zip"
+    code = cli_main(["train", "--run-dir", str(run_dir), "--resume", "--trust-pickle", str(decoy)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1, err
+    assert "naming its files: --trust-pickle" in err
+
+
+# ------------------------------------------------- Gymnasium's re-raise keeps messages safe
+class _Loud:
+    """An object whose repr moves the terminal (and is long)."""
+
+    def __repr__(self) -> str:
+        return "\x1b[2J\x1b[31m" * 500
+
+
+HOSTILE_VALUES = {
+    "escape": "\x1b[31mred\x1b[0m",
+    "huge": "x" * 10_000_000,
+    "repr": _Loud(),
+    "newlines": "a\nb\r\nc\u202e",
+}
+ENV_KEYWORDS = {
+    "DrillString-v0": ["foo", "wob_n", "parameters", "randomization", "reward_weights"],
+    "DrillStringField-v0": ["foo", "measured_depth_m", "randomization", "observation"],
+    "DrillStringCoupled-v0": ["foo", "string", "bit", "applied_force_n", "torque_loop"],
+}
+
+
+def _safe(message: str) -> bool:
+    return len(message) <= MAX_MESSAGE_CHARS and printable(message, 10**6) == message
+
+
+@pytest.mark.parametrize("value", list(HOSTILE_VALUES), ids=str)
+@pytest.mark.parametrize(
+    ("env_id", "keyword"), [(e, k) for e, ks in ENV_KEYWORDS.items() for k in ks]
+)
+def test_make_errors_show_keywords_escaped_and_bounded(
+    env_id: str, keyword: str, value: str
+) -> None:
+    start = time.perf_counter()
+    with pytest.raises((TypeError, ValueError)) as caught:
+        gym.make(env_id, **{keyword: HOSTILE_VALUES[value]})
+    assert time.perf_counter() - start < 1.0
+    error = caught.value
+    assert _safe(str(error)), str(error)[:300]
+    for note in getattr(error, "__notes__", []):
+        assert _safe(note), note[:300]
+    if isinstance(error, TypeError):
+        assert isinstance(error, InputTypeError)
+
+
+def test_a_hostile_keyword_name_is_escaped() -> None:
+    with pytest.raises(InputTypeError) as caught:
+        gym.make("DrillString-v0", **{"\x1b[2J" * 100_000: 1})
+    assert _safe(str(caught.value)) and "\\x1b[2J" in str(caught.value)
+
+
+@pytest.mark.parametrize(
+    ("keywords", "match"),
+    [
+        ({"num_envs": 10**12}, r"num_envs = 1000000000000 is out of range: allowed an integer"),
+        ({"num_envs": _Loud()}, r"num_envs = (\\x1b\[2J\\x1b\[31m)+.*is out of range"),
+        ({"max_episode_steps": 10**400}, r"max_episode_steps = <an integer of \d+ bits>"),
+        ({"render_mode": "\x1b[2J" * 10**5}, r"render_mode = '(\\x1b\[2J)+.*not supported"),
+    ],
+    ids=["num_envs", "repr", "steps", "render_mode"],
+)
+def test_coupled_vector_env_bounds_and_escapes(keywords: dict[str, Any], match: str) -> None:
+    start = time.perf_counter()
+    with pytest.raises(ValueError, match=match) as caught:
+        gym.make_vec("DrillStringCoupled-v0", **keywords)
+    assert time.perf_counter() - start < 1.0 and _safe(str(caught.value))
+
+
+@SMALL
+@given(st.text(max_size=3000), st.text(max_size=200))
+def test_input_type_errors_are_always_safe(first: str, more: str) -> None:
+    """Whatever text an error is built from, also when a caller rebuilds it with more."""
+    with pytest.raises(InputTypeError) as caught, input_type_errors():
+        raise TypeError(first)
+    rebuilt = type(caught.value)(f"{caught.value} with kwargs ({more!s})")
+    for error in (caught.value, rebuilt):
+        assert _safe(str(error))
+
+
+@SMALL
+@given(st.text(max_size=2000), st.integers(0, 300))
+def test_printable_is_bounded_and_has_no_control_characters(text: str, limit: int) -> None:
+    line = printable(text, limit)
+    assert len(line) <= max(limit, 3) and line.isprintable()
+    if len(text) <= limit and text.isprintable() and "\\" not in text:
+        assert line == text
+
+
+# ----------------------------------------------- paths refused before the study is imported
+@pytest.fixture
+def specials(tmp_path: Path) -> Iterator[dict[str, Path]]:
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    regular = tmp_path / "notes.txt"
+    regular.write_text("mine")
+    sock_path = tmp_path / "sock"
+    server = socket.socket(socket.AF_UNIX)
+    server.bind(str(sock_path))
+    try:
+        yield {
+            "fifo": fifo,
+            "socket": sock_path,
+            "device": Path("/dev/zero"),
+            "folder": folder,
+            "file": regular,
+        }
+    finally:
+        server.close()
+
+
+PREFLIGHT_CASES = [
+    (["map", "--results", "{fifo}"], r"argument --results: '.*fifo' is a FIFO \(named pipe\)"),
+    (["compare", "--results={device}"], r"'/dev/zero' is a character device"),
+    (["tune", "--results", "{socket}"], r"'.*sock' is a socket"),
+    (["probability-map", "--results", "{folder}"], r"'.*folder' is a folder: expected a file"),
+    (["tune", "--gains-file", "{folder}"], r"argument --gains-file: .* is a folder"),
+    (["tune", "--gains-file", "{fifo}"], r"is a FIFO"),
+    (["calibrate", "{fifo}", "--window", "0", "1"], r"'.*fifo' is a FIFO"),
+    (["calibrate", "{device}", "--window", "0", "1"], r"is a character device"),
+    (["replay", "{folder}/../fifo", "{file}"], r"is a FIFO"),
+    (["map", "--models", "{file}", "{fifo}"], r"is a FIFO"),
+    (["evaluate", "{socket}"], r"is a socket"),
+    (["benchmark", "mod:Cls", "--out", "{file}"], r"argument --out: .* is a file, not a folder"),
+    (["coupled", "--out", "{fifo}"], r"is a FIFO"),
+    (["train", "--run-dir", "{file}"], r"argument --run-dir: .* is a file, not a folder"),
+    (["convert", "{fifo}", "{folder}/new"], r"is a FIFO"),
+]
+
+
+@pytest.mark.parametrize(("argv", "match"), PREFLIGHT_CASES, ids=lambda v: " ".join(v)[:40])
+def test_unusable_paths_are_refused_before_importing_the_study(
+    argv: list[str], match: str, specials: dict[str, Path]
+) -> None:
+    filled = [a.format(**{k: str(v) for k, v in specials.items()}) for a in argv]
+    problem = refused_path(filled[1:])
+    assert problem is not None and __import__("re").search(match, problem), problem
+
+
+def test_preflight_passes_what_commands_can_use(specials: dict[str, Path]) -> None:
+    for argv in (
+        ["--results", str(specials["file"].with_name("new.db")), "--out", str(specials["folder"])],
+        ["--models", str(specials["folder"]), "--seed", "0", "--controllers", "proposed"],
+        ["--gains-file", str(specials["file"]), "--write"],
+        [str(specials["file"]), "--window", "0", "1"],
+        ["--out", str(specials["folder"] / "new")],
+    ):
+        assert refused_path(argv) is None, argv
+
+
+def test_a_fifo_as_results_is_refused_within_a_second(
+    specials: dict[str, Path], tmp_path: Path
+) -> None:
+    """The whole command, in a fresh interpreter: no study, NumPy or Numba is imported."""
+    code = (
+        "import sys, time; t = time.perf_counter(); from experiments.cli import main; "
+        "c = main(sys.argv[1:]); "
+        "heavy = [m for m in ('numpy', 'numba', 'experiments.stick_slip_map') if m in sys.modules]; "
+        "print(c, time.perf_counter() - t, heavy)"
+    )
+    argv = ["map", "--results", str(specials["fifo"]), "--out", str(tmp_path / "out")]
+    done = subprocess.run(
+        [sys.executable, "-c", code, *argv], capture_output=True, text=True, timeout=60, cwd=ROOT
+    )
+    code_text, seconds, heavy = done.stdout.split(" ", 2)
+    assert code_text == "2" and heavy.strip() == "[]", done.stdout
+    assert float(seconds) < 1.0
+    assert done.stderr.count("\n") == 1 and "is a FIFO" in done.stderr
+    assert not (tmp_path / "out").exists()
