@@ -18,6 +18,8 @@ from __future__ import annotations
 import json
 import math
 import os
+import stat
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -297,14 +299,58 @@ def plant_from_json(data: Any, where: str = "plant") -> CalibratedPlant:
 def load_plant(path: str | os.PathLike[str]) -> CalibratedPlant:
     """Read and schema-check a plant file; ``ValueError`` naming the bad field otherwise."""
     p = Path(path)
-    size = os.stat(p).st_size
-    if size > MAX_PLANT_BYTES:
+    status = os.stat(p)
+    if not stat.S_ISREG(status.st_mode):  # a FIFO or /dev/zero would never end
+        raise ValueError(
+            f"plant file {str(p)!r} is not a regular file (a folder, FIFO, device or socket "
+            "is never opened): expected a plant.json written by drill-gym calibrate"
+        )
+    with open(p, "rb") as f:
+        raw = f.read(MAX_PLANT_BYTES + 1)
+    if len(raw) > MAX_PLANT_BYTES:
+        size = max(status.st_size, len(raw))
         raise ValueError(f"plant file {str(p)!r} is {size} bytes: allowed {MAX_PLANT_BYTES}")
     try:
-        data = json.loads(p.read_text(encoding="utf-8"))
+        data = _strict_json(raw.decode("utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"plant file {str(p)!r} is not JSON: {exc}") from None
+        raise ValueError(f"plant file {str(p)!r} is not JSON: {shown(str(exc))}") from None
+    except RecursionError:
+        raise ValueError(f"plant file {str(p)!r} is not JSON: nested too deeply") from None
+    except ValueError as exc:  # the hooks below, or an integer with too many digits
+        raise ValueError(f"plant file {str(p)!r} is not JSON: {shown(str(exc), 200)}") from None
     return plant_from_json(data, where=p.name)
+
+
+def _strict_json(text: str) -> Any:
+    """``json.loads`` refusing NaN and Infinity, numbers beyond the float range and repeated
+    fields (a later one would silently win)."""
+
+    def constant(name: str) -> Any:
+        raise ValueError(f"{name} is not allowed: every number must be finite")
+
+    def real(literal: str) -> float:
+        value = float(literal)
+        if not math.isfinite(value):
+            raise ValueError(f"the number {shown(literal)} is beyond the float range")
+        return value
+
+    def integer(literal: str) -> int:
+        value = int(literal) if len(literal) <= 320 else None  # the float range ends at 1.8e308
+        if value is None or abs(value) > sys.float_info.max:
+            raise ValueError(f"the integer {shown(literal)} is beyond the float range")
+        return value
+
+    def fields(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+        result: dict[str, Any] = {}
+        for key, value in pairs:
+            if key in result:
+                raise ValueError(f"field {shown(key)} appears twice")
+            result[key] = value
+        return result
+
+    return json.loads(
+        text, parse_constant=constant, parse_float=real, parse_int=integer, object_pairs_hook=fields
+    )
 
 
 MAP_INERTIA_FRACTION: Final = 0.05

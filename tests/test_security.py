@@ -195,7 +195,7 @@ class _Loud:
         return "\x1b[2J\x1b[31m" * 500
 
 
-HOSTILE_VALUES = {
+HOSTILE_VALUES: dict[str, Any] = {
     "escape": "\x1b[31mred\x1b[0m",
     "huge": "x" * 10_000_000,
     "repr": _Loud(),
@@ -233,7 +233,8 @@ def test_make_errors_show_keywords_escaped_and_bounded(
 
 def test_a_hostile_keyword_name_is_escaped() -> None:
     with pytest.raises(InputTypeError) as caught:
-        gym.make("DrillString-v0", **{"\x1b[2J" * 100_000: 1})
+        hostile: dict[str, Any] = {"\x1b[2J" * 100_000: 1}
+        gym.make("DrillString-v0", **hostile)
     assert _safe(str(caught.value)) and "\\x1b[2J" in str(caught.value)
 
 
@@ -356,3 +357,84 @@ def test_a_fifo_as_results_is_refused_within_a_second(
     assert float(seconds) < 1.0
     assert done.stderr.count("\n") == 1 and "is a FIFO" in done.stderr
     assert not (tmp_path / "out").exists()
+
+
+# ------------------------------------------------------ measured logs and plant files
+def _log(tmp_path: Path, text: str | bytes, name: str = "log.csv") -> Path:
+    path = tmp_path / name
+    if isinstance(text, str):
+        text = text.encode("utf-8", "surrogatepass")
+    path.write_bytes(text)
+    return path
+
+
+GOOD_ROWS = "0,1\n0.001,1\n0.002,1\n"
+HOSTILE_LOGS: dict[str, tuple[str | bytes, str]] = {
+    "beyond-float": ("time_s,top_speed_rad_s\n0,1\n0.001,1e400\n0.002,1\n", r"row 2: inf"),
+    "nan": ("time_s,top_speed_rad_s\n0,1\n0.001,nan\n0.002,1\n", r"row 2: nan is not finite"),
+    "nul-bytes": ("time_s,top_speed_rad_s\n0,1\n0.001,1\x00\n", r"row 2: '1\\x00' is not"),
+    "escape-cell": ("time_s,top_speed_rad_s\n0,\x1b[2J\n", r"row 1: '\\x1b\[2J' is not a number"),
+    "huge-cell": ("time_s,top_speed_rad_s\n0," + "9" * 60_000 + "x\n", r"row 1: '9{20,}\.\.\."),
+    "long-line": ("time_s,top_speed_rad_s\n0," + "1" * 100_000 + "\n", r"line 2: longer than"),
+    "long-header": ("#" + "x" * 100_000 + "\n" + GOOD_ROWS, r"line 1: longer than 65536"),
+    "escape-column": ("time_s,top_speed_rad_s,\x1b[31m\n" + GOOD_ROWS, r"unknown column.*\\x1b"),
+    "many-columns": ("time_s,top_speed_rad_s," + ",".join(f"c{i}" for i in range(5000)) + "\n",
+                     r"'c7' and 4992 more"),
+    "duplicate": ("time_s,top_speed_rad_s,time_s\n0,1,0\n", r"'time_s' appear twice"),
+    "not-utf8": (b"time_s,top_speed_rad_s\n0,\xff\n", r"is not UTF-8 text"),
+    "infinity": ("time_s,top_speed_rad_s\n0,1\n0.001,-Infinity\n0.002,1\n",
+                 r"row 2: -inf is not finite"),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", list(HOSTILE_LOGS))
+def test_hostile_logs_are_refused_on_one_safe_line(tmp_path: Path, case: str) -> None:
+    from drill_env.measured_log import read_log
+
+    text, match = HOSTILE_LOGS[case]
+    start = time.perf_counter()
+    with pytest.raises(ValueError, match=match) as caught:
+        read_log(_log(tmp_path, text))
+    assert time.perf_counter() - start < 1.0
+    assert _safe(str(caught.value)), str(caught.value)[:300]
+
+
+def test_a_log_with_a_byte_order_mark_is_read(tmp_path: Path) -> None:
+    from drill_env.measured_log import read_log
+
+    log = read_log(_log(tmp_path, "\ufefftime_s,top_speed_rad_s\n" + GOOD_ROWS))
+    assert list(log.time_s) == [0.0, 0.001, 0.002]
+
+
+@pytest.mark.parametrize("kind", ["fifo", "device", "folder", "socket"])
+def test_logs_and_plants_that_are_not_regular_files_are_never_opened(
+    kind: str, specials: dict[str, Path]
+) -> None:
+    from drill_env.calibrated_plant import load_plant
+    from drill_env.measured_log import read_log
+
+    for reader in (read_log, load_plant):
+        start = time.perf_counter()
+        with pytest.raises(ValueError, match=r"is (a folder|not a regular file)"):
+            reader(specials[kind])
+        assert time.perf_counter() - start < 1.0
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ('{"format": NaN}', r"NaN is not allowed"),
+        ('{"format": 1e400}', r"the number '1e400' is beyond the float range"),
+        ('{"format": ' + "9" * 400 + "}", r"the integer '9+\.\.\. is beyond the float range"),
+        ('{"format": 1, "format": 2}', r"field 'format' appears twice"),
+        ("[" * 100_000 + "]" * 100_000, r"nested too deeply"),
+        ('{"\x1b[2J": 1', r"is not JSON"),
+    ],
+    ids=["nan", "float", "int", "repeated", "deep", "broken"],
+)
+def test_hostile_plant_files_are_refused_on_one_line(tmp_path: Path, text: str, match: str) -> None:
+    from drill_env.calibrated_plant import load_plant
+
+    with pytest.raises(ValueError, match=match) as caught:
+        load_plant(_log(tmp_path, text, "plant.json"))
+    assert _safe(str(caught.value))
