@@ -41,7 +41,7 @@ from drill_env.bit_model import (
     P_XI,
 )
 from drill_env.parameters import PLANT_DT_S, DrillStringParameters
-from drill_env.validation import shown
+from drill_env.validation import printable, shown
 
 __all__ = [
     "MODEL_PARAMETERS",
@@ -313,11 +313,11 @@ def load_plant(path: str | os.PathLike[str]) -> CalibratedPlant:
     try:
         data = _strict_json(raw.decode("utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"plant file {str(p)!r} is not JSON: {shown(str(exc))}") from None
+        raise ValueError(f"plant file {str(p)!r} is not JSON: {printable(str(exc), 200)}") from None
     except RecursionError:
         raise ValueError(f"plant file {str(p)!r} is not JSON: nested too deeply") from None
     except ValueError as exc:  # the hooks below, or an integer with too many digits
-        raise ValueError(f"plant file {str(p)!r} is not JSON: {shown(str(exc), 200)}") from None
+        raise ValueError(f"plant file {str(p)!r} is not JSON: {printable(str(exc), 200)}") from None
     return plant_from_json(data, where=p.name)
 
 

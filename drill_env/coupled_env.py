@@ -661,7 +661,14 @@ class CoupledEnvConfig:
         elif not isinstance(self.bit, RgdParameters):
             raise TypeError("bit must be a preset name or an RgdParameters")
         if isinstance(self.reward_weights, dict):
+            valid = [f.name for f in dataclasses.fields(CoupledRewardWeights)]
+            check_unknown(self.reward_weights, valid, "field", "reward_weights")
             object.__setattr__(self, "reward_weights", CoupledRewardWeights(**self.reward_weights))
+        elif not isinstance(self.reward_weights, CoupledRewardWeights):
+            raise TypeError(
+                "reward_weights must be a CoupledRewardWeights or a dict of its fields, got "
+                f"{shown(self.reward_weights)}"
+            )
         check_choice("action_mode", self.action_mode, ACTION_MODES, "action mode")
         if isinstance(self.torque_loop, str) and self.torque_loop not in TORQUE_LOOPS:
             names = controller_names()

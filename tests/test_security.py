@@ -438,3 +438,112 @@ def test_hostile_plant_files_are_refused_on_one_line(tmp_path: Path, text: str, 
     with pytest.raises(ValueError, match=match) as caught:
         load_plant(_log(tmp_path, text, "plant.json"))
     assert _safe(str(caught.value))
+
+
+# ------------------------------------------------------------------ property tests
+LARGE = settings(deadline=None, max_examples=2_000, suppress_health_check=[HealthCheck.too_slow])
+_ARGV = st.lists(
+    st.one_of(
+        st.text(max_size=40),
+        st.sampled_from(["--results", "--out", "--gains-file", "--run-dir", "--", "/dev/null"]),
+        st.builds(lambda o, v: f"{o}={v}", st.sampled_from(["--results", "--out"]), st.text()),
+    ),
+    max_size=8,
+)
+
+
+def _check_preflight(argv: list[str]) -> None:
+    problem = refused_path(argv)
+    assert problem is None or (_safe(problem) and "\n" not in problem)
+    if problem is None:
+        assert not any(a in ("/dev/null", "--results=/dev/null") for a in argv)
+
+
+@SMALL
+@given(_ARGV)
+def test_preflight_never_fails_and_reports_safely(argv: list[str]) -> None:
+    _check_preflight(argv)
+
+
+@pytest.mark.slow
+@LARGE
+@given(_ARGV)
+def test_preflight_never_fails_and_reports_safely_long(argv: list[str]) -> None:
+    _check_preflight(argv)
+
+
+_LOG_TEXT = st.one_of(
+    st.binary(max_size=300),
+    st.builds(
+        lambda rows: "time_s,top_speed_rad_s\n" + "\n".join(",".join(r) for r in rows),
+        st.lists(
+            st.lists(
+                st.one_of(
+                    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+                    st.integers(-(10**400), 10**400).map(str),
+                    st.text(max_size=6),
+                ),
+                min_size=1,
+                max_size=3,
+            ),
+            max_size=8,
+        ),
+    ),
+)
+
+
+def _check_log(tmp_path: Path, data: str | bytes) -> None:
+    import numpy as np
+
+    from drill_env.measured_log import read_log
+
+    path = _log(tmp_path, data)
+    try:
+        log = read_log(path)
+    except ValueError as err:
+        assert _safe(str(err)), str(err)[:200]
+        return
+    assert np.all(np.isfinite(log.time_s)) and np.all(np.diff(log.time_s) > 0)
+    assert all(np.all(np.isfinite(v)) for v in log.columns.values())
+
+
+@SMALL
+@given(_LOG_TEXT)
+def test_any_log_is_read_finite_or_refused_safely(tmp_path_factory: Any, data: Any) -> None:
+    _check_log(tmp_path_factory.mktemp("log"), data)
+
+
+@pytest.mark.slow
+@LARGE
+@given(_LOG_TEXT)
+def test_any_log_is_read_finite_or_refused_safely_long(tmp_path_factory: Any, data: Any) -> None:
+    _check_log(tmp_path_factory.mktemp("log"), data)
+
+
+_JSON_TEXT = st.one_of(
+    st.text(max_size=200),
+    st.recursive(
+        st.one_of(
+            st.none(),
+            st.booleans(),
+            st.floats(),
+            st.integers(-(10**400), 10**400),
+            st.text(max_size=10),
+        ),
+        lambda inner: st.one_of(
+            st.lists(inner, max_size=4), st.dictionaries(st.text(max_size=8), inner, max_size=4)
+        ),
+        max_leaves=20,
+    ).map(lambda v: json.dumps(v)),
+)
+
+
+@SMALL
+@given(_JSON_TEXT)
+def test_any_plant_file_is_refused_on_one_safe_line(tmp_path_factory: Any, text: str) -> None:
+    from drill_env.calibrated_plant import load_plant
+
+    path = _log(tmp_path_factory.mktemp("plant"), text, "plant.json")
+    with pytest.raises(ValueError) as caught:  # none of these is a plant
+        load_plant(path)
+    assert _safe(str(caught.value)), str(caught.value)[:300]
