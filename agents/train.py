@@ -309,12 +309,53 @@ def _record(config: TrainConfig, extra: dict[str, Any]) -> dict[str, Any]:
 
 
 def _is_run_folder(run_dir: Path) -> bool:
-    """Whether ``run_dir`` has the config.json that ``drill-gym train`` writes."""
+    """Whether ``run_dir`` has the config.json that ``drill-gym train`` writes (read bounded
+    and strict: a FIFO or a huge file there is not one)."""
+    config_file = run_dir / "config.json"
+    if config_file.is_symlink():
+        return False
     try:
-        record = json.loads((run_dir / "config.json").read_text())
+        record = read_json(config_file)
     except (OSError, ValueError):
         return False
-    return isinstance(record, dict) and {"exp_name", "total_timesteps", "n_steps"} <= set(record)
+    return {"exp_name", "total_timesteps", "n_steps"} <= set(record)
+
+
+RUN_SUBFOLDERS: Final = (CHECKPOINT_DIR, "best", "model", "tb")
+"""Folders of a run folder that ``drill-gym train`` writes into."""
+MAX_LINK_SCAN: Final = 100_000
+"""Most entries of a run folder examined for links before resuming."""
+
+
+def _refuse_links(run_dir: Path) -> None:
+    """Refuse to resume in ``run_dir`` when it, or a folder train writes into, holds a
+    symbolic link: writing its files (config.json, progress CSVs, checkpoints) would follow
+    it to a file that is not the run's."""
+    if run_dir.is_symlink():
+        return  # the user named the link itself: its target is the run folder
+    seen = 0
+    for folder in (run_dir, *(run_dir / name for name in RUN_SUBFOLDERS)):
+        if folder != run_dir and (folder.is_symlink() or not folder.is_dir()):
+            if folder.is_symlink():
+                raise ValueError(
+                    f"--resume: {str(folder)!r} is a symbolic link: drill-gym train writes only "
+                    "into folders of its own run; remove the link or start a new run"
+                )
+            continue
+        with os.scandir(folder) as entries:
+            for entry in entries:
+                seen += 1
+                if seen > MAX_LINK_SCAN:
+                    raise ValueError(
+                        f"--resume: {str(run_dir)!r} holds more than {MAX_LINK_SCAN} files: not "
+                        "a run folder of drill-gym train"
+                    )
+                if entry.is_symlink():
+                    raise ValueError(
+                        f"--resume: {str(Path(entry.path))!r} is a symbolic link: drill-gym "
+                        "train writes only files of its own run (a link could send them to "
+                        "another file); remove the link or start a new run"
+                    )
 
 
 def _check_settings(config: TrainConfig) -> None:
@@ -337,11 +378,31 @@ def _check_settings(config: TrainConfig) -> None:
             )
 
 
+def _check_save_dir(config: TrainConfig) -> None:
+    """Refuse a ``--save-dir`` whose files are not a model's: the final model's three files
+    would replace a user's files of the same names."""
+    if not config.save_dir:
+        return  # {run_dir}/model: a folder of the run
+    folder = Path(config.save_dir)
+    if folder.is_symlink() or (os.path.lexists(folder) and not folder.is_dir()):
+        raise ValueError(
+            f"--save-dir {str(folder)!r} exists and is not a folder: expected a new folder, an "
+            "empty one or a model folder"
+        )
+    if folder.is_dir() and any(folder.iterdir()) and not is_model_folder(folder):
+        raise ValueError(
+            f"--save-dir {str(folder)!r} holds other files: expected a new folder, an empty one "
+            "or a model folder (nothing was written)"
+        )
+
+
 def _prepare_run_dir(config: TrainConfig, run_dir: Path) -> Checkpoint | None:
     """The checkpoint to resume (``--resume``), after refusing a run folder that already
     holds files unless ``--resume`` or ``--overwrite`` (which deletes it) is given."""
 
     if config.resume:
+        if run_dir.is_dir():
+            _refuse_links(run_dir)
         last = find_last_checkpoint(run_dir)
         if last is None:
             raise FileNotFoundError(
@@ -464,6 +525,7 @@ def train(config: TrainConfig, progress: bool = True) -> Path:
     """
     run_dir = config.resolved_run_dir()
     _check_settings(config)
+    _check_save_dir(config)
     last = _prepare_run_dir(config, run_dir)
     start_steps = 0 if last is None else last.steps
     total = planned_timesteps(config)

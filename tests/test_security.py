@@ -547,3 +547,47 @@ def test_any_plant_file_is_refused_on_one_safe_line(tmp_path_factory: Any, text:
     with pytest.raises(ValueError) as caught:  # none of these is a plant
         load_plant(path)
     assert _safe(str(caught.value)), str(caught.value)[:300]
+
+
+# ------------------------------------------------- a run folder's links are not followed
+@pytest.mark.parametrize("where", ["config.json", "progress-resumed-at-64.csv", "checkpoints/x"])
+def test_resume_refuses_a_run_folder_holding_links(tmp_path: Path, where: str) -> None:
+    run_dir = tmp_path / "run"
+    (run_dir / "checkpoints" / "steps_64").mkdir(parents=True)
+    (run_dir / "checkpoints" / "steps_64" / "training.json").write_text("{}")
+    notes = tmp_path / "notes.txt"
+    notes.write_text("mine")
+    (run_dir / where).symlink_to(notes)
+    with pytest.raises(ValueError, match=r"is a symbolic link: drill-gym train writes only"):
+        _resume(run_dir)
+    assert notes.read_text() == "mine"
+
+
+def test_overwrite_does_not_read_a_fifo_as_the_run_record(tmp_path: Path) -> None:
+    from agents.train import _is_run_folder
+
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    os.mkfifo(run_dir / "config.json")
+    start = time.perf_counter()
+    assert not _is_run_folder(run_dir)
+    assert time.perf_counter() - start < 1.0
+    (run_dir / "config.json").unlink()
+    (run_dir / "config.json").write_text('{"exp_name": 1, "total_timesteps": 1, "n_steps": NaN}')
+    assert not _is_run_folder(run_dir)
+
+
+def test_train_refuses_a_save_dir_holding_other_files(tmp_path: Path) -> None:
+    from agents.train import _check_save_dir
+
+    mine = tmp_path / "project"
+    mine.mkdir()
+    (mine / "config.json").write_text("my settings")
+    with pytest.raises(ValueError, match=r"--save-dir .* holds other files"):
+        _check_save_dir(TrainConfig(save_dir=str(mine)))
+    (tmp_path / "link").symlink_to(mine)
+    with pytest.raises(ValueError, match=r"exists and is not a folder"):
+        _check_save_dir(TrainConfig(save_dir=str(tmp_path / "link")))
+    _check_save_dir(TrainConfig(save_dir=str(tmp_path / "new")))
+    _check_save_dir(TrainConfig(save_dir=str(ROOT / "agents/models/residual_ppo")))
+    assert (mine / "config.json").read_text() == "my settings"
