@@ -334,6 +334,7 @@ def _read_parquet(
     path: Path,
 ) -> tuple[npt.NDArray[np.float64], dict[str, npt.NDArray[np.float64]]]:
     try:
+        import pyarrow as pa
         import pyarrow.parquet as pq
     except ModuleNotFoundError:
         raise ValueError(
@@ -350,6 +351,10 @@ def _read_parquet(
     data: dict[str, npt.NDArray[np.float64]] = {}
     for name in names:
         column = table.column(name)
+        kind = column.type
+        if not (pa.types.is_floating(kind) or pa.types.is_integer(kind)):
+            # bools, times and dates, text: not a number in the column's SI unit
+            raise ValueError(f"column {name!r} is not numeric ({kind}): expected float or integer")
         if column.null_count:
             first = int(np.flatnonzero(np.asarray(column.is_null()))[0]) + 1
             raise ValueError(f"column {name!r}, row {first}: empty value is not a number")

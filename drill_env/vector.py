@@ -94,7 +94,7 @@ class DrillStringVectorEnv(VectorEnv):
             mask = np.asarray(options.pop("reset_mask"))
             if mask.shape != (self.num_envs,) or mask.dtype != np.bool_:
                 raise ValueError(
-                    f"reset_mask must be a bool array of shape ({self.num_envs},), got {mask!r}"
+                    f"reset_mask must be a bool array of shape ({self.num_envs},), got {shown(mask)}"
                 )
             if not self._started and not mask.all():
                 raise ValueError("the first reset must reset every string (reset_mask all True)")

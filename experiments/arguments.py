@@ -223,6 +223,14 @@ def output_folder(text: str) -> Path:
 output_folder.__name__ = "folder"
 
 
+def _with_notes(exc: BaseException) -> str:
+    """The message of ``exc`` followed by its notes (``add_note``), which libraries use to add
+    context; the line is made safe by :func:`error_line`."""
+    notes = getattr(exc, "__notes__", None)
+    texts = [str(n) for n in notes[:5]] if isinstance(notes, list) else []
+    return "; ".join([str(exc), *texts])
+
+
 def run_command(prog: str, main: Callable[[], int], debug: bool) -> int:
     """Run ``main()`` and turn a user error into one line on standard error and exit code 2.
 
@@ -259,7 +267,7 @@ def run_command(prog: str, main: Callable[[], int], debug: bool) -> int:
         # a check that should have refused it first; still one line, never a traceback.
         if debug:
             raise
-        print(error_line(prog, str(exc)), file=sys.stderr)
+        print(error_line(prog, _with_notes(exc)), file=sys.stderr)
         return USAGE_ERROR
     except KeyboardInterrupt:
         print(f"{prog}: interrupted", file=sys.stderr)

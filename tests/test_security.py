@@ -591,3 +591,40 @@ def test_train_refuses_a_save_dir_holding_other_files(tmp_path: Path) -> None:
     _check_save_dir(TrainConfig(save_dir=str(tmp_path / "new")))
     _check_save_dir(TrainConfig(save_dir=str(ROOT / "agents/models/residual_ppo")))
     assert (mine / "config.json").read_text() == "my settings"
+
+
+def test_the_command_line_prints_an_errors_notes_safely(capsys: pytest.CaptureFixture[str]) -> None:
+    from experiments.arguments import run_command
+
+    def fail() -> int:
+        err = ValueError("wob_n = 'x' is out of range")
+        err.add_note("raised with kwargs {'wob_n': '\x1b[2J" + "x" * 10_000 + "'}")
+        raise err
+
+    assert run_command("drill-gym x", fail, debug=False) == 2
+    line = capsys.readouterr().err
+    assert line.count("\n") == 1 and "\x1b" not in line and len(line) < 1200
+    assert "out of range; raised with kwargs {'wob_n': '\\x1b[2J" in line
+
+
+@pytest.mark.parametrize("kind", ["bool", "timestamp", "text", "duplicate", "escape"])
+def test_parquet_logs_hold_numbers_in_known_columns(tmp_path: Path, kind: str) -> None:
+    pa = pytest.importorskip("pyarrow")
+    pq = pytest.importorskip("pyarrow.parquet")
+    import numpy as np
+
+    from drill_env.measured_log import read_log
+
+    t = pa.array(np.arange(5) * 1e-3)
+    second, names, match = {
+        "bool": (pa.array([True] * 5), None, r"'top_speed_rad_s' is not numeric \(bool\)"),
+        "timestamp": (pa.array(np.arange(5).astype("datetime64[ns]")), None, r"not numeric"),
+        "text": (pa.array(["1"] * 5), None, r"not numeric \(string\)"),
+        "duplicate": (t, ["time_s", "time_s"], r"'time_s' appear twice"),
+        "escape": (t, ["time_s", "\x1b[2J"], r"unknown column\(s\) '\\x1b\[2J'"),
+    }[kind]
+    table = pa.Table.from_arrays([t, second], names=names or ["time_s", "top_speed_rad_s"])
+    pq.write_table(table, tmp_path / "log.parquet")
+    with pytest.raises(ValueError, match=match) as caught:
+        read_log(tmp_path / "log.parquet")
+    assert _safe(str(caught.value))
