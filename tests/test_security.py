@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import os
 import pickle
+import re
 import socket
 import subprocess
 import sys
@@ -35,6 +36,7 @@ from drill_env.validation import (
     input_type_errors,
     printable,
 )
+from experiments.cli import SUBCOMMANDS
 from experiments.cli import main as cli_main
 from experiments.preflight import refused_path
 
@@ -324,7 +326,7 @@ def test_unusable_paths_are_refused_before_importing_the_study(
 ) -> None:
     filled = [a.format(**{k: str(v) for k, v in specials.items()}) for a in argv]
     problem = refused_path(filled[1:])
-    assert problem is not None and __import__("re").search(match, problem), problem
+    assert problem is not None and re.search(match, problem), problem
 
 
 def test_preflight_passes_what_commands_can_use(specials: dict[str, Path]) -> None:
@@ -598,7 +600,8 @@ def test_the_command_line_prints_an_errors_notes_safely(capsys: pytest.CaptureFi
 
     def fail() -> int:
         err = ValueError("wob_n = 'x' is out of range")
-        err.add_note("raised with kwargs {'wob_n': '\x1b[2J" + "x" * 10_000 + "'}")
+        note = "raised with kwargs {'wob_n': '\x1b[2J" + "x" * 10_000 + "'}"
+        err.__notes__ = [note]  # type: ignore[attr-defined]  # add_note (Python 3.11)
         raise err
 
     assert run_command("drill-gym x", fail, debug=False) == 2
@@ -628,3 +631,20 @@ def test_parquet_logs_hold_numbers_in_known_columns(tmp_path: Path, kind: str) -
     with pytest.raises(ValueError, match=match) as caught:
         read_log(tmp_path / "log.parquet")
     assert _safe(str(caught.value))
+
+
+@pytest.mark.parametrize("command", sorted(SUBCOMMANDS))
+@pytest.mark.parametrize("kind", ["fifo", "device", "socket"])
+def test_every_command_refuses_a_special_file_at_once(
+    command: str, kind: str, specials: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    for argv in (
+        [command, str(specials[kind])],
+        [command, "--out", str(specials[kind])],
+        [command, f"--results={specials[kind]}"],
+    ):
+        start = time.perf_counter()
+        assert cli_main(argv) == 2
+        assert time.perf_counter() - start < 1.0
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and err.startswith(f"drill-gym {command}: error: "), err
