@@ -56,7 +56,12 @@ def _problem(option: str | None, value: str) -> str | None:
     mode = _mode(value)
     if mode is None:
         return None
-    what = f"argument {option}: {_shown(value)}" if option else _shown(value)
+    # The wording of the checks these stand in for: argparse's for an output folder
+    # (experiments.arguments.output_folder), the results database's for a file.
+    if option in FOLDER_OPTIONS:
+        what = f"argument {option}: {_shown(value)}"
+    else:
+        what = f"{option} {_shown(value)}" if option else _shown(value)
     for test, kind in _SPECIAL:
         if test(mode):
             return (

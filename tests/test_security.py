@@ -302,11 +302,11 @@ def specials(tmp_path: Path) -> Iterator[dict[str, Path]]:
 
 
 PREFLIGHT_CASES = [
-    (["map", "--results", "{fifo}"], r"argument --results: '.*fifo' is a FIFO \(named pipe\)"),
+    (["map", "--results", "{fifo}"], r"--results '.*fifo' is a FIFO \(named pipe\)"),
     (["compare", "--results={device}"], r"'/dev/zero' is a character device"),
     (["tune", "--results", "{socket}"], r"'.*sock' is a socket"),
     (["probability-map", "--results", "{folder}"], r"'.*folder' is a folder: expected a file"),
-    (["tune", "--gains-file", "{folder}"], r"argument --gains-file: .* is a folder"),
+    (["tune", "--gains-file", "{folder}"], r"--gains-file .* is a folder"),
     (["tune", "--gains-file", "{fifo}"], r"is a FIFO"),
     (["calibrate", "{fifo}", "--window", "0", "1"], r"'.*fifo' is a FIFO"),
     (["calibrate", "{device}", "--window", "0", "1"], r"is a character device"),
