@@ -52,9 +52,27 @@ def _mode(path: str) -> int | None:
         return None
 
 
+def _file_above(path: str) -> str | None:
+    """The nearest existing folder above ``path`` when it is in fact a file (``path`` then
+    cannot be made), or None."""
+    if not path or "\x00" in path or len(path) > 4096:
+        return None
+    parent = os.path.dirname(os.path.normpath(path))
+    for _ in range(256):
+        if not parent or os.path.lexists(parent):
+            break
+        parent = os.path.dirname(parent)
+    mode = _mode(parent) if parent else None
+    return parent if mode is not None and not stat.S_ISDIR(mode) else None
+
+
 def _problem(option: str | None, value: str) -> str | None:
     mode = _mode(value)
     if mode is None:
+        above = _file_above(value) if option in FILE_OPTIONS + FOLDER_OPTIONS else None
+        if above is not None:
+            where = f"argument {option}: " if option in FOLDER_OPTIONS else f"{option} "
+            return f"{where}{_shown(value)} lies inside {_shown(above)}, which is a file"
         return None
     # The wording of the checks these stand in for: argparse's for an output folder
     # (experiments.arguments.output_folder), the results database's for a file.

@@ -317,6 +317,11 @@ PREFLIGHT_CASES = [
     (["coupled", "--out", "{fifo}"], r"is a FIFO"),
     (["train", "--run-dir", "{file}"], r"argument --run-dir: .* is a file, not a folder"),
     (["convert", "{fifo}", "{folder}/new"], r"is a FIFO"),
+    (
+        ["coupled", "--out", "{file}/sub/dir"],
+        r"--out: '.*sub/dir' lies inside '.*notes.txt', which",
+    ),
+    (["map", "--results", "{file}/r.db"], r"--results '.*r.db' lies inside '.*notes.txt', which"),
 ]
 
 
