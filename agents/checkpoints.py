@@ -19,7 +19,7 @@ fresh PPO model from the run's settings and fills it: every array is read by
 pickle). Checkpoints of the previous format (``training.json`` of format 2, ``.npz`` arrays)
 are read by :func:`agents.legacy_format.read_npz`. Older runs wrote SB3's pickled
 ``rl_model_{N}_steps.zip`` and ``rl_model_vecnormalize_{N}_steps.pkl``; they are found here
-and resumed only with ``--trust-pickle``.
+and resumed only when ``--trust-pickle`` names them (:func:`agents.train.train`).
 """
 
 from __future__ import annotations

@@ -215,7 +215,7 @@ def make_training_env(config: TrainConfig, vecnormalize_file: Path | None = None
     native vector env, seen through SB3's API, with episode statistics, the last
     ``frame_stack`` observations stacked (``VecFrameStack``, when above 1) and observation
     (and reward) normalisation of the stacked vector. ``vecnormalize_file``: an older run's
-    pickled VecNormalize statistics (resume with ``--trust-pickle`` only; checkpoints of this
+    pickled VecNormalize statistics (resumed only as named by ``--trust-pickle``; checkpoints of this
     version are loaded by :func:`agents.checkpoints.load_checkpoint`)."""
     from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor, VecNormalize
 

@@ -3,8 +3,9 @@
 Importing a study loads NumPy, Numba and the compiled plants (seconds on a loaded machine), so
 a path that can only hang or fail is refused here first, from its ``stat`` alone (nothing is
 opened): any argument naming a FIFO, a socket or a device (``/dev/zero``), a folder given where
-a file is read or written (``--results``, ``--gains-file``), and a file given where a folder
-is (``--out``, ``--run-dir``, ``--save-dir``). Every other check stays with the command. This
+a file is read or written (``--results``, ``--gains-file``), a file given where a folder
+is (``--out``, ``--run-dir``, ``--save-dir``), and either kind lying inside a file. Every other
+check stays with the command. This
 module uses the standard library only, and the error line has its one home here.
 """
 
