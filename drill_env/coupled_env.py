@@ -90,6 +90,7 @@ from drill_env.validation import (
     check_finite_fields,
     check_int,
     check_range,
+    check_seeds,
     check_unknown,
     input_type_errors,
     require,
@@ -1247,14 +1248,7 @@ class DrillStringCoupledVectorEnv(VectorEnv):
             raise ValueError(
                 f"options = {shown(options)} is not supported: allowed None, {{}} or a reset_mask"
             )
-        if seed is None or isinstance(seed, int):
-            seeds: list[int | None] = [
-                None if seed is None else seed + i for i in range(self.num_envs)
-            ]
-        else:
-            seeds = list(seed)
-            if len(seeds) != self.num_envs:
-                raise ValueError(f"seed list must have {self.num_envs} entries, got {len(seeds)}")
+        seeds = check_seeds(seed, self.num_envs)
         results = []
         for i, (env, s) in enumerate(zip(self.envs, seeds, strict=True)):
             if mask[i]:

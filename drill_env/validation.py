@@ -32,6 +32,7 @@ __all__ = [
     "check_interval",
     "check_range",
     "check_real",
+    "check_seeds",
     "check_unknown",
     "input_type_errors",
     "printable",
@@ -156,6 +157,29 @@ def check_int(name: str, value: object, low: int = 1, high: int | None = None) -
     if value < low or (high is not None and value > high):
         raise ValueError(f"{name} = {shown(value)} is out of range: allowed {allowed}")
     return int(value)
+
+
+def check_seeds(seed: object, count: int) -> list[int | None]:
+    """The reset seeds of ``count`` strings from a vector env's ``seed``: ``None`` (none),
+    an integer ``s >= 0`` (string ``i`` gets ``s + i``) or a list of ``count`` of them (each
+    ``None`` or an integer >= 0).
+
+    Raises:
+        TypeError: ``seed`` is none of these (a bool, a float, a string).
+        ValueError: a negative seed, or a list of another length.
+    """
+    if seed is None:
+        return [None] * count
+    if isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_)):
+        first = check_int("seed", seed, 0)
+        return [first + i for i in range(count)]
+    if not isinstance(seed, (list, tuple)):
+        raise InputTypeError(
+            f"seed must be None, an integer >= 0 or a list of {count} of them, got {shown(seed)}"
+        )
+    if len(seed) != count:
+        raise ValueError(f"seed list must have {count} entries, got {len(seed)}")
+    return [None if s is None else check_int(f"seed[{i}]", s, 0) for i, s in enumerate(seed)]
 
 
 def check_bool(name: str, value: object) -> bool:

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -500,8 +501,6 @@ _LOG_TEXT = st.one_of(
 
 
 def _check_log(tmp_path: Path, data: str | bytes) -> None:
-    import numpy as np
-
     from drill_env.measured_log import read_log
 
     path = _log(tmp_path, data)
@@ -619,7 +618,6 @@ def test_the_command_line_prints_an_errors_notes_safely(capsys: pytest.CaptureFi
 def test_parquet_logs_hold_numbers_in_known_columns(tmp_path: Path, kind: str) -> None:
     pa = pytest.importorskip("pyarrow")
     pq = pytest.importorskip("pyarrow.parquet")
-    import numpy as np
 
     from drill_env.measured_log import read_log
 
@@ -653,3 +651,30 @@ def test_every_command_refuses_a_special_file_at_once(
         assert time.perf_counter() - start < 1.0
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and err.startswith(f"drill-gym {command}: error: "), err
+
+
+@pytest.mark.parametrize("env_id", ["DrillString-v0", "DrillStringCoupled-v0"])
+@pytest.mark.parametrize(
+    ("seed", "error", "match"),
+    [
+        ("x", TypeError, r"seed must be None, an integer >= 0 or a list of 2 of them, got 'x'"),
+        (1.5, TypeError, r"got 1.5"),
+        (True, TypeError, r"got True"),
+        (-1, ValueError, r"seed = -1 is out of range: allowed an integer >= 0"),
+        ([1], ValueError, r"seed list must have 2 entries, got 1"),
+        ([1, -(10**400)], ValueError, r"seed\[1\] = -<an integer of \d+ bits> is out of range"),
+        ([1, "\x1b[2J"], ValueError, r"seed\[1\] = '\\x1b\[2J' is out of range"),
+    ],
+    ids=["text", "float", "bool", "negative", "short", "huge", "escape"],
+)
+def test_vector_env_seeds_are_checked_alike(
+    env_id: str, seed: Any, error: type, match: str
+) -> None:
+    env = gym.make_vec(env_id, num_envs=2)
+    try:
+        with pytest.raises(error, match=match):
+            env.reset(seed=seed)
+        env.reset(seed=[3, None])
+        env.reset(seed=np.int64(4))
+    finally:
+        env.close()
