@@ -62,6 +62,7 @@ from drill_env.evaluation import ZeroAction, episode_metrics, rollout
 from drill_env.limits import DEFAULT_TORQUE_LIMITS
 from drill_env.options import FIELD_MAX_TORQUE_NM, FieldEnvConfig
 from drill_env.scenarios import RPM, FieldRandomization
+from drill_env.validation import shown
 
 __all__ = [
     "REFERENCE_CONTROLLER",
@@ -358,10 +359,30 @@ def _refuse_links(run_dir: Path) -> None:
                     )
 
 
+MAX_ROLLOUT_DECISIONS: Final = 10_000_000
+"""Most decisions of one rollout (``n_steps * num_envs``): SB3's rollout buffer holds each
+decision's observation, action, reward, value and log-probability (about 1 GB at this size
+for the 11 observations of DrillString-v0)."""
+MAX_TOTAL_TIMESTEPS: Final = 10**12
+"""Most decisions of one run (about 300,000 times the shipped agent's 3 M)."""
+
+
 def _check_settings(config: TrainConfig) -> None:
-    """User errors that need no training: base controller, progress bar packages."""
+    """User errors that need no training: sizes, base controller, progress bar packages."""
     import importlib.util
 
+    decisions = config.n_steps * config.num_envs
+    if decisions > MAX_ROLLOUT_DECISIONS:
+        raise ValueError(
+            f"--n-steps {config.n_steps} x --num-envs {config.num_envs} = {decisions} decisions "
+            f"per rollout is out of range: allowed at most {MAX_ROLLOUT_DECISIONS:,} (SB3 keeps "
+            "the whole rollout in memory)"
+        )
+    if config.total_timesteps > MAX_TOTAL_TIMESTEPS:
+        raise ValueError(
+            f"--total-timesteps = {shown(config.total_timesteps)} is out of range: allowed at "
+            f"most {MAX_TOTAL_TIMESTEPS:.0e}"
+        )
     names = controller_names()
     if config.base_controller.lower() != "none" and config.base_controller not in names:
         raise ValueError(

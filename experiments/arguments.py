@@ -262,12 +262,16 @@ def run_command(prog: str, main: Callable[[], int], debug: bool) -> int:
             file=sys.stderr,
         )
         return USAGE_ERROR
-    except (ValueError, OSError, OverflowError, RecursionError) as exc:
-        # OverflowError and RecursionError: a number or a nesting from outside too large for
-        # a check that should have refused it first; still one line, never a traceback.
+    except (ValueError, OSError, OverflowError, RecursionError, MemoryError) as exc:
+        # OverflowError, RecursionError and MemoryError: a number, a nesting or a size from
+        # outside too large for a check that should have refused it first; still one line,
+        # never a traceback.
         if debug:
             raise
-        print(error_line(prog, _with_notes(exc)), file=sys.stderr)
+        text = _with_notes(exc)
+        if isinstance(exc, MemoryError):
+            text = f"not enough memory: {text or 'MemoryError'} (reduce the sizes asked for)"
+        print(error_line(prog, text), file=sys.stderr)
         return USAGE_ERROR
     except KeyboardInterrupt:
         print(f"{prog}: interrupted", file=sys.stderr)

@@ -678,3 +678,35 @@ def test_vector_env_seeds_are_checked_alike(
         env.reset(seed=np.int64(4))
     finally:
         env.close()
+
+
+@pytest.mark.parametrize(
+    ("changes", "match"),
+    [
+        ({"n_steps": 10**9}, r"--n-steps 1000000000 x --num-envs 16 = 16000000000 decisions"),
+        ({"num_envs": 10**6, "n_steps": 11}, r"= 11000000 decisions per rollout is out of range"),
+        ({"total_timesteps": 10**20}, r"--total-timesteps = 1\d{20} is out of range"),
+    ],
+    ids=["n_steps", "num_envs", "total"],
+)
+def test_train_sizes_are_refused_before_anything_is_built(
+    changes: dict[str, Any], match: str, tmp_path: Path
+) -> None:
+    from agents.train import train
+
+    config = TrainConfig(run_dir=str(tmp_path / "run"), batch_size=11, **changes)
+    start = time.perf_counter()
+    with pytest.raises(ValueError, match=match):
+        train(config)
+    assert time.perf_counter() - start < 1.0 and not (tmp_path / "run").exists()
+
+
+def test_a_memory_error_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    from experiments.arguments import run_command
+
+    def fail() -> int:
+        raise MemoryError("Unable to allocate 656. GiB for an array")
+
+    assert run_command("drill-gym x", fail, debug=False) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not enough memory: Unable to allocate 656. GiB" in err
