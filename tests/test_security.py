@@ -710,3 +710,27 @@ def test_a_memory_error_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
     assert run_command("drill-gym x", fail, debug=False) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "not enough memory: Unable to allocate 656. GiB" in err
+
+
+_SEEDS = st.one_of(
+    st.none(),
+    st.integers(-(10**400), 10**400),
+    st.floats(),
+    st.booleans(),
+    st.text(max_size=5),
+    st.lists(st.one_of(st.none(), st.integers(-5, 10**30), st.text(max_size=3)), max_size=4),
+)
+
+
+@SMALL
+@given(_SEEDS, st.integers(1, 3))
+def test_check_seeds_returns_one_seed_per_string_or_refuses(seed: Any, count: int) -> None:
+    from drill_env.validation import check_seeds
+
+    try:
+        seeds = check_seeds(seed, count)
+    except (TypeError, ValueError) as err:
+        assert _safe(str(err)) and ("seed" in str(err))
+        return
+    assert len(seeds) == count
+    assert all(s is None or (type(s) is int and s >= 0) for s in seeds)
