@@ -19,7 +19,7 @@ fresh PPO model from the run's settings and fills it: every array is read by
 pickle). Checkpoints of the previous format (``training.json`` of format 2, ``.npz`` arrays)
 are read by :func:`agents.legacy_format.read_npz`. Older runs wrote SB3's pickled
 ``rl_model_{N}_steps.zip`` and ``rl_model_vecnormalize_{N}_steps.pkl``; they are found here
-and resumed only with ``--trust-pickle``.
+and resumed only when ``--trust-pickle`` names them (:func:`agents.train.train`).
 """
 
 from __future__ import annotations
@@ -75,16 +75,25 @@ class Checkpoint:
         path: The checkpoint folder, or an old run's pickled ``rl_model_{N}_steps.zip``.
         steps: Decisions trained when it was written.
         legacy_norm: For an old checkpoint, its pickled VecNormalize file (or None).
+        pickled: Whether it is an old pickled SB3 checkpoint (``path`` is a file).
     """
 
     path: Path
     steps: int
     legacy_norm: Path | None = None
+    pickled: bool = False
 
     @property
     def legacy(self) -> bool:
         """Whether it is an old pickled SB3 checkpoint."""
-        return self.path.suffix == ".zip"
+        return self.pickled
+
+    @property
+    def pickles(self) -> tuple[Path, ...]:
+        """The pickled files that resuming from it reads (none for a checkpoint folder)."""
+        if not self.pickled:
+            return ()
+        return (self.path,) if self.legacy_norm is None else (self.path, self.legacy_norm)
 
 
 def find_last_checkpoint(run_dir: Path) -> Checkpoint | None:
@@ -103,7 +112,7 @@ def find_last_checkpoint(run_dir: Path) -> Checkpoint | None:
         if match and path.is_file():
             steps = int(match.group(1))
             norm = folder / f"{LEGACY_PREFIX}_vecnormalize_{steps}_steps.pkl"
-            found.append(Checkpoint(path, steps, norm if norm.is_file() else None))
+            found.append(Checkpoint(path, steps, norm if norm.is_file() else None, True))
     if not found:
         return None
     return max(found, key=lambda c: (c.steps, not c.legacy))

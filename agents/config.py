@@ -15,6 +15,7 @@ import dataclasses
 import inspect
 import json
 import math
+import os
 import re
 import textwrap
 import typing
@@ -26,7 +27,7 @@ from typing import Any, Final
 from drill_env.ids import COUPLED_ENV_ID as _COUPLED_ENV_ID
 from drill_env.ids import ENV_ID
 from drill_env.ids import FIELD_ENV_ID as _FIELD_ENV_ID
-from drill_env.validation import shown
+from drill_env.validation import printable, shown
 
 __all__ = [
     "ENV_DEFAULTS",
@@ -146,10 +147,13 @@ class TrainConfig:
     overwrite: bool = False
     """Delete an existing run folder of ``drill-gym train`` first. Without it (or ``resume``)
     a run folder that already holds files is refused."""
-    trust_pickle: bool = False
-    """Let ``resume`` read the pickled checkpoints of older versions (rl_model_*_steps.zip
-    and rl_model_vecnormalize_*.pkl). Unpickling runs any code the file's author put in it:
-    only for checkpoints you wrote yourself."""
+    trust_pickle: tuple[str, ...] = ()
+    """The pickled checkpoint files of an older version that ``resume`` may read, each named:
+    ``checkpoints/rl_model_N_steps.zip`` and, when the run has one,
+    ``checkpoints/rl_model_vecnormalize_N_steps.pkl`` of the checkpoint being resumed.
+    Unpickling runs any code the file's author put in it: name only files you wrote yourself.
+    The trust covers exactly the files named, for this command only: it is never read back
+    from a configuration file."""
     tensorboard: bool = True
     """Write TensorBoard logs (training statistics and validation ratios) to
     ``{run_dir}/tb``."""
@@ -288,7 +292,7 @@ class TrainConfig:
             raise ValueError(
                 f"{_option('env_id')} = {env_id!r} is not valid: allowed {', '.join(ENV_IDS)}"
             )
-        return cls.from_dict({**ENV_DEFAULTS[env_id], **values, "env_id": env_id})
+        return cls._checked({**ENV_DEFAULTS[env_id], **values, "env_id": env_id})
 
     def to_json(self) -> str:
         """The settings as JSON (every field)."""
@@ -296,12 +300,22 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> TrainConfig:
-        """A config from a dict (as written by :meth:`to_json`); unknown keys are an error."""
+        """A config from a dict (as written by :meth:`to_json`); unknown keys are an error.
+
+        A recorded ``trust_pickle`` (``false`` in the records of earlier versions, the files
+        named in later ones) is read as no trust: a file never grants it, only the caller
+        (``TrainConfig(trust_pickle=...)``, ``--trust-pickle FILE``)."""
+        return cls._checked({k: v for k, v in values.items() if k != "trust_pickle"})
+
+    @classmethod
+    def _checked(cls, values: dict[str, Any]) -> TrainConfig:
+        """``cls(**values)`` after refusing unknown keys."""
         names = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(values) - names)
+        unknown = sorted(set(values) - names, key=str)
         if unknown:
             raise TypeError(
-                f"unrecognized config key(s): {', '.join(unknown)}; valid: {', '.join(sorted(names))}"
+                f"unrecognized config key(s): {', '.join(printable(k) for k in unknown)}; "
+                f"valid: {', '.join(sorted(names))}"
             )
         return cls(**values)
 
@@ -385,6 +399,12 @@ class TrainConfig:
             )
         if self.resume and self.overwrite:
             raise ValueError("--resume and --overwrite exclude each other: choose one")
+        self.trust_pickle = _trusted_files(self.trust_pickle)
+        if self.trust_pickle and not self.resume:
+            raise ValueError(
+                f"{_option('trust_pickle')} names pickled checkpoints to resume from: it needs "
+                f"{_option('resume')}"
+            )
 
 
 def _option(name: str) -> str:
@@ -398,6 +418,33 @@ def _check_int(name: str, value: Any, low: int, high: int | None = None) -> None
         return
     allowed = f"an integer >= {low}" if high is None else f"an integer in [{low}, {high}]"
     raise ValueError(f"{_option(name)} = {shown(value)} is out of range: allowed {allowed}")
+
+
+MAX_TRUSTED_FILES: Final = 2
+"""Most files ``--trust-pickle`` names: an old checkpoint and its VecNormalize statistics."""
+
+
+def _trusted_files(value: Any) -> tuple[str, ...]:
+    """``value`` as the tuple of file names ``trust_pickle`` holds (a sequence of 1 to
+    :data:`MAX_TRUSTED_FILES` non-empty paths, or empty)."""
+    option = _option("trust_pickle")
+    if isinstance(value, bool):
+        raise ValueError(
+            f"{option} = {value!r} is not valid: name the pickled checkpoint files you trust "
+            f"({option} FILE [FILE]); a switch would cover files you did not name"
+        )
+    if isinstance(value, (str, bytes, os.PathLike)) or not isinstance(value, (list, tuple)):
+        raise ValueError(f"{option} = {shown(value)} is not valid: expected a list of file names")
+    if len(value) > MAX_TRUSTED_FILES:
+        raise ValueError(
+            f"{option} names {len(value)} files: allowed at most {MAX_TRUSTED_FILES} (an old "
+            "checkpoint rl_model_N_steps.zip and its rl_model_vecnormalize_N_steps.pkl)"
+        )
+    names = tuple(os.fspath(v) if isinstance(v, os.PathLike) else v for v in value)
+    for name in names:
+        if not isinstance(name, str) or not name or "\x00" in name or len(name) > 4096:
+            raise ValueError(f"{option} = {shown(name)} is not valid: expected a file name")
+    return names
 
 
 def _check_number(name: str, value: Any, low: float, high: float, open_low: bool = False) -> None:
@@ -533,7 +580,16 @@ def config_parser(
             continue
         help_text = f"{doc} (default: {shown(f.name, default)})".replace("%", "%%")
         metavar = {int: "N", float: "X"}.get(hint, "TEXT")
-        if typing.get_origin(hint) is list:
+        if f.name == "trust_pickle":
+            parser.add_argument(
+                flag,
+                dest=f.name,
+                nargs="+",
+                default=unset,
+                metavar="FILE",
+                help=f"{doc} (default: none)".replace("%", "%%"),
+            )
+        elif typing.get_origin(hint) is list:
             parser.add_argument(
                 flag,
                 dest=f.name,

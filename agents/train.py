@@ -32,6 +32,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import shlex
 import shutil
 import sys
 import time
@@ -61,6 +62,7 @@ from drill_env.evaluation import ZeroAction, episode_metrics, rollout
 from drill_env.limits import DEFAULT_TORQUE_LIMITS
 from drill_env.options import FIELD_MAX_TORQUE_NM, FieldEnvConfig
 from drill_env.scenarios import RPM, FieldRandomization
+from drill_env.validation import shown
 
 __all__ = [
     "REFERENCE_CONTROLLER",
@@ -214,7 +216,7 @@ def make_training_env(config: TrainConfig, vecnormalize_file: Path | None = None
     native vector env, seen through SB3's API, with episode statistics, the last
     ``frame_stack`` observations stacked (``VecFrameStack``, when above 1) and observation
     (and reward) normalisation of the stacked vector. ``vecnormalize_file``: an older run's
-    pickled VecNormalize statistics (resume with ``--trust-pickle`` only; checkpoints of this
+    pickled VecNormalize statistics (resumed only as named by ``--trust-pickle``; checkpoints of this
     version are loaded by :func:`agents.checkpoints.load_checkpoint`)."""
     from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor, VecNormalize
 
@@ -308,18 +310,79 @@ def _record(config: TrainConfig, extra: dict[str, Any]) -> dict[str, Any]:
 
 
 def _is_run_folder(run_dir: Path) -> bool:
-    """Whether ``run_dir`` has the config.json that ``drill-gym train`` writes."""
+    """Whether ``run_dir`` has the config.json that ``drill-gym train`` writes (read bounded
+    and strict: a FIFO or a huge file there is not one)."""
+    config_file = run_dir / "config.json"
+    if config_file.is_symlink():
+        return False
     try:
-        record = json.loads((run_dir / "config.json").read_text())
+        record = read_json(config_file)
     except (OSError, ValueError):
         return False
-    return isinstance(record, dict) and {"exp_name", "total_timesteps", "n_steps"} <= set(record)
+    return {"exp_name", "total_timesteps", "n_steps"} <= set(record)
+
+
+RUN_SUBFOLDERS: Final = (CHECKPOINT_DIR, "best", "model", "tb")
+"""Folders of a run folder that ``drill-gym train`` writes into."""
+MAX_LINK_SCAN: Final = 100_000
+"""Most entries of a run folder examined for links before resuming."""
+
+
+def _refuse_links(run_dir: Path) -> None:
+    """Refuse to resume in ``run_dir`` when it, or a folder train writes into, holds a
+    symbolic link: writing its files (config.json, progress CSVs, checkpoints) would follow
+    it to a file that is not the run's."""
+    if run_dir.is_symlink():
+        return  # the user named the link itself: its target is the run folder
+    seen = 0
+    for folder in (run_dir, *(run_dir / name for name in RUN_SUBFOLDERS)):
+        if folder != run_dir and (folder.is_symlink() or not folder.is_dir()):
+            if folder.is_symlink():
+                raise ValueError(
+                    f"--resume: {str(folder)!r} is a symbolic link: drill-gym train writes only "
+                    "into folders of its own run; remove the link or start a new run"
+                )
+            continue
+        with os.scandir(folder) as entries:
+            for entry in entries:
+                seen += 1
+                if seen > MAX_LINK_SCAN:
+                    raise ValueError(
+                        f"--resume: {str(run_dir)!r} holds more than {MAX_LINK_SCAN} files: not "
+                        "a run folder of drill-gym train"
+                    )
+                if entry.is_symlink():
+                    raise ValueError(
+                        f"--resume: {str(Path(entry.path))!r} is a symbolic link: drill-gym "
+                        "train writes only files of its own run (a link could send them to "
+                        "another file); remove the link or start a new run"
+                    )
+
+
+MAX_ROLLOUT_DECISIONS: Final = 10_000_000
+"""Most decisions of one rollout (``n_steps * num_envs``): SB3's rollout buffer holds each
+decision's observation, action, reward, value and log-probability (about 1 GB at this size
+for the 11 observations of DrillString-v0)."""
+MAX_TOTAL_TIMESTEPS: Final = 10**12
+"""Most decisions of one run (about 300,000 times the shipped agent's 3 M)."""
 
 
 def _check_settings(config: TrainConfig) -> None:
-    """User errors that need no training: base controller, progress bar packages."""
+    """User errors that need no training: sizes, base controller, progress bar packages."""
     import importlib.util
 
+    decisions = config.n_steps * config.num_envs
+    if decisions > MAX_ROLLOUT_DECISIONS:
+        raise ValueError(
+            f"--n-steps {config.n_steps} x --num-envs {config.num_envs} = {decisions} decisions "
+            f"per rollout is out of range: allowed at most {MAX_ROLLOUT_DECISIONS:,} (SB3 keeps "
+            "the whole rollout in memory)"
+        )
+    if config.total_timesteps > MAX_TOTAL_TIMESTEPS:
+        raise ValueError(
+            f"--total-timesteps = {shown(config.total_timesteps)} is out of range: allowed at "
+            f"most {MAX_TOTAL_TIMESTEPS:.0e}"
+        )
     names = controller_names()
     if config.base_controller.lower() != "none" and config.base_controller not in names:
         raise ValueError(
@@ -336,11 +399,31 @@ def _check_settings(config: TrainConfig) -> None:
             )
 
 
+def _check_save_dir(config: TrainConfig) -> None:
+    """Refuse a ``--save-dir`` whose files are not a model's: the final model's three files
+    would replace a user's files of the same names."""
+    if not config.save_dir:
+        return  # {run_dir}/model: a folder of the run
+    folder = Path(config.save_dir)
+    if folder.is_symlink() or (os.path.lexists(folder) and not folder.is_dir()):
+        raise ValueError(
+            f"--save-dir {str(folder)!r} exists and is not a folder: expected a new folder, an "
+            "empty one or a model folder"
+        )
+    if folder.is_dir() and any(folder.iterdir()) and not is_model_folder(folder):
+        raise ValueError(
+            f"--save-dir {str(folder)!r} holds other files: expected a new folder, an empty one "
+            "or a model folder (nothing was written)"
+        )
+
+
 def _prepare_run_dir(config: TrainConfig, run_dir: Path) -> Checkpoint | None:
     """The checkpoint to resume (``--resume``), after refusing a run folder that already
     holds files unless ``--resume`` or ``--overwrite`` (which deletes it) is given."""
 
     if config.resume:
+        if run_dir.is_dir():
+            _refuse_links(run_dir)
         last = find_last_checkpoint(run_dir)
         if last is None:
             raise FileNotFoundError(
@@ -348,13 +431,7 @@ def _prepare_run_dir(config: TrainConfig, run_dir: Path) -> Checkpoint | None:
                 f"folders {PREFIX}<decisions>/ written by drill-gym train); check --run-dir, "
                 "--exp-name and --seed, or start a new run without --resume"
             )
-        if last.legacy and not config.trust_pickle:
-            raise ValueError(
-                f"--resume: the last checkpoint {str(last.path)!r} is a pickled "
-                f"Stable-Baselines3 checkpoint of an older version: {PICKLE_RISK}; pass "
-                "--trust-pickle only if you wrote it yourself"
-            )
-        return last
+        return _trusted(config, last)
     if run_dir.exists() and not run_dir.is_dir():
         raise ValueError(f"--run-dir {str(run_dir)!r} is a file: expected a folder")
     if run_dir.is_dir() and any(run_dir.iterdir()):
@@ -372,6 +449,52 @@ def _prepare_run_dir(config: TrainConfig, run_dir: Path) -> Checkpoint | None:
             )
         shutil.rmtree(run_dir)
     return None
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):
+        return False
+
+
+def _trusted(config: TrainConfig, last: Checkpoint) -> Checkpoint:
+    """``last`` to resume from: a checkpoint folder as it is; an old pickled checkpoint only
+    when ``--trust-pickle`` names exactly its files (the checkpoint and its VecNormalize
+    statistics), and then read through the names the user gave."""
+
+    named = [Path(name) for name in config.trust_pickle]
+    needed = last.pickles
+    option = "--trust-pickle " + " ".join(shlex.quote(str(p)) for p in needed)
+    if not needed:
+        if named:
+            raise ValueError(
+                f"--trust-pickle names {', '.join(repr(str(n)) for n in named)}, but the last "
+                f"checkpoint {str(last.path)!r} is a checkpoint folder, read without pickle: "
+                "nothing to trust; leave --trust-pickle out"
+            )
+        return last
+    for name in named:
+        if not name.is_file():
+            raise ValueError(f"--trust-pickle {str(name)!r}: no such file")
+    missing = [p for p in needed if not any(_same_file(p, n) for n in named)]
+    if missing:
+        raise ValueError(
+            f"--resume: the last checkpoint {str(last.path)!r} is a pickled Stable-Baselines3 "
+            f"checkpoint of an older version: {PICKLE_RISK}; pass --trust-pickle only if you "
+            f"wrote it yourself, naming its files: {option}"
+        )
+    extra = [n for n in named if not any(_same_file(n, p) for p in needed)]
+    if extra:
+        raise ValueError(
+            f"--trust-pickle names {', '.join(repr(str(n)) for n in extra)}, which --resume "
+            f"does not read: it reads only the last checkpoint's files, {option}"
+        )
+    path = next(n for n in named if _same_file(n, last.path))
+    norm = None
+    if last.legacy_norm is not None:
+        norm = next(n for n in named if _same_file(n, last.legacy_norm))
+    return Checkpoint(path, last.steps, norm, pickled=True)
 
 
 def _start_line(config: TrainConfig, total: int, last: Checkpoint | None) -> str:
@@ -423,6 +546,7 @@ def train(config: TrainConfig, progress: bool = True) -> Path:
     """
     run_dir = config.resolved_run_dir()
     _check_settings(config)
+    _check_save_dir(config)
     last = _prepare_run_dir(config, run_dir)
     start_steps = 0 if last is None else last.steps
     total = planned_timesteps(config)
@@ -447,7 +571,7 @@ def train(config: TrainConfig, progress: bool = True) -> Path:
     # ---- agent: PPO with a zero-initialised residual, or the checkpoint to resume
     if last is None:
         model = make_model(config, venv)
-    elif last.legacy:  # an older run's pickled SB3 checkpoint (--trust-pickle)
+    elif last.legacy:  # an older run's pickled SB3 checkpoint, the file --trust-pickle names
         model = PPO.load(
             last.path,
             env=venv,

@@ -18,6 +18,8 @@ from __future__ import annotations
 import json
 import math
 import os
+import stat
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,6 +41,7 @@ from drill_env.bit_model import (
     P_XI,
 )
 from drill_env.parameters import PLANT_DT_S, DrillStringParameters
+from drill_env.validation import printable, shown
 
 __all__ = [
     "MODEL_PARAMETERS",
@@ -118,36 +121,38 @@ class CalibratedPlant:
     def __post_init__(self) -> None:
         if self.family not in FAMILIES:
             raise ValueError(
-                f"family = {self.family!r} is not known: allowed {', '.join(FAMILIES)}"
+                f"family = {shown(self.family)} is not known: allowed {', '.join(FAMILIES)}"
             )
         expected = FAMILY_PARAMETERS[self.family]
         missing = [n for n in expected if n not in self.parameters]
         extra = [n for n in self.parameters if n not in expected]
         if missing or extra:
             raise ValueError(
-                f"parameters of family {self.family!r}: missing {missing}, unknown {extra}: "
+                f"parameters of family {shown(self.family)}: missing {missing}, unknown {extra}: "
                 f"expected {', '.join(expected)}"
             )
         for name, p in self.parameters.items():
             if not (isinstance(p.value, (int, float)) and math.isfinite(p.value)):
-                raise ValueError(f"parameters.{name}.value = {p.value!r} is not a finite number")
+                raise ValueError(
+                    f"parameters.{name}.value = {shown(p.value)} is not a finite number"
+                )
             low_zero = name in ("damping", "viscous_friction", "stribeck_rate")
             if p.value < 0 or (not low_zero and p.value <= 0):
                 raise ValueError(
-                    f"parameters.{name}.value = {p.value!r} is out of range: allowed "
+                    f"parameters.{name}.value = {shown(p.value)} is out of range: allowed "
                     f"{'>= 0' if low_zero else '> 0'}"
                 )
             if p.unit != parameter_unit(name, self.uses_wob):
                 raise ValueError(
-                    f"parameters.{name}.unit = {p.unit!r}: expected "
+                    f"parameters.{name}.unit = {shown(p.unit)}: expected "
                     f"{parameter_unit(name, self.uses_wob)!r}"
                 )
         a_a = self.parameters["static_friction"].value
         a_0 = self.parameters["sliding_friction"].value
         if a_0 > a_a:
             raise ValueError(
-                f"parameters.sliding_friction.value = {a_0!r} is out of range: allowed <= "
-                f"static_friction = {a_a!r}"
+                f"parameters.sliding_friction.value = {shown(a_0)} is out of range: allowed <= "
+                f"static_friction = {shown(a_a)}"
             )
 
     def model_vector(self) -> npt.NDArray[np.float64]:
@@ -163,7 +168,7 @@ class CalibratedPlant:
             return float(self.parameters[name].value)
         if name in MODEL_PARAMETERS:
             return 0.0
-        raise ValueError(f"unknown parameter {name!r}: allowed {', '.join(MODEL_PARAMETERS)}")
+        raise ValueError(f"unknown parameter {shown(name)}: allowed {', '.join(MODEL_PARAMETERS)}")
 
     def to_json(self) -> dict[str, Any]:
         """The plant as the JSON object of the file."""
@@ -208,11 +213,11 @@ def _clean(value: Any) -> Any:
 
 def _field(data: Mapping[str, Any], name: str, kinds: tuple[type, ...], where: str) -> Any:
     if name not in data:
-        raise ValueError(f"{where}: missing field {name!r}")
+        raise ValueError(f"{where}: missing field {shown(name)}")
     value = data[name]
     if not isinstance(value, kinds) or isinstance(value, bool) and bool not in kinds:
         names = "/".join(k.__name__ for k in kinds)
-        raise ValueError(f"{where}.{name} = {value!r} is not {names}")
+        raise ValueError(f"{where}.{name} = {shown(value)} is not {names}")
     return value
 
 
@@ -229,14 +234,14 @@ def plant_from_json(data: Any, where: str = "plant") -> CalibratedPlant:
         raise ValueError(f"{where}: unknown field(s) {unknown}: allowed {sorted(known)}")
     fmt = _field(data, "format", (str,), where)
     if fmt != PLANT_FORMAT:
-        raise ValueError(f"{where}.format = {fmt!r}: this version reads {PLANT_FORMAT!r}")
+        raise ValueError(f"{where}.format = {shown(fmt)}: this version reads {PLANT_FORMAT!r}")
     number = (int, float)
     parameters = {}
     raw = _field(data, "parameters", (dict,), where)
     for name, entry in raw.items():
         if name not in MODEL_PARAMETERS:
             raise ValueError(
-                f"{where}.parameters: unknown parameter {name!r}: allowed "
+                f"{where}.parameters: unknown parameter {shown(name)}: allowed "
                 f"{', '.join(MODEL_PARAMETERS)}"
             )
         w = f"{where}.parameters.{name}"
@@ -244,10 +249,10 @@ def plant_from_json(data: Any, where: str = "plant") -> CalibratedPlant:
             raise ValueError(f"{w}: expected an object with value and unit")
         rel = entry.get("relative_std")
         if rel is not None and (not isinstance(rel, number) or isinstance(rel, bool)):
-            raise ValueError(f"{w}.relative_std = {rel!r} is not a number or null")
+            raise ValueError(f"{w}.relative_std = {shown(rel)} is not a number or null")
         note = entry.get("note", "")
         if not isinstance(note, str):
-            raise ValueError(f"{w}.note = {note!r} is not text")
+            raise ValueError(f"{w}.note = {shown(note)} is not text")
         parameters[name] = FittedParameter(
             float(_field(entry, "value", number, w)),
             _field(entry, "unit", (str,), w),
@@ -257,25 +262,27 @@ def plant_from_json(data: Any, where: str = "plant") -> CalibratedPlant:
         )
     window = _field(data, "window_s", (list,), where)
     if len(window) != 2 or not all(isinstance(v, number) for v in window):
-        raise ValueError(f"{where}.window_s = {window!r} is not a pair of numbers")
+        raise ValueError(f"{where}.window_s = {shown(window)} is not a pair of numbers")
     top = data.get("top_drive")
     if top is not None:
         if not isinstance(top, Mapping) or not all(
             isinstance(v, number) and math.isfinite(v) for v in top.values()
         ):
-            raise ValueError(f"{where}.top_drive = {top!r} is not an object of numbers")
+            raise ValueError(f"{where}.top_drive = {shown(top)} is not an object of numbers")
         top = {str(k): float(v) for k, v in top.items()}
     operating = data.get("operating_point", {})
     if not isinstance(operating, Mapping) or not all(
         isinstance(v, number) for v in operating.values()
     ):
-        raise ValueError(f"{where}.operating_point = {operating!r} is not an object of numbers")
+        raise ValueError(
+            f"{where}.operating_point = {shown(operating)} is not an object of numbers"
+        )
     fit = data.get("fit", {})
     if not isinstance(fit, Mapping):
-        raise ValueError(f"{where}.fit = {fit!r} is not an object")
+        raise ValueError(f"{where}.fit = {shown(fit)} is not an object")
     log = data.get("log", "")
     if not isinstance(log, str):
-        raise ValueError(f"{where}.log = {log!r} is not text")
+        raise ValueError(f"{where}.log = {shown(log)} is not text")
     return CalibratedPlant(
         family=_field(data, "family", (str,), where),
         uses_wob=bool(_field(data, "uses_wob", (bool,), where)),
@@ -292,14 +299,58 @@ def plant_from_json(data: Any, where: str = "plant") -> CalibratedPlant:
 def load_plant(path: str | os.PathLike[str]) -> CalibratedPlant:
     """Read and schema-check a plant file; ``ValueError`` naming the bad field otherwise."""
     p = Path(path)
-    size = os.stat(p).st_size
-    if size > MAX_PLANT_BYTES:
+    status = os.stat(p)
+    if not stat.S_ISREG(status.st_mode):  # a FIFO or /dev/zero would never end
+        raise ValueError(
+            f"plant file {str(p)!r} is not a regular file (a folder, FIFO, device or socket "
+            "is never opened): expected a plant.json written by drill-gym calibrate"
+        )
+    with open(p, "rb") as f:
+        raw = f.read(MAX_PLANT_BYTES + 1)
+    if len(raw) > MAX_PLANT_BYTES:
+        size = max(status.st_size, len(raw))
         raise ValueError(f"plant file {str(p)!r} is {size} bytes: allowed {MAX_PLANT_BYTES}")
     try:
-        data = json.loads(p.read_text(encoding="utf-8"))
+        data = _strict_json(raw.decode("utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"plant file {str(p)!r} is not JSON: {exc}") from None
+        raise ValueError(f"plant file {str(p)!r} is not JSON: {printable(str(exc), 200)}") from None
+    except RecursionError:
+        raise ValueError(f"plant file {str(p)!r} is not JSON: nested too deeply") from None
+    except ValueError as exc:  # the hooks below, or an integer with too many digits
+        raise ValueError(f"plant file {str(p)!r} is not JSON: {printable(str(exc), 200)}") from None
     return plant_from_json(data, where=p.name)
+
+
+def _strict_json(text: str) -> Any:
+    """``json.loads`` refusing NaN and Infinity, numbers beyond the float range and repeated
+    fields (a later one would silently win)."""
+
+    def constant(name: str) -> Any:
+        raise ValueError(f"{name} is not allowed: every number must be finite")
+
+    def real(literal: str) -> float:
+        value = float(literal)
+        if not math.isfinite(value):
+            raise ValueError(f"the number {shown(literal)} is beyond the float range")
+        return value
+
+    def integer(literal: str) -> int:
+        value = int(literal) if len(literal) <= 320 else None  # the float range ends at 1.8e308
+        if value is None or abs(value) > sys.float_info.max:
+            raise ValueError(f"the integer {shown(literal)} is beyond the float range")
+        return value
+
+    def fields(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+        result: dict[str, Any] = {}
+        for key, value in pairs:
+            if key in result:
+                raise ValueError(f"field {shown(key)} appears twice")
+            result[key] = value
+        return result
+
+    return json.loads(
+        text, parse_constant=constant, parse_float=real, parse_int=integer, object_pairs_hook=fields
+    )
 
 
 MAP_INERTIA_FRACTION: Final = 0.05

@@ -77,14 +77,24 @@ from drill_env.layout import (
     M_TOP_DRIVE_SPEED,
     N_MEASUREMENT,
 )
-from drill_env.limits import MAX_SPEED_RAD_S, TorqueLimits
-from drill_env.parameters import PRESETS, DrillStringParameters
+from drill_env.limits import (
+    MAX_BATCH_BYTES,
+    MAX_EPISODE_S,
+    MAX_NUM_ENVS,
+    MAX_SPEED_RAD_S,
+    TorqueLimits,
+)
+from drill_env.parameters import PLANT_DT_S, PRESETS, DrillStringParameters
 from drill_env.validation import (
     check_choice,
     check_finite_fields,
+    check_int,
     check_range,
+    check_seeds,
     check_unknown,
+    input_type_errors,
     require,
+    shown,
 )
 
 __all__ = [
@@ -503,10 +513,10 @@ def register_axial_controller(name: str, factory: Callable[..., AxialController]
     """Offer ``factory`` under ``name`` as a ``force_loop`` of ``DrillStringCoupled-v0``; the
     same factory twice is harmless, another under a taken name an error."""
     if not isinstance(name, str) or not name or name in FORCE_LOOPS:
-        raise ValueError(f"axial controller name must be a new non-empty string, got {name!r}")
+        raise ValueError(f"axial controller name must be a new non-empty string, got {shown(name)}")
     known = _AXIAL_FACTORIES.get(name)
     if known is not None and known is not factory:
-        raise ValueError(f"axial controller name {name!r} is already registered")
+        raise ValueError(f"axial controller name {shown(name)} is already registered")
     _AXIAL_FACTORIES[name] = factory
 
 
@@ -529,7 +539,7 @@ def make_axial_controller(name: str, **gains: Any) -> AxialController:
             register_axial_controller(name, factory)
     if factory is None:
         raise ValueError(
-            f"force_loop = {name!r} is not a known axial loop: allowed {list(FORCE_LOOPS)} or "
+            f"force_loop = {shown(name)} is not a known axial loop: allowed {list(FORCE_LOOPS)} or "
             f"a registered axial controller {axial_controller_names()}"
         )
     return factory(**gains)
@@ -652,31 +662,38 @@ class CoupledEnvConfig:
         elif not isinstance(self.bit, RgdParameters):
             raise TypeError("bit must be a preset name or an RgdParameters")
         if isinstance(self.reward_weights, dict):
+            valid = [f.name for f in dataclasses.fields(CoupledRewardWeights)]
+            check_unknown(self.reward_weights, valid, "field", "reward_weights")
             object.__setattr__(self, "reward_weights", CoupledRewardWeights(**self.reward_weights))
+        elif not isinstance(self.reward_weights, CoupledRewardWeights):
+            raise TypeError(
+                "reward_weights must be a CoupledRewardWeights or a dict of its fields, got "
+                f"{shown(self.reward_weights)}"
+            )
         check_choice("action_mode", self.action_mode, ACTION_MODES, "action mode")
         if isinstance(self.torque_loop, str) and self.torque_loop not in TORQUE_LOOPS:
             names = controller_names()
             if self.torque_loop not in names:
                 raise ValueError(
-                    f"torque_loop = {self.torque_loop!r} is not a known torque loop: allowed "
+                    f"torque_loop = {shown(self.torque_loop)} is not a known torque loop: allowed "
                     f"{list(TORQUE_LOOPS)} or a registered controller {names}"
                 )
         elif not isinstance(self.torque_loop, (str, CompiledController)):
             raise TypeError(
                 "torque_loop must be 'pi', 'none', a controller name or a controller with a "
-                f"compiled_law, got {self.torque_loop!r}"
+                f"compiled_law, got {shown(self.torque_loop)}"
             )
         if isinstance(self.force_loop, str) and self.force_loop not in FORCE_LOOPS:
             names = axial_controller_names()
             if self.force_loop not in names:
                 raise ValueError(
-                    f"force_loop = {self.force_loop!r} is not a known axial loop: allowed "
+                    f"force_loop = {shown(self.force_loop)} is not a known axial loop: allowed "
                     f"{list(FORCE_LOOPS)} or a registered axial controller {names}"
                 )
         elif not isinstance(self.force_loop, (str, AxialController)):
             raise TypeError(
                 "force_loop must be 'fixed', 'none', an axial controller name or an "
-                f"AxialController, got {self.force_loop!r}"
+                f"AxialController, got {shown(self.force_loop)}"
             )
         check_choice("axial_input", self.axial_input, AXIAL_INPUTS, "axial input")
         check_range("hook_stiffness_n_m", self.hook_stiffness_n_m, 1e3, 1e10)
@@ -684,7 +701,7 @@ class CoupledEnvConfig:
         check_range("max_hook_speed_m_s", self.max_hook_speed_m_s, 1e-6, 10.0)
         check_choice("surface", self.surface, ("max", "delay"), "surface rule")
         if not isinstance(self.randomize, bool):
-            raise TypeError(f"randomize must be True or False, got {self.randomize!r}")
+            raise TypeError(f"randomize must be True or False, got {shown(self.randomize)}")
         check_range("reference_speed_rad_s", self.reference_speed_rad_s, 0.1, 100.0)
         check_range("max_force_n", self.max_force_n, 1.0, 1e7)
         wf = self.bit_parameters.contact_force_n
@@ -731,6 +748,16 @@ class CoupledEnvConfig:
     def substeps(self) -> int:
         """Plant steps per decision."""
         return round(self.control_dt_s / PLANT_STEP_S)
+
+
+def _ring_capacity() -> int:
+    """Entries of each delay line (bit angle and cut depth) a string keeps."""
+    return math.ceil(_RING_SPAN / _SPACING_FRACTION) + 16
+
+
+def _string_bytes() -> int:
+    """Bytes of the two delay lines of one string (what bounds ``num_envs``)."""
+    return 2 * 8 * _ring_capacity()
 
 
 class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
@@ -788,7 +815,8 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
         check_unknown(keywords, [f.name for f in dataclasses.fields(CoupledEnvConfig)])
         render.check_render_mode(render_mode)
         self.render_mode = render_mode
-        self.config = CoupledEnvConfig(**keywords)
+        with input_type_errors():
+            self.config = CoupledEnvConfig(**keywords)
         c = self.config
         self.metadata = {
             "render_modes": render.available_render_modes(),
@@ -805,7 +833,7 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
         self._string = c.string_parameters
         self._bit_nominal = c.bit_parameters
         self._steps_per_episode = round(c.episode_s / c.control_dt_s)
-        capacity = math.ceil(_RING_SPAN / _SPACING_FRACTION) + 16
+        capacity = _ring_capacity()
         self._ring_phi = np.zeros(capacity)
         self._ring_r = np.zeros(capacity)
         self._ring = np.zeros(3, dtype=np.int64)
@@ -819,7 +847,7 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
         if c.torque_loop not in TORQUE_LOOPS:
             controller = resolve_controller(c.torque_loop)
             if not isinstance(controller, CompiledController):
-                raise TypeError(f"torque_loop = {c.torque_loop!r} has no compiled law")
+                raise TypeError(f"torque_loop = {shown(c.torque_loop)} has no compiled law")
             self._law = compile_law(controller, self._string, TorqueLimits(0.0, c.max_torque_nm))
         self._law_state = np.zeros(1) if self._law is None else self._law.initial_state.copy()
         self._law_params = np.zeros(1) if self._law is None else self._law.params
@@ -836,7 +864,7 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
         """Start an episode from steady drilling (see the class docstring)."""
         super().reset(seed=seed)
         if options:
-            raise ValueError(f"options = {options!r} is not supported: allowed None or {{}}")
+            raise ValueError(f"options = {shown(options)} is not supported: allowed None or {{}}")
         c, s = self.config, self._string
         rng = self.np_random
         rock = float(rng.uniform(0.8, 1.2)) if c.randomize else 1.0
@@ -952,7 +980,7 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
             )
             command = float(self._axial.command(seen, c.control_dt_s)) + a_axial * scale
             if not math.isfinite(command):
-                raise ValueError(f"the axial controller returned {command!r}: allowed finite")
+                raise ValueError(f"the axial controller returned {shown(command)}: allowed finite")
         elif c.force_loop == "fixed":
             command = (self._v_ref if hook else c.applied_force_n) + a_axial * scale
         elif hook:
@@ -1174,20 +1202,14 @@ class DrillStringCoupledVectorEnv(VectorEnv):
         render_mode: str | None = None,
         **keywords: Any,
     ) -> None:
-        if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
-            raise ValueError(f"num_envs = {num_envs!r} is out of range: allowed an integer >= 1")
-        if max_episode_steps is not None and (
-            isinstance(max_episode_steps, bool)
-            or not isinstance(max_episode_steps, int)
-            or max_episode_steps < 1
-        ):
-            raise ValueError(
-                f"max_episode_steps = {max_episode_steps!r} is out of range: allowed an "
-                "integer >= 1"
-            )
+        most = min(MAX_NUM_ENVS, MAX_BATCH_BYTES // _string_bytes())
+        num_envs = check_int("num_envs", num_envs, 1, most)
+        if max_episode_steps is not None:
+            most_steps = round(MAX_EPISODE_S / PLANT_DT_S)  # as the other vector envs
+            check_int("max_episode_steps", max_episode_steps, 1, most_steps)
         if render_mode is not None:
             raise ValueError(
-                f"render_mode = {render_mode!r} is not supported by the vector env: allowed "
+                f"render_mode = {shown(render_mode)} is not supported by the vector env: allowed "
                 "None (render a single env)"
             )
         self.max_episode_steps = max_episode_steps
@@ -1218,22 +1240,15 @@ class DrillStringCoupledVectorEnv(VectorEnv):
             mask = np.asarray(options.pop("reset_mask"))
             if mask.shape != (self.num_envs,) or mask.dtype != np.bool_:
                 raise ValueError(
-                    f"reset_mask must be a bool array of shape ({self.num_envs},), got {mask!r}"
+                    f"reset_mask must be a bool array of shape ({self.num_envs},), got {shown(mask)}"
                 )
             if not self._started and not mask.all():
                 raise ValueError("the first reset must reset every string (reset_mask all True)")
         if options:
             raise ValueError(
-                f"options = {options!r} is not supported: allowed None, {{}} or a reset_mask"
+                f"options = {shown(options)} is not supported: allowed None, {{}} or a reset_mask"
             )
-        if seed is None or isinstance(seed, int):
-            seeds: list[int | None] = [
-                None if seed is None else seed + i for i in range(self.num_envs)
-            ]
-        else:
-            seeds = list(seed)
-            if len(seeds) != self.num_envs:
-                raise ValueError(f"seed list must have {self.num_envs} entries, got {len(seeds)}")
+        seeds = check_seeds(seed, self.num_envs)
         results = []
         for i, (env, s) in enumerate(zip(self.envs, seeds, strict=True)):
             if mask[i]:

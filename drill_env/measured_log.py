@@ -24,16 +24,20 @@ last value or drops out to a constant) and stalls of the top drive.
 
 from __future__ import annotations
 
+import array
 import csv
 import math
 import os
+import stat
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Final
+from typing import Final, TextIO
 
 import numpy as np
 import numpy.typing as npt
+
+from drill_env.validation import shown
 
 __all__ = [
     "COLUMN_UNITS",
@@ -61,6 +65,8 @@ COLUMN_UNITS: Final = {
     "surface_torque_nm": "N m",
 }
 """Unit of each column of the format."""
+_ENCODING: Final = "utf-8-sig"
+"""UTF-8, with or without the byte-order mark some spreadsheets write."""
 MAX_LOG_BYTES: Final = 1 << 30
 """Largest log file accepted, bytes (1 GiB: a day at 1 kHz of six columns), checked before
 reading."""
@@ -68,6 +74,10 @@ MAX_LOG_ROWS: Final = 50_000_000
 """Most data rows accepted."""
 MIN_LOG_ROWS: Final = 3
 """Fewest data rows a log can have."""
+MAX_LINE_CHARS: Final = 64 * 1024
+"""Longest line of a CSV log (header, comment or data row), characters."""
+MAX_SHOWN_NAMES: Final = 8
+"""Most column names a message lists (the others are counted)."""
 
 GAP_FACTOR: Final = 3.0
 """A time step longer than this many median steps is a gap."""
@@ -136,7 +146,7 @@ class MeasuredLog:
             return self.time_s
         if name not in self.columns:
             raise ValueError(
-                f"the log {self.source or ''} has no column {name!r}: it has "
+                f"the log {self.source or ''} has no column {shown(name)}: it has "
                 f"{', '.join(['time_s', *self.columns])}"
             )
         return self.columns[name]
@@ -186,13 +196,20 @@ def check_log_arrays(
     _check_rows(time_s, columns)
 
 
+def _listed(names: list[str]) -> str:
+    """At most :data:`MAX_SHOWN_NAMES` names, each shown escaped and bounded."""
+    text = ", ".join(shown(n) for n in names[:MAX_SHOWN_NAMES])
+    more = len(names) - MAX_SHOWN_NAMES
+    return text + (f" and {more} more" if more > 0 else "")
+
+
 def _check_names(names: list[str]) -> None:
     unknown = [n for n in names if n not in COLUMN_UNITS]
     if unknown:
-        raise ValueError(
-            f"unknown column(s) {', '.join(repr(n) for n in unknown)}: allowed "
-            f"{', '.join(COLUMN_UNITS)}"
-        )
+        raise ValueError(f"unknown column(s) {_listed(unknown)}: allowed {', '.join(COLUMN_UNITS)}")
+    duplicated = sorted({n for n in names if names.count(n) > 1})
+    if duplicated:
+        raise ValueError(f"column(s) {_listed(duplicated)} appear twice or more")
     missing = [n for n in REQUIRED_COLUMNS if n not in names]
     if missing:
         raise ValueError(
@@ -211,7 +228,7 @@ def _check_rows(
     for name in names:
         values = time_s if name == "time_s" else columns[name]
         if values.shape != (n,):
-            raise ValueError(f"column {name!r} has shape {values.shape}, expected ({n},)")
+            raise ValueError(f"column {shown(name)} has shape {values.shape}, expected ({n},)")
         bad = np.flatnonzero(~np.isfinite(values))
         if bad.size:
             raise ValueError(
@@ -229,18 +246,37 @@ def _check_rows(
 
 
 def _check_size(path: Path) -> None:
-    size = os.stat(path).st_size
+    """Refuse anything but a regular file of at most :data:`MAX_LOG_BYTES` (a FIFO, a device
+    such as ``/dev/zero`` or a folder is never opened)."""
+    status = os.stat(path)
+    if not stat.S_ISREG(status.st_mode):
+        kind = "a folder" if stat.S_ISDIR(status.st_mode) else "not a regular file"
+        raise ValueError(
+            f"log {str(path)!r} is {kind} (a FIFO, a device or a socket is never opened): "
+            "expected a CSV or Parquet file"
+        )
+    size = status.st_size
     if size > MAX_LOG_BYTES:
         raise ValueError(
             f"log {str(path)!r} is {size} bytes: allowed at most {MAX_LOG_BYTES} bytes"
         )
 
 
+def _line(f: TextIO, path: Path, line_number: int) -> str:
+    """The next line of ``f`` (empty at the end), refused beyond :data:`MAX_LINE_CHARS`."""
+    line = f.readline(MAX_LINE_CHARS + 1)
+    if len(line) > MAX_LINE_CHARS:
+        raise ValueError(
+            f"log {str(path)!r}, line {line_number}: longer than {MAX_LINE_CHARS} characters"
+        )
+    return line
+
+
 def _header(path: Path) -> tuple[list[str], int]:
     """The header's names and the number of lines before the first data row."""
-    with open(path, encoding="utf-8", newline="") as f:
+    with open(path, encoding=_ENCODING, newline="") as f:
         skipped = 0
-        for line in f:
+        while line := _line(f, path, skipped + 1):
             skipped += 1
             text = line.strip()
             if not text or text.startswith("#"):
@@ -255,35 +291,40 @@ def _read_csv(path: Path) -> tuple[npt.NDArray[np.float64], dict[str, npt.NDArra
         names, skipped = _header(path)
     except UnicodeDecodeError as exc:
         raise ValueError(f"log {str(path)!r} is not UTF-8 text: {exc.reason}") from None
-    duplicated = sorted({n for n in names if names.count(n) > 1})
-    if duplicated:
-        raise ValueError(f"column(s) {', '.join(repr(n) for n in duplicated)} appear twice")
-    _check_names(names)  # unknown and missing columns before any number is read
-    rows: list[list[float]] = []
-    with open(path, encoding="utf-8", newline="") as f:
-        for _ in range(skipped):
-            next(f)
-        reader = csv.reader(f)
-        for row_number, row in enumerate(reader, start=1):
-            if not row or (len(row) == 1 and not row[0].strip()):
-                continue
-            if row_number > MAX_LOG_ROWS:
-                raise ValueError(f"log {str(path)!r} has more than {MAX_LOG_ROWS} data rows")
-            if len(row) != len(names):
-                raise ValueError(
-                    f"row {row_number}: {len(row)} values for {len(names)} columns "
-                    f"({', '.join(names)})"
-                )
-            values = []
-            for name, text in zip(names, row, strict=False):
-                try:
-                    values.append(float(text))
-                except ValueError:
+    _check_names(names)  # unknown, repeated and missing columns before any number is read
+    values = array.array("d")  # 8 bytes a value, whatever the row count
+    rows = 0
+    try:
+        with open(path, encoding=_ENCODING, newline="") as f:
+            for _ in range(skipped):
+                f.readline(MAX_LINE_CHARS + 1)
+            row_number = 0
+            while line := _line(f, path, skipped + row_number + 1):
+                row_number += 1
+                row = next(csv.reader([line]), [])
+                if not row or (len(row) == 1 and not row[0].strip()):
+                    continue
+                if row_number > MAX_LOG_ROWS:
+                    raise ValueError(f"log {str(path)!r} has more than {MAX_LOG_ROWS} data rows")
+                if len(row) != len(names):
                     raise ValueError(
-                        f"column {name!r}, row {row_number}: {text.strip()!r} is not a number"
-                    ) from None
-            rows.append(values)
-    table = np.array(rows, dtype=np.float64).reshape(len(rows), len(names))
+                        f"row {row_number}: {len(row)} values for {len(names)} columns "
+                        f"({', '.join(names)})"
+                    )
+                for name, text in zip(names, row, strict=True):
+                    try:
+                        values.append(float(text))
+                    except ValueError:
+                        raise ValueError(
+                            f"column {name!r}, row {row_number}: {shown(text.strip())} is not a "
+                            "number"
+                        ) from None
+                rows += 1
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"log {str(path)!r} is not UTF-8 text: {exc.reason}") from None
+    except csv.Error as exc:
+        raise ValueError(f"log {str(path)!r} is not valid CSV: {shown(str(exc))}") from None
+    table = np.frombuffer(values, dtype=np.float64).reshape(rows, len(names))
     data = {name: np.ascontiguousarray(table[:, j]) for j, name in enumerate(names)}
     time_s = data.pop("time_s")
     return time_s, data
@@ -293,6 +334,7 @@ def _read_parquet(
     path: Path,
 ) -> tuple[npt.NDArray[np.float64], dict[str, npt.NDArray[np.float64]]]:
     try:
+        import pyarrow as pa
         import pyarrow.parquet as pq
     except ModuleNotFoundError:
         raise ValueError(
@@ -302,12 +344,17 @@ def _read_parquet(
     meta = pq.read_metadata(path)
     if meta.num_rows > MAX_LOG_ROWS:
         raise ValueError(f"log {str(path)!r} has {meta.num_rows} rows: allowed {MAX_LOG_ROWS}")
+    _check_names(list(meta.schema.names))  # before any column is read
     table = pq.read_table(path)
     names = list(table.column_names)
     _check_names(names)
     data: dict[str, npt.NDArray[np.float64]] = {}
     for name in names:
         column = table.column(name)
+        kind = column.type
+        if not (pa.types.is_floating(kind) or pa.types.is_integer(kind)):
+            # bools, times and dates, text: not a number in the column's SI unit
+            raise ValueError(f"column {name!r} is not numeric ({kind}): expected float or integer")
         if column.null_count:
             first = int(np.flatnonzero(np.asarray(column.is_null()))[0]) + 1
             raise ValueError(f"column {name!r}, row {first}: empty value is not a number")

@@ -56,6 +56,7 @@ from drill_env.validation import (
     check_range,
     check_real,
     check_unknown,
+    input_type_errors,
     printable,
     require,
     shown,
@@ -373,9 +374,10 @@ class EnvConfig:
     def from_kwargs(cls, kwargs: dict[str, Any], base: EnvConfig | None = None) -> EnvConfig:
         """Validate ``kwargs`` (unknown names are a ``TypeError`` listing the valid ones)."""
         check_unknown(kwargs, cls.keywords())
-        if base is None:
-            return cls(**kwargs)
-        return dataclasses.replace(base, **kwargs)
+        with input_type_errors():  # Gymnasium's make adds the raw keywords to a TypeError
+            if base is None:
+                return cls(**kwargs)
+            return dataclasses.replace(base, **kwargs)
 
 
 def episode_config(base: EnvConfig, options: dict[str, Any] | None) -> EnvConfig:

@@ -11,17 +11,20 @@ line, no control characters), and any text from outside that reaches a terminal 
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import numbers
 import unicodedata
-from collections.abc import Collection, Iterable, Sequence
+from collections.abc import Collection, Iterable, Iterator, Sequence
 from typing import Any, Final
 
 import numpy as np
 
 __all__ = [
+    "MAX_MESSAGE_CHARS",
     "MAX_SHOWN_CHARS",
+    "InputTypeError",
     "check_bool",
     "check_choice",
     "check_finite_fields",
@@ -29,7 +32,9 @@ __all__ = [
     "check_interval",
     "check_range",
     "check_real",
+    "check_seeds",
     "check_unknown",
+    "input_type_errors",
     "printable",
     "require",
     "shown",
@@ -45,7 +50,8 @@ def printable(text: object, limit: int = MAX_SHOWN_CHARS, cell: bool = False) ->
     become ``\\xNN`` or ``\\uNNNN``, in a cell ``|`` (its border) becomes ``\\|``, and more
     than ``limit`` characters are cut with ``...``."""
     out: list[str] = []
-    for char in str(text):
+    # Every character gives at least one, so the first limit + 1 decide the result.
+    for char in str(text)[: limit + 1]:
         if cell and char == "|":
             out.append("\\|")
         elif char == "\\" or char.isprintable() or char == " ":
@@ -57,6 +63,34 @@ def printable(text: object, limit: int = MAX_SHOWN_CHARS, cell: bool = False) ->
             out.append(f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}")
     line = "".join(out)
     return line if len(line) <= limit else line[: max(0, limit - 3)] + "..."
+
+
+MAX_MESSAGE_CHARS: Final = 1000
+"""Longest message of an :class:`InputTypeError` (longer is cut with ...)."""
+
+
+class InputTypeError(TypeError):
+    """A ``TypeError`` about a value from outside whose message is always printable and
+    bounded: it is passed through :func:`printable` whenever the exception is built, also when
+    a caller builds it again with more text. (Gymnasium's ``make`` re-raises a ``TypeError`` of
+    an env's constructor as ``type(err)(f"{err} ... with kwargs ({kwargs})")``, which would
+    otherwise print the raw keywords: escape sequences, or a 10 MB string.)"""
+
+    def __init__(self, *args: object) -> None:
+        super().__init__(*(printable(arg, MAX_MESSAGE_CHARS) for arg in args))
+
+
+@contextlib.contextmanager
+def input_type_errors() -> Iterator[None]:
+    """Turn a ``TypeError`` raised inside into an :class:`InputTypeError` (same message, made
+    printable and bounded): wrap the construction of an env's configuration from the keywords
+    a user gave, so that no caller can add them to the message raw."""
+    try:
+        yield
+    except InputTypeError:
+        raise
+    except TypeError as err:
+        raise InputTypeError(str(err)) from None
 
 
 def shown(value: object, limit: int = MAX_SHOWN_CHARS) -> str:
@@ -83,7 +117,7 @@ def check_real(name: str, value: object, allowed: str = "a finite real number") 
     beyond the float range (an ``int`` such as ``10**400``). NaN and infinities pass: the range
     checks refuse them."""
     if not _is_real(value):
-        raise TypeError(
+        raise InputTypeError(
             f"{name} must be a real number, got {shown(value)} ({printable(type(value).__name__)})"
         )
     try:
@@ -125,10 +159,33 @@ def check_int(name: str, value: object, low: int = 1, high: int | None = None) -
     return int(value)
 
 
+def check_seeds(seed: object, count: int) -> list[int | None]:
+    """The reset seeds of ``count`` strings from a vector env's ``seed``: ``None`` (none),
+    an integer ``s >= 0`` (string ``i`` gets ``s + i``) or a list of ``count`` of them (each
+    ``None`` or an integer >= 0).
+
+    Raises:
+        TypeError: ``seed`` is none of these (a bool, a float, a string).
+        ValueError: a negative seed, or a list of another length.
+    """
+    if seed is None:
+        return [None] * count
+    if isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_)):
+        first = check_int("seed", seed, 0)
+        return [first + i for i in range(count)]
+    if not isinstance(seed, (list, tuple)):
+        raise InputTypeError(
+            f"seed must be None, an integer >= 0 or a list of {count} of them, got {shown(seed)}"
+        )
+    if len(seed) != count:
+        raise ValueError(f"seed list must have {count} entries, got {len(seed)}")
+    return [None if s is None else check_int(f"seed[{i}]", s, 0) for i, s in enumerate(seed)]
+
+
 def check_bool(name: str, value: object) -> bool:
     """``value`` if it is ``True`` or ``False``."""
     if not isinstance(value, bool):
-        raise TypeError(f"{name} must be True or False, got {shown(value)}")
+        raise InputTypeError(f"{name} must be True or False, got {shown(value)}")
     return value
 
 
@@ -156,7 +213,7 @@ def check_unknown(
     unknown = sorted((printable(name) for name in set(given) - set(valid)), key=str)
     if unknown:
         scope = f" for {owner}" if owner else ""
-        raise TypeError(
+        raise InputTypeError(
             f"unrecognized {what}(s){scope}: {', '.join(unknown)}; valid {what}s: "
             f"{', '.join(valid)}"
         )

@@ -30,7 +30,7 @@ from drill_env.limits import MAX_EPISODE_S, MAX_NUM_ENVS
 from drill_env.options import EnvConfig, FieldEnvConfig
 from drill_env.parameters import PLANT_DT_S
 from drill_env.rewards import TERMS, reward_terms, total_reward
-from drill_env.validation import check_int, shown
+from drill_env.validation import check_int, check_seeds, shown
 
 __all__ = ["DrillStringFieldVectorEnv", "DrillStringVectorEnv"]
 
@@ -94,26 +94,13 @@ class DrillStringVectorEnv(VectorEnv):
             mask = np.asarray(options.pop("reset_mask"))
             if mask.shape != (self.num_envs,) or mask.dtype != np.bool_:
                 raise ValueError(
-                    f"reset_mask must be a bool array of shape ({self.num_envs},), got {mask!r}"
+                    f"reset_mask must be a bool array of shape ({self.num_envs},), got {shown(mask)}"
                 )
             if not self._started and not mask.all():
                 raise ValueError("the first reset must reset every string (reset_mask all True)")
-        if seed is None:
-            seeds: list[int | None] = [None] * self.num_envs
-        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
-            seed = check_int("seed", seed, 0)
-            seeds = [seed + i for i in range(self.num_envs)]
-        else:
-            if not isinstance(seed, (list, tuple)):
-                raise TypeError(
-                    f"seed must be None, an integer >= 0 or a list of {self.num_envs} of them, "
-                    f"got {shown(seed)}"
-                )
-            if len(seed) != self.num_envs:
-                raise ValueError(f"seed list must have {self.num_envs} entries, got {len(seed)}")
-            seeds = [
-                None if s is None else check_int(f"seed[{i}]", s, 0) for i, s in enumerate(seed)
-            ]
+        seeds = check_seeds(seed, self.num_envs)
+        if isinstance(seed, np.integer):
+            seed = int(seed)
         if seed is not None:
             self._np_random, self._np_random_seed = gym.utils.seeding.np_random(
                 seed if isinstance(seed, int) else None

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, Final, NoReturn
 
 from drill_env.validation import printable, shown
+from experiments.preflight import USAGE_ERROR, error_line_format
 
 __all__ = [
     "BASE_SEED_HIGH",
@@ -34,8 +35,6 @@ __all__ = [
     "seed_type",
 ]
 
-USAGE_ERROR: int = 2
-"""Exit code of a user error (the argparse convention)."""
 SEED_HIGH: Final = 2**32 - 1
 """Largest seed a command takes when it uses the seed as it is (a reset or training seed)."""
 BASE_SEED_HIGH: Final = 2**31 - 1
@@ -56,7 +55,7 @@ def one_line(text: str) -> str:
 
 def error_line(prog: str, message: str) -> str:
     """The one line that reports a user error of the command ``prog``."""
-    return f"{prog}: error: {one_line(message)} (see {prog} --help)"
+    return error_line_format.format(prog=prog, message=one_line(message))
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter):
@@ -224,6 +223,14 @@ def output_folder(text: str) -> Path:
 output_folder.__name__ = "folder"
 
 
+def _with_notes(exc: BaseException) -> str:
+    """The message of ``exc`` followed by its notes (``add_note``), which libraries use to add
+    context; the line is made safe by :func:`error_line`."""
+    notes = getattr(exc, "__notes__", None)
+    texts = [str(n) for n in notes[:5]] if isinstance(notes, list) else []
+    return "; ".join([str(exc), *texts])
+
+
 def run_command(prog: str, main: Callable[[], int], debug: bool) -> int:
     """Run ``main()`` and turn a user error into one line on standard error and exit code 2.
 
@@ -255,12 +262,16 @@ def run_command(prog: str, main: Callable[[], int], debug: bool) -> int:
             file=sys.stderr,
         )
         return USAGE_ERROR
-    except (ValueError, OSError, OverflowError, RecursionError) as exc:
-        # OverflowError and RecursionError: a number or a nesting from outside too large for
-        # a check that should have refused it first; still one line, never a traceback.
+    except (ValueError, OSError, OverflowError, RecursionError, MemoryError) as exc:
+        # OverflowError, RecursionError and MemoryError: a number, a nesting or a size from
+        # outside too large for a check that should have refused it first; still one line,
+        # never a traceback.
         if debug:
             raise
-        print(error_line(prog, str(exc)), file=sys.stderr)
+        text = _with_notes(exc)
+        if isinstance(exc, MemoryError):
+            text = f"not enough memory: {text or 'MemoryError'} (reduce the sizes asked for)"
+        print(error_line(prog, text), file=sys.stderr)
         return USAGE_ERROR
     except KeyboardInterrupt:
         print(f"{prog}: interrupted", file=sys.stderr)

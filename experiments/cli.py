@@ -15,8 +15,7 @@ import os
 import sys
 from collections.abc import Sequence
 
-from drill_env.validation import shown
-from experiments.arguments import USAGE_ERROR, run_command
+from experiments.preflight import USAGE_ERROR, error_line_format, refused_path
 
 __all__ = ["DEBUG_VARIABLE", "SUBCOMMANDS", "main"]
 
@@ -115,6 +114,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(_usage())
         return 0
     name, rest = args[0], args[1:]
+    if name in SUBCOMMANDS:  # a path no command can use is refused before any heavy import
+        problem = refused_path(rest)
+        if problem is not None:
+            prog = f"drill-gym {name}"
+            print(error_line_format.format(prog=prog, message=problem), file=sys.stderr)
+            return USAGE_ERROR
+    from drill_env.validation import shown
+    from experiments.arguments import run_command
+
     if name not in SUBCOMMANDS:
         kind = "option" if name.startswith("-") else "command"
         print(

@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any, Final, Protocol
 
 from drill_env import __version__
+from drill_env.validation import printable
 from experiments.tables import json_clean
 
 __all__ = [
@@ -453,6 +454,8 @@ class ResultsDatabase:
             )
         except sqlite3.Error as err:
             raise OSError(f"--results {str(path)!r}: cannot open it ({err})") from None
+        # The file's schema runs no function with side effects (SQLite's trusted_schema).
+        connection.execute("PRAGMA trusted_schema = OFF")
         database = cls(path, sweep, settings_hash, version, connection)
         try:
             database._prepare(writable=not read_only)
@@ -498,14 +501,16 @@ class ResultsDatabase:
                 )
             else:
                 extra = [
-                    f"{kind} {name!r}"
+                    f"{printable(kind, 20)} {_shown(name)}"
                     for kind, name in objects
                     if not (kind == "table" and name in _TABLES)
                     and not (kind == "index" and str(name).startswith("sqlite_autoindex_"))
                 ]
                 if extra:
+                    more = f" and {len(extra) - 5} more" if len(extra) > 5 else ""
                     raise _refuse(
-                        self.path, f"has {', '.join(extra)}, which a results database has not"
+                        self.path,
+                        f"has {', '.join(extra[:5])}{more}, which a results database has not",
                     )
                 for (table, columns), statement in zip(_TABLES.items(), _CREATE, strict=True):
                     found = tuple(

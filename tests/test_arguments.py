@@ -9,8 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from experiments.arguments import check_output_folder
+from experiments.arguments import check_output_folder, run_command
 from experiments.cli import main as cli_main
+from experiments.train import main as train_main
 
 COMMANDS = {
     "compare": ["compare", "--no-agent"],
@@ -104,12 +105,16 @@ def test_check_output_folder_accepts_new_and_existing_folders(tmp_path: Path) ->
 def test_train_refuses_a_run_folder_that_is_a_file(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """``train --out`` (its ``--run-dir``) is checked by the training itself, before it
-    starts."""
+    """``train --out`` (its ``--run-dir``) is refused before the command is imported, and
+    by the training itself, before it starts."""
     notes = tmp_path / "notes.txt"
     notes.write_text("mine\n")
     before = _notes(notes)
     assert cli_main(["train", "--out", str(notes), "--total-timesteps", "100"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"--out: {str(notes)!r} is a file" in err, err
+    argv = ["--run-dir=" + str(notes), "--total-timesteps", "100"]
+    assert run_command("drill-gym train", lambda: train_main(argv), debug=False) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"--run-dir {str(notes)!r} is a file" in err, err
     assert _notes(notes) == before

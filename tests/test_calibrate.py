@@ -303,7 +303,7 @@ def test_calibrate_and_replay_as_a_user_types_them(tmp_path: Path) -> None:
         (("calibrate", "rig.csv", "--window", "5:2", "--out", "o"), "argument --window"),
         (("calibrate", "rig.csv", "--window", "2:x", "--out", "o"), "argument --window"),
         (("calibrate", "missing.csv", "--window", "0:1", "--out", "o"), "No such file"),
-        (("calibrate", "rig.csv", "--window", "0:1", "--out", "afile"), "is not a directory"),
+        (("calibrate", "rig.csv", "--window", "0:1", "--out", "afile"), "is a file, not a folder"),
         (("calibrate", "rig.csv", "--window", "0:99", "--out", "o"), "out of range"),
         (
             ("calibrate", "rig.csv", "--window", "0:1", "--out", "o", "--fix", "mass=1"),
