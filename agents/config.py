@@ -1,5 +1,5 @@
 """The training configuration of the residual PPO agent, CleanRL style: one flat dataclass,
-a docstring under every field, parsed from the command line by :func:`parse_config`.
+a docstring under every field (the help of ``drill-gym train``'s options).
 
 The defaults are the shipped ``DrillString-v0`` agent's settings (``agents/models/residual_ppo``).
 Another env has its own defaults in :data:`ENV_DEFAULTS` (the shipped field agent's,
@@ -9,7 +9,6 @@ every field the caller does not set; ``TrainConfig(...)`` itself takes every val
 
 from __future__ import annotations
 
-import argparse
 import ast
 import dataclasses
 import inspect
@@ -18,7 +17,6 @@ import math
 import os
 import re
 import textwrap
-import typing
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,10 +36,7 @@ __all__ = [
     "PAPER_ENV_ID",
     "TRAINING_RANGE_NAMES",
     "TrainConfig",
-    "config_from_namespace",
-    "config_parser",
     "field_docs",
-    "parse_config",
     "plain_text",
 ]
 
@@ -479,15 +474,6 @@ def field_docs(cls: type = TrainConfig) -> dict[str, str]:
     return docs
 
 
-def _parse_bool(text: str) -> bool:
-    lowered = text.strip().lower()
-    if lowered in ("1", "true", "yes", "on"):
-        return True
-    if lowered in ("0", "false", "no", "off"):
-        return False
-    raise argparse.ArgumentTypeError(f"expected true or false, got {text!r}")
-
-
 def plain_text(text: str, fields: Sequence[str] = ()) -> str:
     """``text`` without Sphinx/reST markup, for ``--help``: roles such as ``:class:`x``` become
     ``x``, double and single backticks are dropped, ``::`` before a literal block becomes
@@ -503,134 +489,3 @@ def plain_text(text: str, fields: Sequence[str] = ()) -> str:
     text = re.sub(r"`([^`]+)`", literal, text)
     text = text.replace("`", "'")
     return re.sub(r"::(\s*\n)", r":\1", text)
-
-
-def _show_default(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, list):
-        return " ".join(str(v) for v in value)
-    if value == "":
-        return "empty"
-    return str(value)
-
-
-def config_parser(
-    prog: str = "drill-gym train",
-    description: str = "",
-    parser_class: type[argparse.ArgumentParser] = argparse.ArgumentParser,
-) -> argparse.ArgumentParser:
-    """The command-line parser of :class:`TrainConfig`: one ``--field value`` per field
-    (``--flag`` alone sets a boolean to true, ``--no-flag`` to false; ``--net-arch 64 64`` for
-    lists), its help the field's docstring in plain text with its default (and the default of
-    each env that has its own, :data:`ENV_DEFAULTS`).
-
-    The parsed namespace holds only the options given (argparse's ``SUPPRESS`` default), so
-    that :func:`config_from_namespace` can fill in the defaults of the chosen env.
-
-    Args:
-        prog: The command as typed, for the usage line and messages.
-        description: Text above the options (markup is removed, see :func:`plain_text`).
-        parser_class: The ``argparse.ArgumentParser`` (sub)class to build; it may take
-            ``formatter_class``.
-
-    Returns:
-        The parser; :func:`config_from_namespace` turns its result into a config.
-    """
-    names = [f.name for f in dataclasses.fields(TrainConfig)]
-    parser = parser_class(
-        prog=prog,
-        description=plain_text(description, names),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    unset = argparse.SUPPRESS  # an option not given leaves no attribute
-    docs = field_docs()
-    hints = typing.get_type_hints(TrainConfig)
-    defaults = TrainConfig()
-
-    def shown(name: str, value: Any) -> str:
-        text = _show_default(value)
-        for env_id, values in ENV_DEFAULTS.items():
-            if name in values:
-                text += f"; {env_id}: {_show_default(values[name])}"
-        return text
-
-    for f in dataclasses.fields(TrainConfig):
-        flag = _option(f.name)
-        default = getattr(defaults, f.name)
-        doc = plain_text(docs.get(f.name, ""), names)
-        hint = hints[f.name]
-        if hint is bool:
-            off = "--no-" + flag[2:]
-            switch = f"; {off} turns it off" if default else ""
-            help_text = f"{doc} (default: {shown(f.name, default)}{switch})"
-            parser.add_argument(
-                flag,
-                dest=f.name,
-                nargs="?",
-                const=True,
-                default=unset,
-                type=_parse_bool,
-                metavar="true|false",
-                help=help_text.replace("%", "%%"),
-            )
-            parser.add_argument(
-                off, dest=f.name, action="store_false", default=unset, help=argparse.SUPPRESS
-            )
-            continue
-        help_text = f"{doc} (default: {shown(f.name, default)})".replace("%", "%%")
-        metavar = {int: "N", float: "X"}.get(hint, "TEXT")
-        if f.name == "trust_pickle":
-            parser.add_argument(
-                flag,
-                dest=f.name,
-                nargs="+",
-                default=unset,
-                metavar="FILE",
-                help=f"{doc} (default: none)".replace("%", "%%"),
-            )
-        elif typing.get_origin(hint) is list:
-            parser.add_argument(
-                flag,
-                dest=f.name,
-                nargs="+",
-                type=int,
-                default=unset,
-                metavar="SIZE",
-                help=help_text,
-            )
-        elif f.name == "env_id":
-            parser.add_argument(  # --env: the name of the studies' option
-                flag, "--env", dest=f.name, choices=ENV_IDS, default=unset, help=help_text
-            )
-        else:
-            parser.add_argument(
-                flag, dest=f.name, type=hint, default=unset, metavar=metavar, help=help_text
-            )
-    return parser
-
-
-def config_from_namespace(args: argparse.Namespace) -> TrainConfig:
-    """The :class:`TrainConfig` of parsed arguments (other attributes are ignored): the
-    options given, the others the defaults of the chosen env (:meth:`TrainConfig.for_env`).
-
-    Raises:
-        ValueError: A value out of range (one line naming the option and the allowed range).
-    """
-    names = {f.name for f in dataclasses.fields(TrainConfig)}
-    given = {k: v for k, v in vars(args).items() if k in names}
-    return TrainConfig.for_env(given.pop("env_id", PAPER_ENV_ID), **given)
-
-
-def parse_config(
-    argv: Sequence[str] | None, prog: str = "drill-gym train", description: str = ""
-) -> TrainConfig:
-    """A :class:`TrainConfig` from command-line arguments (see :func:`config_parser`).
-
-    Raises:
-        ValueError: A value out of range (one line naming the option and the allowed range;
-            ``drill-gym`` prints it and exits with status 2). Unparsable values (``--seed x``)
-            end the program as argparse does.
-    """
-    parser = config_parser(prog, description)
-    return config_from_namespace(parser.parse_args(list(argv) if argv is not None else None))

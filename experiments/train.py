@@ -4,7 +4,7 @@ The settings are :class:`agents.config.TrainConfig` (the Spec of a run; its fiel
 those of a model's ``config.json``): every field is an option whose help is the field's
 docstring, with the default of each env that has its own (:data:`agents.config.ENV_DEFAULTS`).
 An option not given leaves no value, so that the chosen env's defaults fill it in
-(:func:`agents.config.config_from_namespace`). Three fields have the studies' option names
+(:func:`config_from_namespace`). Three fields have the studies' option names
 (:data:`OPTION_NAMES`: ``--env``, ``--out``, ``--duration-s``; the field's own name is still
 accepted); booleans are ``--flag``, ``--flag true|false`` and ``--no-flag``.
 
@@ -33,14 +33,13 @@ from typing import Any, Final
 from agents.config import (
     ENV_DEFAULTS,
     ENV_IDS,
+    PAPER_ENV_ID,
     TrainConfig,
-    _parse_bool,
-    _show_default,
-    config_from_namespace,
     field_docs,
     plain_text,
 )
 from agents.train import train
+from drill_env.validation import printable
 from experiments.arguments import ArgumentParser
 from experiments.spec_cli import Option, option_name, spec_from_args, spec_options
 
@@ -167,8 +166,9 @@ def _parser(full: bool = False) -> ArgumentParser:
         }
         if hint is bool:
             kwargs.update(nargs="?", const=True, type=_parse_bool, metavar="true|false")
-        elif typing.get_origin(hint) is list:
-            kwargs.update(nargs="+", type=int, metavar="SIZE")
+        elif typing.get_origin(hint) in (list, tuple):
+            element = typing.get_args(hint)[0]
+            kwargs.update(nargs="+", type=element, metavar="SIZE" if element is int else "FILE")
         elif spec.choices is not None:
             kwargs.update(choices=spec.choices)
         else:
@@ -187,6 +187,51 @@ def _parser(full: bool = False) -> ArgumentParser:
     return parser
 
 
+def _parse_bool(text: str) -> bool:
+    lowered = text.strip().lower()
+    if lowered in ("1", "true", "yes", "on"):
+        return True
+    if lowered in ("0", "false", "no", "off"):
+        return False
+    raise argparse.ArgumentTypeError(f"expected true or false, got {printable(text)}")
+
+
+def _show_default(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (list, tuple)):
+        return " ".join(str(v) for v in value) if value else "none"
+    if value == "":
+        return "empty"
+    return str(value)
+
+
+def config_from_namespace(args: argparse.Namespace) -> TrainConfig:
+    """The :class:`TrainConfig` of parsed arguments (other attributes are ignored): the
+    options given, the others the defaults of the chosen env (:meth:`TrainConfig.for_env`).
+
+    Raises:
+        ValueError: A value out of range (one line naming the option and the allowed range).
+    """
+    names = {f.name for f in dataclasses.fields(TrainConfig)}
+    given = {k: v for k, v in vars(args).items() if k in names}
+    try:
+        return TrainConfig.for_env(given.pop("env_id", PAPER_ENV_ID), **given)
+    except ValueError as err:
+        raise ValueError(_both_names(str(err))) from None
+
+
+def parse_config(argv: Sequence[str] | None) -> TrainConfig:
+    """A :class:`TrainConfig` from ``drill-gym train`` arguments.
+
+    Raises:
+        ValueError: A value out of range (one line naming the option and the allowed range;
+            ``drill-gym`` prints it and exits with status 2). Unparsable values (``--seed x``)
+            end the program as argparse does.
+    """
+    return config_from_namespace(_parser().parse_args(list(argv) if argv is not None else None))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """``drill-gym train [--setting value ...]``; returns the exit code (``--help-all`` lists
     every setting).
@@ -197,10 +242,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         FileNotFoundError: ``--resume`` without a checkpoint.
     """
     args = _parser().parse_args(list(argv) if argv is not None else None)
-    try:
-        config = config_from_namespace(args)
-    except ValueError as err:
-        raise ValueError(_both_names(str(err))) from None
+    config = config_from_namespace(args)
     command = spec_from_args(TrainCommandSpec, args)
     out = train(config, progress=not command.no_progress)
     record = json.loads((out / "config.json").read_text())

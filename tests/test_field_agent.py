@@ -20,10 +20,11 @@ import numpy as np
 import pytest
 
 import drill_env  # noqa: F401  (registers the envs)
-from agents.config import ENV_DEFAULTS, FIELD_ENV_ID, TrainConfig, parse_config
+from agents.config import ENV_DEFAULTS, FIELD_ENV_ID, TrainConfig
 from agents.inference import ObsNorm, PolicySpec, stack_frames
 from agents.policy import DEFAULT_MODEL_DIR, ResidualPolicy, is_model_folder, load_policy
 from drill_env.evaluation import rollout
+from experiments.train import parse_config
 
 FIELD = FIELD_ENV_ID
 SHIPPED = DEFAULT_MODEL_DIR / "field_agent"
@@ -83,7 +84,9 @@ def test_bad_env_settings_are_one_line_errors() -> None:
         TrainConfig.for_env("Nope-v0")
     with pytest.raises(ValueError, match=r"--env-id = 'Nope-v0' is not valid: allowed"):
         TrainConfig(env_id="Nope-v0")
-    with pytest.raises(ValueError, match=r"--observation = 'surface' is not valid with --env-id"):
+    with pytest.raises(
+        ValueError, match=r"--observation = 'surface' is not valid with --env/--env-id"
+    ):
         parse_config(["--observation", "surface"])
     with pytest.raises(ValueError, match=r"--observation = 'all' is not valid: allowed surface"):
         parse_config(["--env", FIELD, "--observation", "all"])
@@ -128,13 +131,15 @@ def test_bad_training_ranges_are_one_line_errors() -> None:
         ValueError, match=r"--training-ranges = 'sticky' is not valid: allowed env, wide"
     ):
         parse_config(["--env", FIELD, "--training-ranges", "sticky"])
-    with pytest.raises(ValueError, match=r"--training-ranges = 'wide' is not valid with --env-id"):
+    with pytest.raises(
+        ValueError, match=r"--training-ranges = 'wide' is not valid with --env/--env-id"
+    ):
         parse_config(["--training-ranges", "wide"])
 
 
 def test_help_shows_the_field_defaults(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit):
-        parse_config(["--help"])
+        parse_config(["--help-all"])
     flat = " ".join(capsys.readouterr().out.split())
     assert f"(default: 1; {FIELD}: {ENV_DEFAULTS[FIELD]['frame_stack']})" in flat
     assert f"(default: proposed; {FIELD}: z_torque_tuned;" in flat

@@ -29,7 +29,7 @@ from hypothesis import strategies as st
 
 import drill_env  # noqa: F401  (registers the envs)
 from agents.checkpoints import find_last_checkpoint
-from agents.config import TrainConfig, parse_config
+from agents.config import TrainConfig
 from agents.train import _prepare_run_dir
 from drill_env.validation import (
     MAX_MESSAGE_CHARS,
@@ -40,6 +40,7 @@ from drill_env.validation import (
 from experiments.cli import SUBCOMMANDS
 from experiments.cli import main as cli_main
 from experiments.preflight import refused_path
+from experiments.train import parse_config
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = settings(
