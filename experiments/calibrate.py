@@ -35,6 +35,7 @@ from experiments.calibration_fit import (
     calibrate,
     feature_errors,
     features,
+    simulate_free,
     simulate_plant,
     stuck_threshold,
 )
@@ -269,6 +270,10 @@ def _report(
         f"{plant.fit['max_relative_std']:.0%} is reported as not identifiable, held fixed, "
         "and the rest refitted.",
         "",
+        "## Top drive (free-running mode)",
+        "",
+        *_top_drive_lines(result),
+        "",
         "![fit](fit.png)",
         "",
         "![loop](loop.png)",
@@ -277,6 +282,22 @@ def _report(
         "",
     ]
     return "\n".join(lines)
+
+
+def _top_drive_lines(result: FitResult) -> list[str]:
+    top = result.top_drive
+    if top is None or top.values is None:
+        reason = top.reason if top is not None else "not identified"
+        return [f"Not identified: {reason}. `drill-gym replay --free-running` needs it."]
+    v = top.values
+    return [
+        f"Identified from the top speed and the surface torque: inertia "
+        f"{v['inertia_kg_m2']:.4g} kg m^2 (momentum balance of top drive and bit, R^2 "
+        f"{top.balance_r2:.3f}); PI speed loop with gains {v['speed_gain_nm_s_rad']:.4g} N m s/rad "
+        f"and {v['integral_gain_nm_rad']:.4g} N m/rad around {v['reference_speed_rad_s']:.4g} "
+        f"rad/s (R^2 {top.loop_r2:.3f}). `drill-gym replay --free-running` runs the plant with "
+        "this top drive instead of the measured top speed.",
+    ]
 
 
 def _parser() -> ArgumentParser:
@@ -382,6 +403,9 @@ def replay_parser() -> ArgumentParser:
                         help="replayed window, start:end in s (required)")  # fmt: skip
     parser.add_argument("--out", type=Path, metavar="DIR",
                         help="output directory, made if missing (required)")  # fmt: skip
+    parser.add_argument("--free-running", action="store_true",
+                        help="run the plant's identified top drive under its speed loop instead "
+                        "of the measured top speed (the plant self-excites)")  # fmt: skip
     return parser
 
 
@@ -395,9 +419,16 @@ def replay_main(argv: Sequence[str]) -> int:
     plant = load_plant(args.plant)
     log = read_log(args.log)
     window = log.window(*args.window)
-    speed, torque = simulate_plant(plant, window)
-    columns = {"time_s": window.time_s, "bit_speed_rad_s": speed, "bit_torque_nm": torque}
-    for name in ("top_speed_rad_s", "bit_speed_rad_s", "bit_torque_nm", "wob_n"):
+    columns = {"time_s": window.time_s}
+    if args.free_running:
+        top_speed, speed, torque, surface = simulate_free(plant, window)
+        columns |= {"bit_speed_rad_s": speed, "bit_torque_nm": torque,
+                    "top_speed_rad_s": top_speed, "surface_torque_nm": surface}  # fmt: skip
+    else:
+        speed, torque = simulate_plant(plant, window)
+        columns |= {"bit_speed_rad_s": speed, "bit_torque_nm": torque}
+    for name in ("top_speed_rad_s", "bit_speed_rad_s", "bit_torque_nm", "wob_n",
+                 "surface_torque_nm"):  # fmt: skip
         if window.has(name):
             columns[f"measured_{name}"] = window.column(name)
     table = np.column_stack(list(columns.values()))
@@ -410,6 +441,11 @@ def replay_main(argv: Sequence[str]) -> int:
         "",
         f"Plant: family {plant.family}, fitted on {plant.window_s[0]:g}-{plant.window_s[1]:g} s of "
         f"{plant.log}. Window: {args.window[0]:g}-{args.window[1]:g} s.",
+        "",
+        "Free running: the plant's identified top drive under its PI speed loop (initial state "
+        "from the window's first samples), not the measured top speed."
+        if args.free_running
+        else "Driven by the measured top-drive speed.",
         "",
     ]
     defects = [d for d in find_defects(log) if d.overlaps(*args.window)]
@@ -443,7 +479,8 @@ def replay_main(argv: Sequence[str]) -> int:
                 f"{_format(r['error'], 3)} ({kind}) |"
             )
         lines += ["", "![replay](replay.png)", ""]
-        title = f"replay of {args.window[0]:g}-{args.window[1]:g} s"
+        mode = "free-running " if args.free_running else ""
+        title = f"{mode}replay of {args.window[0]:g}-{args.window[1]:g} s"
         _save(_fit_figure(window, speed, torque, title), out / "replay.png")
     else:
         lines.append("The log lacks bit_speed_rad_s or bit_torque_nm: no features compared.")

@@ -7,6 +7,7 @@ stick-slip features that compare a replay with the log.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -44,6 +45,8 @@ __all__ = [
     "calibrate",
     "features",
     "initial_estimates",
+    "identify_top_drive",
+    "simulate_free",
     "simulate_plant",
 ]
 
@@ -650,6 +653,7 @@ class FitResult:
     defects: list[Defect]
     excluded_samples: int
     wall_s: float
+    top_drive: TopDriveFit | None = None
 
 
 def fit_weights(window: MeasuredLog) -> tuple[npt.NDArray[np.float64], list[Defect]]:
@@ -722,7 +726,13 @@ def calibrate(
         f.bic = n_eff * math.log(f.cost / f.n) + len(f.free) * math.log(n_eff)
     chosen = min(fits.values(), key=lambda f: f.bic)
     plant = _plant_of(chosen, window, uses_wob, window_s, log.source, fits, defects, weights)
-    return FitResult(plant, fits, defects, int((weights == 0).sum()), time.perf_counter() - started)
+    top = identify_top_drive(window, float(chosen.p[P_J]))
+    if top.values is not None:
+        top_values = {**top.values, "pi_law_r2": top.loop_r2, "momentum_balance_r2": top.balance_r2}
+        plant = dataclasses.replace(plant, top_drive=top_values)
+    return FitResult(
+        plant, fits, defects, int((weights == 0).sum()), time.perf_counter() - started, top
+    )
 
 
 def _plant_of(
@@ -916,3 +926,160 @@ def feature_errors(measured: dict[str, float], simulated: dict[str, float]) -> d
         else:
             out[key] = (s - m) / abs(m) if m else math.nan
     return out
+
+
+MIN_TOP_DRIVE_R2: Final = 0.5
+"""Least share of the surface torque's variance a PI speed loop must explain for the top drive
+to count as identified."""
+
+
+@dataclass
+class TopDriveFit:
+    """The top drive identified from a window's top speed and surface torque (or why not).
+
+    ``values`` follow :data:`drill_env.bit_model.TOP_DRIVE_KEYS`; ``loop_r2`` is the share of
+    the surface torque's variance that the PI law explains, ``balance_r2`` that of the
+    momentum balance of the top drive and the bit."""
+
+    values: dict[str, float] | None
+    loop_r2: float = math.nan
+    balance_r2: float = math.nan
+    reason: str = ""
+
+
+def _cumulative(t: npt.NDArray[np.float64], y: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    return np.concatenate(([0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * np.diff(t))))
+
+
+def identify_top_drive(window: MeasuredLog, bit_inertia_kg_m2: float) -> TopDriveFit:
+    """Identify the top drive of the free-running mode from the window (docs/calibration.md).
+
+    * Its inertia ``J_t`` from the momentum balance of the top drive and the bit, integrated
+      once: ``J_t (w_t - w_t(0)) + J (w_b - w_b(0)) = int(T_s - T_bit) + a + b t`` (``T_s``
+      the surface torque; ``b`` absorbs a constant torque lost on the way), least squares.
+    * Its PI speed loop from ``T_s = k_p (r - w_t) + k_i int(r - w_t)``, i.e. ``T_s = a_0 +
+      a_1 t - k_p w_t - k_i int(w_t)`` (least squares; ``r = a_1 / k_i``).
+
+    Returns the values, or None and the reason when the log has no surface torque or the fit
+    does not describe a top drive under a PI speed loop.
+    """
+    if not window.has("surface_torque_nm"):
+        return TopDriveFit(None, reason="the log has no surface_torque_nm column: the top "
+                           "drive cannot be identified (free running needs it)")  # fmt: skip
+    t = window.time_s - window.time_s[0]
+    top = window.column("top_speed_rad_s")
+    surface = window.column("surface_torque_nm")
+    net = _cumulative(t, surface)
+    if window.has("bit_torque_nm") and window.has("bit_speed_rad_s"):
+        net = net - _cumulative(t, window.column("bit_torque_nm"))
+        target = net - bit_inertia_kg_m2 * (window.column("bit_speed_rad_s") - window.column(
+            "bit_speed_rad_s")[0])  # fmt: skip
+    else:
+        return TopDriveFit(None, reason="the window lacks the bit speed or the torque on bit")
+    a = np.column_stack([top - top[0], np.ones_like(t), t])
+    coef, *_ = np.linalg.lstsq(a, target, rcond=None)
+    inertia = float(coef[0])
+    balance_r2 = 1.0 - float(np.var(target - a @ coef) / (np.var(target) or 1.0))
+    b = np.column_stack([np.ones_like(t), t, -top, -_cumulative(t, top)])
+    loop, *_ = np.linalg.lstsq(b, surface, rcond=None)
+    loop_r2 = 1.0 - float(np.var(surface - b @ loop) / (np.var(surface) or 1.0))
+    kp, ki = float(loop[2]), float(loop[3])
+    if not (inertia > 0 and kp >= 0 and ki > 0 and loop_r2 >= MIN_TOP_DRIVE_R2):
+        return TopDriveFit(
+            None, loop_r2, balance_r2,
+            f"the surface torque is not that of a PI speed loop on the top drive (inertia "
+            f"{inertia:.4g} kg m^2, gains {kp:.4g} N m s/rad and {ki:.4g} N m/rad, PI law "
+            f"explains {loop_r2:.0%} of its variance; needed: inertia > 0, gains >= 0, "
+            f">= {MIN_TOP_DRIVE_R2:.0%})",
+        )  # fmt: skip
+    values = {
+        "inertia_kg_m2": inertia,
+        "speed_gain_nm_s_rad": kp,
+        "integral_gain_nm_rad": ki,
+        "reference_speed_rad_s": float(loop[1]) / ki,
+    }
+    return TopDriveFit(values, loop_r2, balance_r2)
+
+
+def top_drive_vector(plant: CalibratedPlant) -> npt.NDArray[np.float64]:
+    """The plant's identified top drive as ``(J_t, k_p, k_i, r)``; ValueError without one."""
+    from drill_env.bit_model import TOP_DRIVE_KEYS
+
+    top = plant.top_drive or {}
+    missing = [key for key in TOP_DRIVE_KEYS if key not in top]
+    if missing:
+        raise ValueError(
+            "the plant has no identified top drive (top_drive lacks "
+            f"{', '.join(missing)}): calibrate it on a log with a surface_torque_nm column "
+            "to run it free"
+        )
+    return np.array([float(top[key]) for key in TOP_DRIVE_KEYS])
+
+
+def simulate_free(
+    plant: CalibratedPlant, log: MeasuredLog
+) -> tuple[
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+]:
+    """Run ``plant`` free on the log's clock: its identified top drive under its speed loop
+    instead of the measured top speed (:func:`drill_env.bit_model.simulate_free_running`).
+
+    The initial state is estimated from the log's first samples: the measured top and bit
+    speeds, the loop's integrator from the measured surface torque (or the steady one, from
+    the mean torque on bit, without it), and the twist that best matches the first
+    :data:`INITIAL_STATE_FRACTION` of the log (a grid of 61 values as in
+    :func:`initial_twist`); the parameters are not touched.
+
+    Returns:
+        ``(top_speed_rad_s, bit_speed_rad_s, bit_torque_nm, surface_torque_nm)``.
+    """
+    from drill_env.bit_model import simulate_free_running
+
+    top_drive = top_drive_vector(plant)
+    j_t, kp, ki, reference = top_drive
+    p = plant.model_vector()
+    if plant.uses_wob and not log.has("wob_n"):
+        raise ValueError("the plant's friction scales with WOB but the log has no column 'wob_n'")
+    wob = wob_input(log) if plant.uses_wob else None
+    top0 = float(np.median(log.column("top_speed_rad_s")[:5]))
+    speed0 = 0.0
+    if log.has("bit_speed_rad_s"):
+        bit = log.column("bit_speed_rad_s")
+        speed0 = _speed0(bit, stuck_threshold(bit))
+    if log.has("surface_torque_nm"):
+        u0 = float(np.median(log.column("surface_torque_nm")[:5]))
+    elif log.has("bit_torque_nm"):
+        u0 = float(np.mean(log.column("bit_torque_nm")))
+    else:
+        u0 = float(plant.operating_point.get("mean_bit_torque_nm", 0.0))
+    integral0 = (u0 - kp * (reference - top0)) / ki
+    if log.has("bit_torque_nm"):
+        torque0 = float(np.median(log.column("bit_torque_nm")[:5]))
+        balance = (torque0 - p[P_C] * (top0 - speed0)) / p[P_K]
+    else:
+        balance = plant.initial_twist_rad
+    twist0 = balance
+    if log.has("bit_speed_rad_s") and log.has("bit_torque_nm"):
+        n = max(3, int(INITIAL_STATE_FRACTION * log.time_s.size))
+        head = log.time_s[:n]
+        bit = log.column("bit_speed_rad_s")[:n]
+        torque = log.column("bit_torque_nm")[:n]
+        scale = float(np.mean(wob[:n])) if wob is not None else 1.0
+        span = p[P_AA] * scale / p[P_K]
+        scales = (float(np.std(bit)) or 1.0, float(np.std(torque)) or 1.0)
+        best = (math.inf, balance)
+        for x0 in balance + span * np.linspace(-1.0, 1.0, 61):
+            _, s, q, _ = simulate_free_running(
+                head, p, plant.family, top_drive, float(x0), top0, speed0, integral0,
+                None if wob is None else wob[:n],
+            )  # fmt: skip
+            cost = float(np.mean(((s - bit) / scales[0]) ** 2 + ((q - torque) / scales[1]) ** 2))
+            if cost < best[0]:
+                best = (cost, float(x0))
+        twist0 = best[1]
+    return simulate_free_running(
+        log.time_s, p, plant.family, top_drive, twist0, top0, speed0, integral0, wob
+    )
