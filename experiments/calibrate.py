@@ -181,7 +181,7 @@ def _uncertainty_figure(result: FitResult) -> Any:
     ax.set_xscale("log")
     ax.set_xlim(1e-3, 200)
     ax.axvline(25, color="C3", lw=0.8, ls="--")
-    ax.set_xlabel("relative standard deviation (%, Laplace); dashed: identifiability limit")
+    ax.set_xlabel("relative standard deviation (%, bootstrap); dashed: identifiability limit")
     ax.set_title(f"parameter uncertainty, family {plant.family}", fontsize=10)
     return fig
 
@@ -251,24 +251,39 @@ def _report(
         "",
         "## Parameters",
         "",
-        "| parameter | value | unit | relative std | status |",
-        "|---|---|---|---|---|",
+        "| parameter | value | unit | relative std | 95 % interval | status |",
+        "|---|---|---|---|---|---|",
     ]
     for name, p in plant.parameters.items():
         if p.identified:
+            interval = (
+                "-" if p.interval_95 is None
+                else f"{p.interval_95[0]:.4g} to {p.interval_95[1]:.4g}"
+            )  # fmt: skip
             lines.append(
-                f"| {name} | {p.value:.6g} | {p.unit} | {_format(p.relative_std, 2)} | fitted |"
+                f"| {name} | {p.value:.6g} | {p.unit} | {_format(p.relative_std, 2)} | "
+                f"{interval} | fitted |"
             )
         else:
-            lines.append(f"| {name} | (held at {p.value:.4g}) | {p.unit} | - | {p.note} |")
+            lines.append(f"| {name} | (held at {p.value:.4g}) | {p.unit} | - | - | {p.note} |")
+    boot = result.bootstrap
+    how = (
+        f"a residual block bootstrap ({boot.replicates} replicates, blocks of "
+        f"{boot.block_samples} samples: the fitted residuals resampled onto the fitted "
+        "simulation and the parameters refitted)"
+        if boot is not None
+        else "the Laplace approximation"
+    )
     lines += [
         "",
         f"Initial twist of the window: {plant.initial_twist_rad:.6g} rad (fitted, a nuisance "
-        "parameter). Relative standard deviations come from the Laplace approximation (the "
-        "inverse Gauss-Newton Hessian at the optimum, scaled by the residual variance and "
-        "inflated by n / n_eff); a parameter above "
+        "parameter). Which parameters are identified is screened with the Laplace "
+        "approximation (the inverse Gauss-Newton Hessian at the optimum, scaled by the "
+        "residual variance and inflated by n / n_eff): a parameter above "
         f"{plant.fit['max_relative_std']:.0%} is reported as not identifiable, held fixed, "
-        "and the rest refitted.",
+        f"and the rest refitted. The relative standard deviations and intervals come from {how}; "
+        "they hold for the model family and the held values, and do not contain the error of "
+        "the model's form (docs/calibration.md).",
         "",
         "## Top drive (free-running mode)",
         "",
@@ -340,7 +355,7 @@ def calibrate_main(argv: Sequence[str]) -> int:
     args = parser.parse_args(list(argv))
     _required(parser, args, ("log", "window", "out"))
     out: Path = args.out
-    prepare_out(out, CALIBRATE_FILES, ("plant.json", PLANT_FORMAT))
+    prepare_out(out, CALIBRATE_FILES, ("plant.json", PLANT_FORMAT.rsplit("/", 1)[0] + "/"))
     log = read_log(args.log)
     families = FAMILIES if args.family == "auto" else (args.family,)
     result = calibrate(log, args.window, families, not args.no_wob, dict(args.fix or []))
