@@ -60,9 +60,11 @@ def test_free_running_plant_follows_the_rig_closed_loop() -> None:
         error = np.sqrt(np.mean((simulated - reference) ** 2)) / np.std(reference)
         assert error < tolerance
     threshold = stuck_threshold(bit)
-    measured = features(t[tail], bit, out[tail, 2], threshold)
-    simulated = features(t[tail], speed, torque, threshold)
-    assert simulated["period_cycles_s"] == pytest.approx(measured["period_cycles_s"], rel=0.005)
+    rig_features = features(t[tail], bit, out[tail, 2], threshold)
+    free_features = features(t[tail], speed, torque, threshold)
+    assert free_features["period_cycles_s"] == pytest.approx(
+        rig_features["period_cycles_s"], rel=0.005
+    )
 
 
 @pytest.mark.parametrize("seed", [4, 5])
