@@ -402,6 +402,29 @@ def replay_rows(
     return rows, measured, simulated, errors
 
 
+def top_drive_rows(
+    window: MeasuredLog,
+    top_speed: npt.NDArray[np.float64],
+    surface_torque: npt.NDArray[np.float64],
+) -> list[dict[str, Any]]:
+    """Feature rows of a free-running replay's top drive: the mean and standard deviation of
+    the top speed (rad/s) and of the surface torque (N m), simulated against measured
+    (relative errors), for the columns the log has."""
+    rows = []
+    for name, stem, unit, simulated in (
+        ("top_speed_rad_s", "top_speed", "rad_s", top_speed),
+        ("surface_torque_nm", "surface_torque", "nm", surface_torque),
+    ):
+        if not window.has(name):
+            continue
+        measured = window.column(name)
+        for label, fn in (("mean", np.mean), ("std", np.std)):
+            m, v = float(fn(measured)), float(fn(simulated))
+            rows.append({"feature": f"{stem}_{label}_{unit}", "measured": m, "simulated": v,
+                         "error": (v - m) / abs(m) if m else math.nan})  # fmt: skip
+    return rows
+
+
 def replay_parser() -> ArgumentParser:
     """The parser of ``drill-gym replay``."""
     parser = ArgumentParser(
@@ -473,6 +496,8 @@ def replay_main(argv: Sequence[str]) -> int:
         lines.append("")
     if window.has("bit_speed_rad_s") and window.has("bit_torque_nm"):
         rows, *_ = replay_rows(window, speed, torque)
+        if args.free_running:
+            rows += top_drive_rows(window, columns["top_speed_rad_s"], columns["surface_torque_nm"])
         with (out / "features.csv").open("w") as f:
             f.write("feature,measured,simulated,error\n")
             for r in rows:

@@ -304,6 +304,9 @@ def test_calibrate_and_replay_as_a_user_types_them(tmp_path: Path) -> None:
     header = (tmp_path / "free" / "replay.csv").read_text().splitlines()[0]
     assert header.startswith("time_s,bit_speed_rad_s,bit_torque_nm,top_speed_rad_s,")
     assert "Free running" in (tmp_path / "free" / "replay.md").read_text()
+    free_table = (tmp_path / "free" / "features.csv").read_text()
+    for key in ("top_speed_std_rad_s", "surface_torque_mean_nm"):
+        assert key in free_table
 
 
 @pytest.mark.parametrize(
