@@ -47,7 +47,9 @@ __all__ = [
     "P_K",
     "P_TAU",
     "P_XI",
+    "TOP_DRIVE_KEYS",
     "simulate_bit",
+    "simulate_free_running",
     "substeps_for",
 ]
 
@@ -79,6 +81,43 @@ def substeps_for(p: npt.NDArray[np.float64], sample_period_s: float) -> int:
     if p[P_TAU] > 0:
         h = min(h, 0.25 * p[P_TAU])
     return max(1, min(MAX_SUBSTEPS, int(math.ceil(sample_period_s / h))))
+
+
+@njit(cache=True)
+def _bit_substep(j_bit, k, c, t_a, t_0, xi, c_v, tau, h, wt_a, wt_b, twist, w, v, direction):  # fmt: skip
+    """One step ``h`` of the bit with the top-drive speed going from ``wt_a`` to ``wt_b``;
+    returns ``(twist, w, v, direction, t_bit)`` (``direction`` 0 while stuck)."""
+    t_e = k * twist + c * (wt_a - w)
+    if direction == 0:
+        if abs(t_e) <= t_a:
+            twist += h * 0.5 * (wt_a + wt_b)
+            if tau > 0:
+                v += (0.0 - v) * (1.0 - math.exp(-h / tau))
+            else:
+                v = 0.0
+            return twist, w, v, 0, t_e
+        direction = 1 if t_e > 0 else -1
+    slip = direction * (t_0 + (t_a - t_0) * math.exp(-xi * v))
+    # Damping implicit for stability: J (w1 - w) = h (k twist + c (wt - w1) - slip - c_v w1).
+    w1 = (j_bit * w + h * (k * twist + c * wt_b - slip)) / (j_bit + h * (c + c_v))
+    if w1 * direction <= 0.0:
+        # The bit stops inside the step: stick if the string cannot turn it.
+        w1 = 0.0
+        t_e1 = k * twist + c * wt_b
+        if abs(t_e1) <= t_a:
+            direction = 0
+            t_bit = t_e1
+        else:
+            direction = 1 if t_e1 > 0 else -1
+            t_bit = slip
+    else:
+        t_bit = slip + c_v * w1
+    twist += h * (0.5 * (wt_a + wt_b) - w1)
+    if tau > 0:
+        v += (abs(w1) - v) * (1.0 - math.exp(-h / tau))
+    else:
+        v = abs(w1)
+    return twist, w1, v, direction, t_bit
 
 
 @njit(cache=True)
@@ -120,42 +159,11 @@ def _simulate(time_s, top_speed, wob, use_wob, family, p, twist0, speed0, subste
         t_bit = 0.0
         for s in range(substeps):
             wt_a = wt0 + dwt * s
-            wt_b = wt_a + dwt
             scale = s0 + ds * (s + 0.5)
-            t_a = a_a * scale
-            t_0 = a_0 * scale
-            t_e = k * twist + c * (wt_a - w)
-            if direction == 0:
-                if abs(t_e) <= t_a:
-                    t_bit = t_e
-                    twist += h * 0.5 * (wt_a + wt_b)
-                    if tau > 0:
-                        v += (0.0 - v) * (1.0 - math.exp(-h / tau))
-                    else:
-                        v = 0.0
-                    continue
-                direction = 1 if t_e > 0 else -1
-            slip = direction * (t_0 + (t_a - t_0) * math.exp(-xi * v))
-            # Damping implicit for stability: J (w1 - w) = h (k twist + c (wt - w1) - slip - c_v w1).
-            w1 = (j_bit * w + h * (k * twist + c * wt_b - slip)) / (j_bit + h * (c + c_v))
-            if w1 * direction <= 0.0:
-                # The bit stops inside the step: stick if the string cannot turn it.
-                w1 = 0.0
-                t_e1 = k * twist + c * wt_b
-                if abs(t_e1) <= t_a:
-                    direction = 0
-                    t_bit = t_e1
-                else:
-                    direction = 1 if t_e1 > 0 else -1
-                    t_bit = slip
-            else:
-                t_bit = slip + c_v * w1
-            twist += h * (0.5 * (wt_a + wt_b) - w1)
-            w = w1
-            if tau > 0:
-                v += (abs(w) - v) * (1.0 - math.exp(-h / tau))
-            else:
-                v = abs(w)
+            twist, w, v, direction, t_bit = _bit_substep(
+                j_bit, k, c, a_a * scale, a_0 * scale, xi, c_v, tau, h, wt_a, wt_a + dwt,
+                twist, w, v, direction,
+            )  # fmt: skip
         if direction == 0:
             t_bit = k * twist + c * top_speed[i + 1]
             scale_end = wob[i + 1] if use_wob else 1.0
@@ -216,3 +224,137 @@ def simulate_bit(
         float(speed0_rad_s), int(n_sub), speed, torque, stuck,
     )  # fmt: skip
     return speed, torque, stuck
+
+
+@njit(cache=True)
+def _simulate_free(time_s, wob, use_wob, family, p, top, twist0, top_speed0, speed0, integral0, substeps, out_top, out_speed, out_torque, out_surface):  # fmt: skip
+    n = time_s.shape[0]
+    j_bit = p[0]
+    k = p[1]
+    c = p[2]
+    a_a = p[3]
+    a_0 = p[4]
+    xi = p[5]
+    c_v = p[6] if family >= 1 else 0.0
+    tau = p[7] if family >= 2 else 0.0
+    j_top, kp, ki, reference = top[0], top[1], top[2], top[3]
+    twist = twist0
+    wt = top_speed0
+    w = speed0
+    v = abs(speed0)
+    integral = integral0
+    t_e0 = k * twist + c * (wt - w)
+    scale0 = wob[0] if use_wob else 1.0
+    direction = 0
+    if abs(w) >= 1e-9 or abs(t_e0) > a_a * scale0:
+        direction = 1 if (w > 0 or (w == 0 and t_e0 > 0)) else -1
+    else:
+        w = 0.0
+    out_top[0] = wt
+    out_speed[0] = w
+    out_surface[0] = kp * (reference - wt) + ki * integral
+    if direction == 0:
+        out_torque[0] = t_e0
+    else:
+        out_torque[0] = direction * (a_0 + (a_a - a_0) * math.exp(-xi * v)) * scale0 + c_v * w
+    for i in range(n - 1):
+        h = (time_s[i + 1] - time_s[i]) / substeps
+        s0 = wob[i] if use_wob else 1.0
+        ds = ((wob[i + 1] - wob[i]) / substeps) if use_wob else 0.0
+        t_bit = 0.0
+        for s in range(substeps):
+            scale = s0 + ds * (s + 0.5)
+            error = reference - wt
+            u = kp * error + ki * integral
+            t_e = k * twist + c * (wt - w)
+            wt_b = wt + h * (u - t_e) / j_top
+            integral += h * error
+            twist, w, v, direction, t_bit = _bit_substep(
+                j_bit, k, c, a_a * scale, a_0 * scale, xi, c_v, tau, h, wt, wt_b, twist, w, v,
+                direction,
+            )  # fmt: skip
+            wt = wt_b
+        if direction == 0:
+            t_bit = k * twist + c * wt
+        out_top[i + 1] = wt
+        out_speed[i + 1] = w
+        out_torque[i + 1] = t_bit
+        out_surface[i + 1] = kp * (reference - wt) + ki * integral
+        if not (abs(w) < 1e9 and abs(twist) < 1e9 and abs(wt) < 1e9):
+            for m in range(i + 2, n):
+                out_top[m] = np.nan
+                out_speed[m] = np.nan
+                out_torque[m] = np.nan
+                out_surface[m] = np.nan
+            return False
+    return True
+
+
+TOP_DRIVE_KEYS: Final = (
+    "inertia_kg_m2",
+    "speed_gain_nm_s_rad",
+    "integral_gain_nm_rad",
+    "reference_speed_rad_s",
+)
+"""The identified top drive of the free-running mode, in this order: its inertia, the
+proportional and integral gains of its PI speed loop, and the loop's speed reference."""
+
+
+def simulate_free_running(
+    time_s: npt.NDArray[np.float64],
+    p: npt.NDArray[np.float64],
+    family: str,
+    top_drive: npt.NDArray[np.float64],
+    twist0_rad: float,
+    top_speed0_rad_s: float,
+    speed0_rad_s: float,
+    integral0_rad: float,
+    wob_n: npt.NDArray[np.float64] | None = None,
+    substeps: int | None = None,
+) -> tuple[
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+]:
+    """Simulate the bit and a modelled top drive, so that the plant self-excites.
+
+    The top drive (inertia ``J_t``) follows its PI speed loop: ``J_t w_t' = u - T_e`` with
+    ``u = k_p (r - w_t) + k_i int(r - w_t)``; the bit side is that of :func:`simulate_bit`.
+
+    Args:
+        time_s: Output times, s, shape ``(n,)``, strictly increasing.
+        p: Model parameter vector, shape ``(N_MODEL_PARAMS,)``.
+        family: One of :data:`FAMILIES`.
+        top_drive: ``(J_t, k_p, k_i, r)`` in the units of :data:`TOP_DRIVE_KEYS`.
+        twist0_rad: Initial twist, rad.
+        top_speed0_rad_s: Initial top-drive speed, rad/s.
+        speed0_rad_s: Initial bit speed, rad/s.
+        integral0_rad: Initial state of the loop's integrator ``int(r - w_t)``, rad.
+        wob_n: Weight on bit, N, shape ``(n,)`` (friction per newton of WOB), or None.
+        substeps: Steps per output interval (default :func:`substeps_for`, and at least 20
+            steps per time constant ``J_t / k_p`` of the speed loop).
+
+    Returns:
+        ``(top_speed_rad_s, bit_speed_rad_s, bit_torque_nm, surface_torque_nm)``, each shape
+        ``(n,)``; NaN after a divergence.
+    """
+    t = np.ascontiguousarray(time_s, dtype=np.float64)
+    params = np.ascontiguousarray(p, dtype=np.float64)
+    top = np.ascontiguousarray(top_drive, dtype=np.float64)
+    if family not in FAMILY_CODES:
+        raise ValueError(f"family = {family!r} is not known: allowed {', '.join(FAMILIES)}")
+    if top.shape != (4,) or not np.all(np.isfinite(top)) or top[0] <= 0:
+        raise ValueError(f"top_drive = {top!r}: allowed 4 finite numbers, inertia > 0")
+    dt = float(np.median(np.diff(t)))
+    n_sub = substeps or substeps_for(params, dt)
+    if top[1] > 0:
+        n_sub = max(n_sub, int(math.ceil(20 * dt * top[1] / top[0])))
+    use_wob = wob_n is not None
+    wob = np.ascontiguousarray(wob_n if use_wob else np.zeros(1), dtype=np.float64)
+    outs = [np.empty_like(t) for _ in range(4)]
+    _simulate_free(
+        t, wob, use_wob, FAMILY_CODES[family], params, top, float(twist0_rad),
+        float(top_speed0_rad_s), float(speed0_rad_s), float(integral0_rad), int(n_sub), *outs,
+    )  # fmt: skip
+    return outs[0], outs[1], outs[2], outs[3]

@@ -46,6 +46,7 @@ from drill_env.validation import printable, shown
 __all__ = [
     "MODEL_PARAMETERS",
     "PLANT_FORMAT",
+    "READ_FORMATS",
     "CalibratedPlant",
     "FittedParameter",
     "drill_string_parameters",
@@ -54,8 +55,11 @@ __all__ = [
     "parameter_unit",
 ]
 
-PLANT_FORMAT: Final = "drill-string-gym/calibrated-plant/1"
-"""The ``format`` of every plant file this version reads and writes."""
+PLANT_FORMAT: Final = "drill-string-gym/calibrated-plant/2"
+"""The ``format`` of the plant files this version writes (2 adds each parameter's
+``interval_95``)."""
+READ_FORMATS: Final = ("drill-string-gym/calibrated-plant/1", PLANT_FORMAT)
+"""The plant file formats this version reads."""
 MAX_PLANT_BYTES: Final = 1 << 20
 """Largest plant file read, bytes."""
 
@@ -93,8 +97,9 @@ class FittedParameter:
         value: Its value, in ``unit``.
         unit: SI unit.
         identified: Whether the data determined it (False: fixed, ``note`` says at what).
-        relative_std: Relative standard deviation of the fitted value (Laplace), or None.
+        relative_std: Relative standard deviation of the fitted value, or None.
         note: How it was obtained.
+        interval_95: ``(low, high)``: its 95 % interval (bootstrap), in ``unit``, or None.
     """
 
     value: float
@@ -102,6 +107,7 @@ class FittedParameter:
     identified: bool = True
     relative_std: float | None = None
     note: str = ""
+    interval_95: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -183,6 +189,7 @@ class CalibratedPlant:
                     "identified": p.identified,
                     "relative_std": p.relative_std,
                     "note": p.note,
+                    "interval_95": None if p.interval_95 is None else list(p.interval_95),
                 }
                 for n, p in self.parameters.items()
             },
@@ -233,8 +240,11 @@ def plant_from_json(data: Any, where: str = "plant") -> CalibratedPlant:
     if unknown:
         raise ValueError(f"{where}: unknown field(s) {unknown}: allowed {sorted(known)}")
     fmt = _field(data, "format", (str,), where)
-    if fmt != PLANT_FORMAT:
-        raise ValueError(f"{where}.format = {shown(fmt)}: this version reads {PLANT_FORMAT!r}")
+    if fmt not in READ_FORMATS:
+        raise ValueError(
+            f"{where}.format = {shown(fmt)}: this version reads "
+            f"{', '.join(map(repr, READ_FORMATS))}"
+        )
     number = (int, float)
     parameters = {}
     raw = _field(data, "parameters", (dict,), where)
@@ -253,12 +263,21 @@ def plant_from_json(data: Any, where: str = "plant") -> CalibratedPlant:
         note = entry.get("note", "")
         if not isinstance(note, str):
             raise ValueError(f"{w}.note = {shown(note)} is not text")
+        interval = entry.get("interval_95")
+        if interval is not None and not (
+            isinstance(interval, list)
+            and len(interval) == 2
+            and all(isinstance(v, number) and not isinstance(v, bool) for v in interval)
+            and interval[0] <= interval[1]
+        ):
+            raise ValueError(f"{w}.interval_95 = {shown(interval)} is not [low, high] or null")
         parameters[name] = FittedParameter(
             float(_field(entry, "value", number, w)),
             _field(entry, "unit", (str,), w),
             bool(_field(entry, "identified", (bool,), w)),
             None if rel is None else float(rel),
             note,
+            None if interval is None else (float(interval[0]), float(interval[1])),
         )
     window = _field(data, "window_s", (list,), where)
     if len(window) != 2 or not all(isinstance(v, number) for v in window):

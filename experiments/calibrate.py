@@ -35,6 +35,7 @@ from experiments.calibration_fit import (
     calibrate,
     feature_errors,
     features,
+    simulate_free,
     simulate_plant,
     stuck_threshold,
 )
@@ -180,7 +181,7 @@ def _uncertainty_figure(result: FitResult) -> Any:
     ax.set_xscale("log")
     ax.set_xlim(1e-3, 200)
     ax.axvline(25, color="C3", lw=0.8, ls="--")
-    ax.set_xlabel("relative standard deviation (%, Laplace); dashed: identifiability limit")
+    ax.set_xlabel("relative standard deviation (%, bootstrap); dashed: identifiability limit")
     ax.set_title(f"parameter uncertainty, family {plant.family}", fontsize=10)
     return fig
 
@@ -250,24 +251,43 @@ def _report(
         "",
         "## Parameters",
         "",
-        "| parameter | value | unit | relative std | status |",
-        "|---|---|---|---|---|",
+        "| parameter | value | unit | relative std | 95 % interval | status |",
+        "|---|---|---|---|---|---|",
     ]
     for name, p in plant.parameters.items():
         if p.identified:
+            interval = (
+                "-" if p.interval_95 is None
+                else f"{p.interval_95[0]:.4g} to {p.interval_95[1]:.4g}"
+            )  # fmt: skip
             lines.append(
-                f"| {name} | {p.value:.6g} | {p.unit} | {_format(p.relative_std, 2)} | fitted |"
+                f"| {name} | {p.value:.6g} | {p.unit} | {_format(p.relative_std, 2)} | "
+                f"{interval} | fitted |"
             )
         else:
-            lines.append(f"| {name} | (held at {p.value:.4g}) | {p.unit} | - | {p.note} |")
+            lines.append(f"| {name} | (held at {p.value:.4g}) | {p.unit} | - | - | {p.note} |")
+    boot = result.bootstrap
+    how = (
+        f"a residual block bootstrap ({boot.replicates} replicates, blocks of "
+        f"{boot.block_samples} samples: the fitted residuals resampled onto the fitted "
+        "simulation and the parameters refitted)"
+        if boot is not None
+        else "the Laplace approximation"
+    )
     lines += [
         "",
         f"Initial twist of the window: {plant.initial_twist_rad:.6g} rad (fitted, a nuisance "
-        "parameter). Relative standard deviations come from the Laplace approximation (the "
-        "inverse Gauss-Newton Hessian at the optimum, scaled by the residual variance and "
-        "inflated by n / n_eff); a parameter above "
+        "parameter). Which parameters are identified is screened with the Laplace "
+        "approximation (the inverse Gauss-Newton Hessian at the optimum, scaled by the "
+        "residual variance and inflated by n / n_eff): a parameter above "
         f"{plant.fit['max_relative_std']:.0%} is reported as not identifiable, held fixed, "
-        "and the rest refitted.",
+        f"and the rest refitted. The relative standard deviations and intervals come from {how}; "
+        "they hold for the model family and the held values, and do not contain the error of "
+        "the model's form (docs/calibration.md).",
+        "",
+        "## Top drive (free-running mode)",
+        "",
+        *_top_drive_lines(result),
         "",
         "![fit](fit.png)",
         "",
@@ -277,6 +297,22 @@ def _report(
         "",
     ]
     return "\n".join(lines)
+
+
+def _top_drive_lines(result: FitResult) -> list[str]:
+    top = result.top_drive
+    if top is None or top.values is None:
+        reason = top.reason if top is not None else "not identified"
+        return [f"Not identified: {reason}. `drill-gym replay --free-running` needs it."]
+    v = top.values
+    return [
+        f"Identified from the top speed and the surface torque: inertia "
+        f"{v['inertia_kg_m2']:.4g} kg m^2 (momentum balance of top drive and bit, R^2 "
+        f"{top.balance_r2:.3f}); PI speed loop with gains {v['speed_gain_nm_s_rad']:.4g} N m s/rad "
+        f"and {v['integral_gain_nm_rad']:.4g} N m/rad around {v['reference_speed_rad_s']:.4g} "
+        f"rad/s (R^2 {top.loop_r2:.3f}). `drill-gym replay --free-running` runs the plant with "
+        "this top drive instead of the measured top speed.",
+    ]
 
 
 def _parser() -> ArgumentParser:
@@ -319,7 +355,7 @@ def calibrate_main(argv: Sequence[str]) -> int:
     args = parser.parse_args(list(argv))
     _required(parser, args, ("log", "window", "out"))
     out: Path = args.out
-    prepare_out(out, CALIBRATE_FILES, ("plant.json", PLANT_FORMAT))
+    prepare_out(out, CALIBRATE_FILES, ("plant.json", PLANT_FORMAT.rsplit("/", 1)[0] + "/"))
     log = read_log(args.log)
     families = FAMILIES if args.family == "auto" else (args.family,)
     result = calibrate(log, args.window, families, not args.no_wob, dict(args.fix or []))
@@ -366,6 +402,29 @@ def replay_rows(
     return rows, measured, simulated, errors
 
 
+def top_drive_rows(
+    window: MeasuredLog,
+    top_speed: npt.NDArray[np.float64],
+    surface_torque: npt.NDArray[np.float64],
+) -> list[dict[str, Any]]:
+    """Feature rows of a free-running replay's top drive: the mean and standard deviation of
+    the top speed (rad/s) and of the surface torque (N m), simulated against measured
+    (relative errors), for the columns the log has."""
+    rows = []
+    for name, stem, unit, simulated in (
+        ("top_speed_rad_s", "top_speed", "rad_s", top_speed),
+        ("surface_torque_nm", "surface_torque", "nm", surface_torque),
+    ):
+        if not window.has(name):
+            continue
+        measured = window.column(name)
+        for label, fn in (("mean", np.mean), ("std", np.std)):
+            m, v = float(fn(measured)), float(fn(simulated))
+            rows.append({"feature": f"{stem}_{label}_{unit}", "measured": m, "simulated": v,
+                         "error": (v - m) / abs(m) if m else math.nan})  # fmt: skip
+    return rows
+
+
 def replay_parser() -> ArgumentParser:
     """The parser of ``drill-gym replay``."""
     parser = ArgumentParser(
@@ -382,6 +441,9 @@ def replay_parser() -> ArgumentParser:
                         help="replayed window, start:end in s (required)")  # fmt: skip
     parser.add_argument("--out", type=Path, metavar="DIR",
                         help="output directory, made if missing (required)")  # fmt: skip
+    parser.add_argument("--free-running", action="store_true",
+                        help="run the plant's identified top drive under its speed loop instead "
+                        "of the measured top speed (the plant self-excites)")  # fmt: skip
     return parser
 
 
@@ -395,9 +457,16 @@ def replay_main(argv: Sequence[str]) -> int:
     plant = load_plant(args.plant)
     log = read_log(args.log)
     window = log.window(*args.window)
-    speed, torque = simulate_plant(plant, window)
-    columns = {"time_s": window.time_s, "bit_speed_rad_s": speed, "bit_torque_nm": torque}
-    for name in ("top_speed_rad_s", "bit_speed_rad_s", "bit_torque_nm", "wob_n"):
+    columns = {"time_s": window.time_s}
+    if args.free_running:
+        top_speed, speed, torque, surface = simulate_free(plant, window)
+        columns |= {"bit_speed_rad_s": speed, "bit_torque_nm": torque,
+                    "top_speed_rad_s": top_speed, "surface_torque_nm": surface}  # fmt: skip
+    else:
+        speed, torque = simulate_plant(plant, window)
+        columns |= {"bit_speed_rad_s": speed, "bit_torque_nm": torque}
+    for name in ("top_speed_rad_s", "bit_speed_rad_s", "bit_torque_nm", "wob_n",
+                 "surface_torque_nm"):  # fmt: skip
         if window.has(name):
             columns[f"measured_{name}"] = window.column(name)
     table = np.column_stack(list(columns.values()))
@@ -411,6 +480,11 @@ def replay_main(argv: Sequence[str]) -> int:
         f"Plant: family {plant.family}, fitted on {plant.window_s[0]:g}-{plant.window_s[1]:g} s of "
         f"{plant.log}. Window: {args.window[0]:g}-{args.window[1]:g} s.",
         "",
+        "Free running: the plant's identified top drive under its PI speed loop (initial state "
+        "from the window's first samples), not the measured top speed."
+        if args.free_running
+        else "Driven by the measured top-drive speed.",
+        "",
     ]
     defects = [d for d in find_defects(log) if d.overlaps(*args.window)]
     if defects:
@@ -422,6 +496,8 @@ def replay_main(argv: Sequence[str]) -> int:
         lines.append("")
     if window.has("bit_speed_rad_s") and window.has("bit_torque_nm"):
         rows, *_ = replay_rows(window, speed, torque)
+        if args.free_running:
+            rows += top_drive_rows(window, columns["top_speed_rad_s"], columns["surface_torque_nm"])
         with (out / "features.csv").open("w") as f:
             f.write("feature,measured,simulated,error\n")
             for r in rows:
@@ -443,7 +519,8 @@ def replay_main(argv: Sequence[str]) -> int:
                 f"{_format(r['error'], 3)} ({kind}) |"
             )
         lines += ["", "![replay](replay.png)", ""]
-        title = f"replay of {args.window[0]:g}-{args.window[1]:g} s"
+        mode = "free-running " if args.free_running else ""
+        title = f"{mode}replay of {args.window[0]:g}-{args.window[1]:g} s"
         _save(_fit_figure(window, speed, torque, title), out / "replay.png")
     else:
         lines.append("The log lacks bit_speed_rad_s or bit_torque_nm: no features compared.")

@@ -7,6 +7,7 @@ stick-slip features that compare a replay with the log.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -26,7 +27,9 @@ from drill_env.bit_model import (
     P_K,
     P_TAU,
     P_XI,
+    TOP_DRIVE_KEYS,
     simulate_bit,
+    simulate_free_running,
     substeps_for,
 )
 from drill_env.calibrated_plant import (
@@ -44,6 +47,8 @@ __all__ = [
     "calibrate",
     "features",
     "initial_estimates",
+    "identify_top_drive",
+    "simulate_free",
     "simulate_plant",
 ]
 
@@ -224,28 +229,31 @@ SEGMENT_MIN_STUCK_S: Final = 0.02
 
 def stuck_segments(
     log: MeasuredLog, cycles: int = SEGMENT_CYCLES
-) -> list[tuple[int, int, float]] | None:
-    """Segments ``(first, end, torque)`` of the multiple-shooting stage of the fit: each starts
-    in the middle of every :data:`SEGMENT_CYCLES`-th measured stuck run (``|bit speed|`` below :func:`stuck_threshold`
-    for :data:`SEGMENT_MIN_STUCK_S`) with the median measured torque of its first 5 samples,
-    and ends where the next starts; None with fewer than 2 stuck runs (no stick-slip)."""
+) -> list[tuple[int, int, float, int, int]] | None:
+    """Segments ``(first, end, torque, run_first, run_end)`` of the multiple-shooting stage of
+    the fit: each starts in the middle of every ``cycles``-th measured stuck run (``|bit
+    speed|`` below :func:`stuck_threshold` for :data:`SEGMENT_MIN_STUCK_S`) and ends where the
+    next starts; ``torque`` is the median measured torque of its first 5 samples and
+    ``run_first:run_end`` the stuck run without its 2 first and last samples (from which the
+    fit estimates the starting torque, :meth:`_Problem.simulate`). None with fewer than 2
+    stuck runs (no stick-slip)."""
     bit = log.column("bit_speed_rad_s")
     torque = log.column("bit_torque_nm")
     stuck = np.abs(bit) < stuck_threshold(bit)
     padded = np.concatenate(([0], stuck.astype(np.int8), [0]))
     edges = np.flatnonzero(np.diff(padded))
-    starts = []
+    runs = []
     min_samples = max(5, int(SEGMENT_MIN_STUCK_S / log.sample_period_s))
     for a, b in zip(edges[::2], edges[1::2], strict=False):
         if b - a >= min_samples:
-            starts.append(int(a + b) // 2)
-    if len(starts) < 2:
+            runs.append((int(a + b) // 2, int(a) + 2, int(b) - 2))
+    if len(runs) < 2:
         return None
-    starts = starts[::cycles]
-    ends = [*starts[1:], bit.size]
+    runs = runs[::cycles]
+    ends = [r[0] for r in runs[1:]] + [bit.size]
     return [
-        (a, b, float(np.median(torque[a : a + 5])))
-        for a, b in zip(starts, ends, strict=False)
+        (a, b, float(np.median(torque[a : a + 5])), lo, hi)
+        for (a, lo, hi), b in zip(runs, ends, strict=False)
         if b - a >= 3
     ]
 
@@ -294,8 +302,9 @@ class _Problem:
     speed0: float
     substeps: int
     twist0_fixed: float = 0.0
-    segments: list[tuple[int, int, float]] | None = None
+    segments: list[tuple[int, int, float, int, int]] | None = None
     balance: MomentumBalance | None = None
+    _angle: npt.NDArray[np.float64] | None = None  # the top drive's measured angle, rad
 
     def unpack(self, theta: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], float]:
         p = self.fixed_p.copy()
@@ -341,10 +350,21 @@ class _Problem:
                 self.log.time_s, top, p, self.family, twist0, self.speed0, wob, self.substeps
             )
             return speed, torque
-        # Multiple shooting: every segment starts stuck, its twist from the measured torque.
+        # Multiple shooting: every segment starts stuck, its twist from the measured torque of
+        # its whole stuck run: while stuck the torque on bit is the string's, T(t) = T(a) +
+        # k (angle(t) - angle(a)) + c (w_t(t) - w_t(a)) with the top drive's measured angle,
+        # so each sample of the run estimates T(a) (their median: a few ms of one sample's
+        # noise would move the break-away, and the fit would buy it back with the friction).
         speed = self.log.column("bit_speed_rad_s").copy()
         torque = self.log.column("bit_torque_nm").copy()
-        for a, b, torque0 in self.segments:
+        measured = self.log.column("bit_torque_nm")
+        if self._angle is None:
+            self._angle = _cumulative(self.log.time_s, top)
+        angle = self._angle
+        for a, b, _, lo, hi in self.segments:
+            start = measured[lo:hi] - p[P_K] * (angle[lo:hi] - angle[a])
+            start = start - p[P_C] * (top[lo:hi] - top[a])
+            torque0 = float(np.median(start))
             s, q, _ = simulate_bit(
                 self.log.time_s[a:b], top[a:b], p, self.family, (torque0 - p[P_C] * top[a]) / p[P_K],
                 0.0, None if wob is None else wob[a:b], self.substeps,
@@ -383,8 +403,14 @@ def _initial_twist_grid(problem: _Problem, p: npt.NDArray[np.float64]) -> float:
     return best[1]
 
 
+JACOBIAN_STEP: Final = 1e-3
+"""Central-difference step of the fit's Jacobian, in log-parameter units (0.1 %). A step of
+1 % reached a lower cost on logs of the fit's own simulator but recovered the lab rig's
+inertia and stiffness less well (one seed: -4.6 % and -9 % against -0.1 % and -2.7 %)."""
+
+
 def _jacobian(
-    problem: _Problem, theta: npt.NDArray[np.float64], step: float = 1e-3
+    problem: _Problem, theta: npt.NDArray[np.float64], step: float = JACOBIAN_STEP
 ) -> npt.NDArray[np.float64]:
     columns = []
     for i in range(theta.size):
@@ -528,7 +554,7 @@ def _fit_family(
         problem.segments = short
         if shooting is not None:
             problem.free = free_shooting
-        for q, twist_q in candidates:
+        for source, (q, twist_q) in enumerate(candidates):
             problem.fixed_p = q.copy()
             theta0 = problem.pack(q, twist_q)
             variants = [theta0]
@@ -541,10 +567,16 @@ def _fit_family(
             for th in variants:
                 problem.substeps = substeps_for(problem.unpack(th)[0], log.sample_period_s)
                 r = problem.residuals(th)
-                tried.append((float(r @ r), q.copy(), th))
+                tried.append((float(r @ r), source, q.copy(), th))
         tried.sort(key=lambda item: item[0])
+        # The best start of every source (the direct estimates, the simpler family's optimum)
+        # is refined, then the next best up to STARTS_REFINED: a start of low initial cost
+        # from one source can lie in a poorer basin than the other source's best.
+        firsts = [next(item for item in tried if item[1] == k) for k in range(len(candidates))]
+        first_ids = {id(item) for item in firsts}
+        chosen_starts = firsts + [item for item in tried if id(item) not in first_ids]
         best_run = None
-        for _, q, th in tried[:STARTS_REFINED]:
+        for _, _, q, th in chosen_starts[: max(STARTS_REFINED, len(firsts))]:
             problem.fixed_p = q
             problem.free = free_shooting if shooting is not None else free_full
             if short is not None:
@@ -641,6 +673,142 @@ def _fit_family(
     )  # fmt: skip
 
 
+BOOTSTRAP_REPLICATES: Final = 100
+"""Replicates of the residual block bootstrap of the chosen family's parameters."""
+BOOTSTRAP_ITERATIONS: Final = 8
+"""Refit iterations of one bootstrap replicate."""
+BOOTSTRAP_SEED: Final = 20_240_601
+"""Seed of the bootstrap's resampling (same log, same intervals)."""
+
+
+@dataclass
+class Bootstrap:
+    """The residual block bootstrap of one fit: per free parameter the relative standard
+    deviation (of its logarithm over the replicates) and the 95 % percentile interval."""
+
+    relative_std: dict[str, float]
+    interval_95: dict[str, tuple[float, float]]
+    replicates: int
+    block_samples: int
+
+
+def _shooting_problem(
+    log: MeasuredLog,
+    fit: FamilyFit,
+    uses_wob: bool,
+    weights: npt.NDArray[np.float64],
+    balance: MomentumBalance | None,
+) -> _Problem:
+    """The residuals the fit of ``fit`` minimised (multiple shooting when the window
+    stick-slips, else the whole window with its initial twist), at its free parameters."""
+    bit = log.column("bit_speed_rad_s")
+    torque = log.column("bit_torque_nm")
+    scales = (float(np.std(bit)) or 1.0, float(np.std(torque)) or 1.0)
+    segments = stuck_segments(log)
+    free = [n for n in fit.free if n != "initial_twist"] if segments is not None else fit.free
+    if balance is not None:
+        weights = np.concatenate([weights, weights[: bit.size]])
+    return _Problem(
+        log, fit.family, uses_wob, list(free), fit.p.copy(), weights, scales,
+        _speed0(bit, stuck_threshold(bit)), substeps_for(fit.p, log.sample_period_s),
+        fit.twist0, segments, balance,
+    )  # fmt: skip
+
+
+def bootstrap(
+    problem: _Problem,
+    replicates: int = BOOTSTRAP_REPLICATES,
+    seed: int = BOOTSTRAP_SEED,
+) -> Bootstrap:
+    """Residual block bootstrap at the optimum of ``problem``.
+
+    The fitted residuals of the bit speed and the torque on bit (on the window's clock) are
+    resampled in blocks of one correlation length (``n / n_eff`` samples, the same blocks for
+    both, so that their correlations in time and between them are kept) and added to the
+    fitted simulation: a new measured window, on which everything the fit takes from the
+    data is taken again (the segments' starting states, the momentum balance), and the
+    parameters are refitted (a Gauss-Newton chord iteration with the optimum's Jacobian,
+    every residual a full simulation). The spread of the refitted parameters is their
+    uncertainty, the model's misfit included; it is conditional on the held parameters.
+    """
+    theta = problem.pack(problem.fixed_p, problem.twist0_fixed)
+    base = problem.residuals(theta)
+    log = problem.log
+    n = log.time_s.size
+    used = problem.weights[: 2 * n] > 0
+    fraction = _effective_fraction(base[: 2 * n][used])
+    block = int(min(max(1, round(1.0 / fraction)), max(1, n // 4)))
+    jac = _jacobian(problem, theta)
+    info = jac.T @ jac
+    info += 1e-9 * max(float(np.trace(info)), 1e-300) / info.shape[0] * np.eye(info.shape[0])
+    factor = np.linalg.cholesky(info)
+
+    def solve(g: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        return np.asarray(np.clip(-np.linalg.solve(factor.T, np.linalg.solve(factor, g)), -1, 1))
+
+    names = ("bit_speed_rad_s", "bit_torque_nm")
+    fitted = [
+        log.column(name) - np.where(used[k * n : (k + 1) * n], base[k * n : (k + 1) * n], 0.0)
+        * problem.scales[k]
+        for k, name in enumerate(names)
+    ]  # fmt: skip
+    rng = np.random.default_rng(seed)
+    draws = []
+    for _ in range(replicates):
+        starts = rng.integers(0, n - block + 1, size=-(-n // block))
+        index = (starts[:, None] + np.arange(block)[None, :]).ravel()[:n]
+        columns = dict(log.columns)
+        for k, name in enumerate(names):
+            noise = np.where(used[k * n : (k + 1) * n], base[k * n : (k + 1) * n], 0.0)[index]
+            columns[name] = fitted[k] + noise * problem.scales[k]
+        data = MeasuredLog(log.time_s, columns, log.source)
+        segments = stuck_segments(data) if problem.segments is not None else None
+        replica = dataclasses.replace(
+            problem, log=data, segments=segments, _angle=None,
+            balance=None if problem.balance is None else MomentumBalance.of(data),
+        )  # fmt: skip
+        if segments is not None and len(segments) != len(problem.segments or []):
+            replica = dataclasses.replace(replica, segments=problem.segments)
+        # The first step is the linearised refit (always taken: the cost of stick-slip is not
+        # smooth at the scale of one replicate's noise, and a rejected step would leave the
+        # replicate at the optimum and the interval too narrow); the chord iteration then
+        # moves only downhill.
+        th = theta + solve(jac.T @ replica.residuals(theta))
+        r = replica.residuals(th)
+        cost = float(r @ r)
+        for _ in range(BOOTSTRAP_ITERATIONS):
+            step = solve(jac.T @ r)
+            for _ in range(4):
+                trial = th + step
+                r_trial = replica.residuals(trial)
+                cost_trial = float(r_trial @ r_trial)
+                if cost_trial < cost:
+                    break
+                step = 0.5 * step
+            else:
+                break
+            converged = (cost - cost_trial) < 1e-6 * cost
+            th, r, cost = trial, r_trial, cost_trial
+            if converged:
+                break
+        draws.append(th)
+    samples = np.array(draws)
+    rel: dict[str, float] = {}
+    interval: dict[str, tuple[float, float]] = {}
+    for name in problem.free:
+        if name == "initial_twist":
+            continue
+        values = np.array([_value_of(problem, th, name) for th in samples])
+        rel[name] = float(np.std(np.log(values)))
+        low, high = np.percentile(values, [2.5, 97.5])
+        interval[name] = (float(low), float(high))
+    return Bootstrap(rel, interval, replicates, block)
+
+
+def _value_of(problem: _Problem, theta: npt.NDArray[np.float64], name: str) -> float:
+    return float(problem.unpack(theta)[0][MODEL_PARAMETERS[name][0]])
+
+
 @dataclass
 class FitResult:
     """A calibration: the chosen plant, every family's fit, the window's defects."""
@@ -650,6 +818,8 @@ class FitResult:
     defects: list[Defect]
     excluded_samples: int
     wall_s: float
+    top_drive: TopDriveFit | None = None
+    bootstrap: Bootstrap | None = None
 
 
 def fit_weights(window: MeasuredLog) -> tuple[npt.NDArray[np.float64], list[Defect]]:
@@ -721,8 +891,29 @@ def calibrate(
         f.n_eff = n_eff
         f.bic = n_eff * math.log(f.cost / f.n) + len(f.free) * math.log(n_eff)
     chosen = min(fits.values(), key=lambda f: f.bic)
-    plant = _plant_of(chosen, window, uses_wob, window_s, log.source, fits, defects, weights)
-    return FitResult(plant, fits, defects, int((weights == 0).sum()), time.perf_counter() - started)
+    # The uncertainty of the chosen family's parameters: a residual block bootstrap (the
+    # Laplace screen of the fit decided which parameters are identified).
+    boot = bootstrap(_shooting_problem(window, chosen, uses_wob, weights, balance))
+    plant = _plant_of(chosen, window, uses_wob, window_s, log.source, fits, defects, weights, boot)
+    top = identify_top_drive(window, float(chosen.p[P_J]))
+    if top.values is not None:
+        top_values = {**top.values, "pi_law_r2": top.loop_r2, "momentum_balance_r2": top.balance_r2}
+        plant = dataclasses.replace(plant, top_drive=top_values)
+    return FitResult(
+        plant, fits, defects, int((weights == 0).sum()), time.perf_counter() - started, top,
+        boot,
+    )  # fmt: skip
+
+
+def _hold_value(name: str, p: npt.NDArray[np.float64], direct: npt.NDArray[np.float64]) -> float:
+    """Where a parameter the window does not identify is held: damping terms at 0, the
+    memory time at its fitted value, the others at their direct estimate."""
+    index = MODEL_PARAMETERS[name][0]
+    if name in ("damping", "viscous_friction"):
+        return 0.0
+    if name == "memory_time":
+        return float(p[index])
+    return float(direct[index])
 
 
 def _plant_of(
@@ -734,6 +925,7 @@ def _plant_of(
     fits: dict[str, FamilyFit],
     defects: list[Defect],
     weights: npt.NDArray[np.float64],
+    boot: Bootstrap | None = None,
 ) -> CalibratedPlant:
     parameters = {}
     for name in FAMILY_PARAMETERS[fit.family]:
@@ -742,10 +934,18 @@ def _plant_of(
             parameters[name] = FittedParameter(
                 value, parameter_unit(name, uses_wob), False, None, fit.fixed[name]
             )
+        elif boot is not None and name in boot.relative_std:
+            parameters[name] = FittedParameter(
+                value, parameter_unit(name, uses_wob), True, boot.relative_std[name],
+                f"fitted (output error on bit speed and torque on bit); uncertainty: residual "
+                f"block bootstrap ({boot.replicates} replicates, blocks of {boot.block_samples} "
+                f"samples; Laplace relative std {fit.relative_std.get(name, math.nan):.2g})",
+                boot.interval_95[name],
+            )  # fmt: skip
         else:
             parameters[name] = FittedParameter(
                 value, parameter_unit(name, uses_wob), True, fit.relative_std.get(name),
-                "fitted (output error on bit speed and torque on bit)",
+                "fitted (output error on bit speed and torque on bit); uncertainty: Laplace",
             )  # fmt: skip
     bit = window.column("bit_speed_rad_s")
     # The noise of the bit-speed sensor: the robust spread of the second differences (white
@@ -916,3 +1116,156 @@ def feature_errors(measured: dict[str, float], simulated: dict[str, float]) -> d
         else:
             out[key] = (s - m) / abs(m) if m else math.nan
     return out
+
+
+MIN_TOP_DRIVE_R2: Final = 0.5
+"""Least share of the surface torque's variance a PI speed loop must explain for the top drive
+to count as identified."""
+
+
+@dataclass
+class TopDriveFit:
+    """The top drive identified from a window's top speed and surface torque (or why not).
+
+    ``values`` follow :data:`drill_env.bit_model.TOP_DRIVE_KEYS`; ``loop_r2`` is the share of
+    the surface torque's variance that the PI law explains, ``balance_r2`` that of the
+    momentum balance of the top drive and the bit."""
+
+    values: dict[str, float] | None
+    loop_r2: float = math.nan
+    balance_r2: float = math.nan
+    reason: str = ""
+
+
+def _cumulative(t: npt.NDArray[np.float64], y: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    return np.concatenate(([0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * np.diff(t))))
+
+
+def identify_top_drive(window: MeasuredLog, bit_inertia_kg_m2: float) -> TopDriveFit:
+    """Identify the top drive of the free-running mode from the window (docs/calibration.md).
+
+    * Its inertia ``J_t`` from the momentum balance of the top drive and the bit, integrated
+      once: ``J_t (w_t - w_t(0)) + J (w_b - w_b(0)) = int(T_s - T_bit) + a + b t`` (``T_s``
+      the surface torque; ``b`` absorbs a constant torque lost on the way), least squares.
+    * Its PI speed loop from ``T_s = k_p (r - w_t) + k_i int(r - w_t)``, i.e. ``T_s = a_0 +
+      a_1 t - k_p w_t - k_i int(w_t)`` (least squares; ``r = a_1 / k_i``).
+
+    Returns the values, or None and the reason when the log has no surface torque or the fit
+    does not describe a top drive under a PI speed loop.
+    """
+    if not window.has("surface_torque_nm"):
+        return TopDriveFit(None, reason="the log has no surface_torque_nm column: the top "
+                           "drive cannot be identified (free running needs it)")  # fmt: skip
+    t = window.time_s - window.time_s[0]
+    top = window.column("top_speed_rad_s")
+    surface = window.column("surface_torque_nm")
+    net = _cumulative(t, surface)
+    if window.has("bit_torque_nm") and window.has("bit_speed_rad_s"):
+        net = net - _cumulative(t, window.column("bit_torque_nm"))
+        target = net - bit_inertia_kg_m2 * (window.column("bit_speed_rad_s") - window.column(
+            "bit_speed_rad_s")[0])  # fmt: skip
+    else:
+        return TopDriveFit(None, reason="the window lacks the bit speed or the torque on bit")
+    a = np.column_stack([top - top[0], np.ones_like(t), t])
+    coef, *_ = np.linalg.lstsq(a, target, rcond=None)
+    inertia = float(coef[0])
+    balance_r2 = 1.0 - float(np.var(target - a @ coef) / (np.var(target) or 1.0))
+    b = np.column_stack([np.ones_like(t), t, -top, -_cumulative(t, top)])
+    loop, *_ = np.linalg.lstsq(b, surface, rcond=None)
+    loop_r2 = 1.0 - float(np.var(surface - b @ loop) / (np.var(surface) or 1.0))
+    kp, ki = float(loop[2]), float(loop[3])
+    if not (inertia > 0 and kp >= 0 and ki > 0 and loop_r2 >= MIN_TOP_DRIVE_R2):
+        return TopDriveFit(
+            None, loop_r2, balance_r2,
+            f"the surface torque is not that of a PI speed loop on the top drive (inertia "
+            f"{inertia:.4g} kg m^2, gains {kp:.4g} N m s/rad and {ki:.4g} N m/rad, PI law "
+            f"explains {loop_r2:.0%} of its variance; needed: inertia > 0, gains >= 0, "
+            f">= {MIN_TOP_DRIVE_R2:.0%})",
+        )  # fmt: skip
+    values = {
+        "inertia_kg_m2": inertia,
+        "speed_gain_nm_s_rad": kp,
+        "integral_gain_nm_rad": ki,
+        "reference_speed_rad_s": float(loop[1]) / ki,
+    }
+    return TopDriveFit(values, loop_r2, balance_r2)
+
+
+def top_drive_vector(plant: CalibratedPlant) -> npt.NDArray[np.float64]:
+    """The plant's identified top drive as ``(J_t, k_p, k_i, r)``; ValueError without one."""
+    top = plant.top_drive or {}
+    missing = [key for key in TOP_DRIVE_KEYS if key not in top]
+    if missing:
+        raise ValueError(
+            "the plant has no identified top drive (top_drive lacks "
+            f"{', '.join(missing)}): calibrate it on a log with a surface_torque_nm column "
+            "to run it free"
+        )
+    return np.array([float(top[key]) for key in TOP_DRIVE_KEYS])
+
+
+def simulate_free(
+    plant: CalibratedPlant, log: MeasuredLog
+) -> tuple[
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+]:
+    """Run ``plant`` free on the log's clock: its identified top drive under its speed loop
+    instead of the measured top speed (:func:`drill_env.bit_model.simulate_free_running`).
+
+    The initial state is estimated from the log's first samples: the measured top and bit
+    speeds, the loop's integrator from the measured surface torque (or the steady one, from
+    the mean torque on bit, without it), and the twist that best matches the first
+    :data:`INITIAL_STATE_FRACTION` of the log (a grid of 61 values as in
+    :func:`initial_twist`); the parameters are not touched.
+
+    Returns:
+        ``(top_speed_rad_s, bit_speed_rad_s, bit_torque_nm, surface_torque_nm)``.
+    """
+    top_drive = top_drive_vector(plant)
+    j_t, kp, ki, reference = top_drive
+    p = plant.model_vector()
+    if plant.uses_wob and not log.has("wob_n"):
+        raise ValueError("the plant's friction scales with WOB but the log has no column 'wob_n'")
+    wob = wob_input(log) if plant.uses_wob else None
+    top0 = float(np.median(log.column("top_speed_rad_s")[:5]))
+    speed0 = 0.0
+    if log.has("bit_speed_rad_s"):
+        bit = log.column("bit_speed_rad_s")
+        speed0 = _speed0(bit, stuck_threshold(bit))
+    if log.has("surface_torque_nm"):
+        u0 = float(np.median(log.column("surface_torque_nm")[:5]))
+    elif log.has("bit_torque_nm"):
+        u0 = float(np.mean(log.column("bit_torque_nm")))
+    else:
+        u0 = float(plant.operating_point.get("mean_bit_torque_nm", 0.0))
+    integral0 = (u0 - kp * (reference - top0)) / ki
+    if log.has("bit_torque_nm"):
+        torque0 = float(np.median(log.column("bit_torque_nm")[:5]))
+        balance = (torque0 - p[P_C] * (top0 - speed0)) / p[P_K]
+    else:
+        balance = plant.initial_twist_rad
+    twist0 = balance
+    if log.has("bit_speed_rad_s") and log.has("bit_torque_nm"):
+        n = max(3, int(INITIAL_STATE_FRACTION * log.time_s.size))
+        head = log.time_s[:n]
+        bit = log.column("bit_speed_rad_s")[:n]
+        torque = log.column("bit_torque_nm")[:n]
+        scale = float(np.mean(wob[:n])) if wob is not None else 1.0
+        span = p[P_AA] * scale / p[P_K]
+        scales = (float(np.std(bit)) or 1.0, float(np.std(torque)) or 1.0)
+        best = (math.inf, balance)
+        for x0 in balance + span * np.linspace(-1.0, 1.0, 61):
+            _, s, q, _ = simulate_free_running(
+                head, p, plant.family, top_drive, float(x0), top0, speed0, integral0,
+                None if wob is None else wob[:n],
+            )  # fmt: skip
+            cost = float(np.mean(((s - bit) / scales[0]) ** 2 + ((q - torque) / scales[1]) ** 2))
+            if cost < best[0]:
+                best = (cost, float(x0))
+        twist0 = best[1]
+    return simulate_free_running(
+        log.time_s, p, plant.family, top_drive, twist0, top0, speed0, integral0, wob
+    )

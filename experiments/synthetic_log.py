@@ -80,6 +80,7 @@ LAB_NOISE: Final = {
     "bit_speed_rad_s": 0.05,
     "bit_torque_nm": 0.03,
     "wob_n": 2.0,
+    "surface_torque_nm": 0.03,
 }
 """Standard deviation of the white measurement noise of each column of the lab log."""
 LAB_DEFECTS: Final[dict[str, tuple[float, ...]]] = {
@@ -96,7 +97,7 @@ def _lab_run(rig, duration_s, out_dt, h, wob_wave, stall_start, stall_end):  # f
     (j_top, j_bit, k, c, a_a, a_0, xi, c_v, tau, kp, ki, ref, wob0) = rig
     n_out = int(round(duration_s / out_dt)) + 1
     per = int(round(out_dt / h))
-    out = np.empty((n_out, 4))
+    out = np.empty((n_out, 5))
     wt = 0.0
     wb = 0.0
     twist = 0.0
@@ -118,6 +119,12 @@ def _lab_run(rig, duration_s, out_dt, h, wob_wave, stall_start, stall_end):  # f
         out[i, 1] = wb
         out[i, 2] = t_bit
         out[i, 3] = wob
+        r_now = ref
+        if stall_start <= t < stall_end:
+            r_now = 0.0
+        elif t < 1.0:
+            r_now = ref * t
+        out[i, 4] = kp * (r_now - wt) + ki * integ
         for _ in range(per):
             r = ref
             if stall_start <= t < stall_end:
@@ -191,7 +198,7 @@ def lab_log(
     out = _lab_run(values, duration_s, 1e-3, 2e-6, 0.05, stall[0], stall[1])
     time_s = np.round(np.arange(out.shape[0]) * 1e-3, 9)
     rng = np.random.default_rng(seed)
-    names = ("top_speed_rad_s", "bit_speed_rad_s", "bit_torque_nm", "wob_n")
+    names = ("top_speed_rad_s", "bit_speed_rad_s", "bit_torque_nm", "wob_n", "surface_torque_nm")
     columns = {
         name: out[:, j] + rng.normal(0.0, LAB_NOISE[name], out.shape[0])
         for j, name in enumerate(names)
@@ -209,6 +216,7 @@ FIELD_NOISE: Final = {
     "bit_speed_rad_s": 0.1,
     "bit_torque_nm": 200.0,
     "wob_n": 500.0,
+    "surface_torque_nm": 200.0,
 }
 """Standard deviation of the white measurement noise of each column of the field log."""
 FIELD_DEFECTS: Final[dict[str, tuple[float, ...]]] = {
@@ -223,7 +231,7 @@ FIELD_DEFECTS: Final[dict[str, tuple[float, ...]]] = {
 def _field_run(p, t_a, t_0, c_bit, duration_s, out_dt, h, kp, ki, ref):  # fmt: skip
     n_out = int(round(duration_s / out_dt)) + 1
     per = int(round(out_dt / h))
-    out = np.empty((n_out, 3))
+    out = np.empty((n_out, 4))
     x = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     mode = STUCK
     integ = 0.0
@@ -240,6 +248,8 @@ def _field_run(p, t_a, t_0, c_bit, duration_s, out_dt, h, kp, ki, ref):  # fmt: 
         out[i, 0] = x[0]
         out[i, 1] = x[6]
         out[i, 2] = t_bit
+        r_now = ref if t >= 5.0 else ref * t / 5.0
+        out[i, 3] = max(kp * (r_now - x[0]) + ki * integ, 0.0)
         for _ in range(per):
             r = ref if t >= 5.0 else ref * t / 5.0
             err = r - x[0]
@@ -268,7 +278,7 @@ def field_log(
     )  # fmt: skip
     time_s = np.round(np.arange(out.shape[0]) * sample_period_s, 9)
     rng = np.random.default_rng(seed)
-    names = ("top_speed_rad_s", "bit_speed_rad_s", "bit_torque_nm")
+    names = ("top_speed_rad_s", "bit_speed_rad_s", "bit_torque_nm", "surface_torque_nm")
     columns = {
         name: out[:, j] + rng.normal(0.0, FIELD_NOISE[name], out.shape[0])
         for j, name in enumerate(names)

@@ -20,8 +20,10 @@ from drill_env.bit_model import P_A0, P_AA, P_CV, P_K, P_TAU, P_XI, simulate_bit
 from drill_env.calibrated_plant import (
     PLANT_FORMAT,
     CalibratedPlant,
+    FittedParameter,
     env_keywords,
     load_plant,
+    parameter_unit,
     plant_from_json,
 )
 from drill_env.measured_log import MeasuredLog, write_log_csv
@@ -295,6 +297,16 @@ def test_calibrate_and_replay_as_a_user_types_them(tmp_path: Path) -> None:
     for key in ("period_fft_s", "period_cycles_s", "bit_speed_p2p_rad_s", "bit_torque_p2p_nm",
                 "bit_torque_mean_nm", "stuck_fraction", "normalised_rms_speed_error"):  # fmt: skip
         assert key in table
+    assert load_plant(tmp_path / "cal" / "plant.json").top_drive is not None
+    done = _cli("replay", "cal/plant.json", str(log), "--window", "5:9", "--out", "free",
+                "--free-running", cwd=tmp_path)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    header = (tmp_path / "free" / "replay.csv").read_text().splitlines()[0]
+    assert header.startswith("time_s,bit_speed_rad_s,bit_torque_nm,top_speed_rad_s,")
+    assert "Free running" in (tmp_path / "free" / "replay.md").read_text()
+    free_table = (tmp_path / "free" / "features.csv").read_text()
+    for key in ("top_speed_std_rad_s", "surface_torque_mean_nm"):
+        assert key in free_table
 
 
 @pytest.mark.parametrize(
@@ -315,6 +327,19 @@ def test_calibrate_and_replay_as_a_user_types_them(tmp_path: Path) -> None:
         ),
         (("replay", "afile", "rig.csv", "--window", "0:1", "--out", "o"), "not JSON"),
         (
+            (
+                "replay",
+                "plant.json",
+                "rig.csv",
+                "--window",
+                "0:0.05",
+                "--out",
+                "o",
+                "--free-running",
+            ),
+            "no identified top drive",
+        ),
+        (
             ("calibrate", "rig.csv", "--window", "0:0.05", "--out", "mine"),
             "is not from a previous run of this command",
         ),
@@ -328,6 +353,7 @@ def test_calibrate_and_replay_as_a_user_types_them(tmp_path: Path) -> None:
         "unknown-fix",
         "bad-value",
         "bad-plant",
+        "free-without-top-drive",
         "not-ours",
     ],  # fmt: skip
 )
@@ -344,6 +370,13 @@ def test_user_errors_are_one_line_and_exit_2(
         "time_s,top_speed_rad_s,bit_speed_rad_s,bit_torque_nm\n0,1,1,1\n0.001,1,?,1\n"
     )
     (tmp_path / "afile").write_text("mine")
+    values = {"bit_inertia": 0.02, "stiffness": 1.5, "damping": 0.01, "static_friction": 2.5,
+              "sliding_friction": 1.5, "stribeck_rate": 0.5}  # fmt: skip
+    CalibratedPlant(
+        "karnopp",
+        False,
+        {n: FittedParameter(v, parameter_unit(n, False)) for n, v in values.items()},
+    ).save(tmp_path / "plant.json")  # a plant without an identified top drive
     (tmp_path / "mine").mkdir()
     (tmp_path / "mine" / "report.md").write_text("my notes")
     done = _cli(*args, cwd=tmp_path)
