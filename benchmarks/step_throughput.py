@@ -130,7 +130,7 @@ def kernel_throughput(num: int, seconds: float, parallel: bool) -> float:
     for i in range(num):
         batch.reset_string(i, i, None)
     dispatcher = kernel.advance_batch_parallel if parallel else kernel.advance_batch
-    batch._advance = kernel.fast_entry(dispatcher, batch.arrays, batch.settings)
+    batch._advance = kernel.fast_entry(dispatcher, batch._kernel_input, batch.settings)
     actions = np.zeros(num)
     batch.step(actions)  # warm up
     steps = 0

@@ -3,8 +3,9 @@ channel, in-loop controller and actuator, advanced by many plant steps in one ca
 
 One loop, :func:`_string_loop`, is written once and compiled once per plant, chosen by the
 type of the state it carries: :func:`advance_batch` for the 4-DOF plant (its state a tuple of
-floats, in registers) and :func:`advance_chain_batch` for a distributed string (an array state
-advanced in place by :func:`drill_env.chain.chain_step`); the few lines that differ are the
+floats, in registers) and :func:`advance_chain_batch` for a distributed string (its speeds and
+twists as two contiguous rows of its scratch array for the whole call, advanced in place by
+:func:`drill_env.chain.chain_step_rows`); the few lines that differ are the
 small functions of each plant below. Per plant step ``j`` of string ``i`` (time
 ``t_j = step_index * dt``):
 
@@ -55,13 +56,19 @@ from numba.extending import intrinsic, overload
 
 from drill_env.actuator import actuator_step
 from drill_env.chain import (
+    CHAIN_SPEED_ROW,
+    CHAIN_TWIST_ROW,
     CP_MU_0,
     CP_MU_A,
     CP_N,
     CP_R,
+    chain_load_rows,
+    chain_probe_rows,
     chain_probe_state,
-    chain_step_checked,
+    chain_step_rows,
+    chain_store_rows,
     chain_surface_torque,
+    chain_surface_torque_rows,
 )
 from drill_env.control import call_law
 from drill_env.friction import STUCK
@@ -558,7 +565,7 @@ def _step(state, mi, u, p, t_a, t_0, dt, work):  # pragma: no cover
     raise NotImplementedError
 
 
-def _store(state, xs) -> None:  # pragma: no cover
+def _store(state, xs, p) -> None:  # pragma: no cover
     """Write the carried state back to the string's row."""
     raise NotImplementedError
 
@@ -582,7 +589,7 @@ def _probe_impl(state, p, probes):
         return lumped
 
     def chain(state, p, probes):
-        return chain_probe_state(state, probes), chain_surface_torque(state, p)
+        return chain_probe_rows(state, probes), chain_surface_torque_rows(state, p)
 
     return chain
 
@@ -608,8 +615,8 @@ def _step_impl(state, mi, u, p, t_a, t_0, dt, work):
 
     def chain(state, mi, u, p, t_a, t_0, dt, work):
         if math.isfinite(u):
-            mn, accepted = chain_step_checked(
-                state, mi, u, p, t_a, t_0, dt, work, MAX_SPEED_RAD_S, MAX_TWIST_RAD
+            mn, accepted = chain_step_rows(
+                mi, u, p, t_a, t_0, dt, state, MAX_SPEED_RAD_S, MAX_TWIST_RAD
             )
             return state, mn, accepted
         return state, mi, False
@@ -618,15 +625,15 @@ def _step_impl(state, mi, u, p, t_a, t_0, dt, work):
 
 
 @overload(_store, inline="always")
-def _store_impl(state, xs):
+def _store_impl(state, xs, p):
     if _is_lumped(state):
 
-        def lumped(state, xs):
+        def lumped(state, xs, p):
             for c in range(N_STATE):
                 xs[c] = state[c]
 
         return lumped
-    return lambda state, xs: None  # advanced in place
+    return lambda state, xs, p: chain_store_rows(state, p, xs)
 
 
 @overload(_measured_state, inline="always")
@@ -640,8 +647,10 @@ def _measured_state_impl(src, state, std, noise, row, node_noise, p):
         return lumped
 
     def chain(src, state, std, noise, row, node_noise, p):
+        w, t = state[CHAIN_SPEED_ROW], state[CHAIN_TWIST_ROW]
         for c in range(2 * int(p[CP_N]) - 1):  # every node
-            src[SRC_STATE + c] = state[c] + std * node_noise[c // 2] if c % 2 == 0 else state[c]
+            e = c // 2
+            src[SRC_STATE + c] = w[e] + std * node_noise[e] if c % 2 == 0 else t[e]
 
     return chain
 
@@ -732,7 +741,7 @@ def _string_loop(i, b, s, state):
     _sums(rep, tracking, variation, stuck, n_done, torque_squared, residual_squared)
     if not active:
         return
-    _store(state, xs)
+    _store(state, xs, p)
     ints[I_MODE] = mi
     ints[I_STEP] = k
     f[F_LAST_TORQUE] = u_prev
@@ -832,7 +841,8 @@ def advance_chain_batch(b, s):
     arrays = _arrays(b)
     _check_noise_room(arrays.noise, arrays.ints, s.n_sub)
     for i in range(arrays.x.shape[0]):
-        _string_loop(i, arrays, s, arrays.x[i])
+        chain_load_rows(arrays.x[i], arrays.plant[i], arrays.work[i])
+        _string_loop(i, arrays, s, arrays.work[i])
 
 
 @njit(cache=True, parallel=True)
@@ -841,7 +851,8 @@ def advance_chain_batch_parallel(b, s):
     arrays = _arrays(b)
     _check_noise_room(arrays.noise, arrays.ints, s.n_sub)
     for i in prange(arrays.x.shape[0]):
-        _string_loop(i, arrays, s, arrays.x[i])
+        chain_load_rows(arrays.x[i], arrays.plant[i], arrays.work[i])
+        _string_loop(i, arrays, s, arrays.work[i])
 
 
 def observe(
