@@ -159,7 +159,7 @@ def batch_rate(params: DistributedStringParameters, seconds: float, parallel: bo
     venv.reset(seed=0)
     batch = venv.unwrapped.batch  # type: ignore[attr-defined]
     dispatcher = kernel.advance_chain_batch_parallel if parallel else kernel.advance_chain_batch
-    batch._advance = kernel.fast_entry(dispatcher, batch.arrays, batch.settings)
+    batch._advance = kernel.fast_entry(dispatcher, batch._kernel_input, batch.settings)
     actions = np.zeros(64)
     batch.step(actions)
     steps = 0

@@ -7,7 +7,8 @@ Prints, for the default scenario (100 s episodes, 50 ms decisions, noise on):
 (c) a naive per-step numpy implementation of the same dynamics (matrix form, RK4, Karnopp);
 
 and the ratios between them. Then, side by side, the single env against the compiled floor of
-the same plant: the same configuration run in compiled calls of 10 s (a batch of one), in direct mode and in residual mode on ``proposed``,
+the same plant: the same configuration under the same constant action run in compiled calls
+of 10 s (a batch of one), in direct mode and in residual mode on ``proposed``,
 and ``DrillStringField-v0`` with its field defaults against its own floor (each with
 ``randomize=False``, so that env and floor run the same string: the nominal scenario); the rates are
 measured in alternating slices of CPU time (the machine is shared) and the best slice of each
@@ -32,6 +33,7 @@ import numpy as np
 import drill_env  # noqa: F401  (registers DrillString-v0)
 from drill_env import kernel
 from drill_env.batch import StringBatch
+from drill_env.layout import REP_TIME, STATUS_OK
 from drill_env.options import EnvConfig, FieldEnvConfig
 from drill_env.parameters import PRESETS
 
@@ -59,14 +61,18 @@ def env_throughput(seconds: float, **kwargs: object) -> float:
     return steps * dt / (time.perf_counter() - start)
 
 
+def _constant_action(config: EnvConfig) -> float:
+    """13 kN m in direct mode (about the steady drilling torque of the 4-DOF string), no
+    residual in residual mode."""
+    return 0.0 if config.residual else 2 * 13_000 / config.max_torque_nm - 1
+
+
 def _env_stepper(env_id: str, **kwargs: object) -> tuple[object, float]:
     """A ``gym.make`` env ready to step with a constant action, and its decision period, s."""
     env = gym.make(env_id, **kwargs)
     env.reset(seed=0)
-    residual = env.unwrapped.config.residual  # type: ignore[attr-defined]
-    span = env.unwrapped.config.max_torque_nm  # type: ignore[attr-defined]
-    # 13 kN m in direct mode (about the steady drilling torque), no residual in residual mode.
-    action = np.array([0.0 if residual else 2 * 13_000 / span - 1], dtype=np.float32)
+    config = env.unwrapped.config  # type: ignore[attr-defined]
+    action = np.array([_constant_action(config)], dtype=np.float32)
     for _ in range(50):
         env.step(action)
 
@@ -85,12 +91,15 @@ def _env_stepper(env_id: str, **kwargs: object) -> tuple[object, float]:
 
 
 def _floor_stepper(config: EnvConfig) -> tuple[object, float]:
-    """The same plant as compiled calls of 10 s (the longest decision period: a call's own cost
-    is then below 0.1 % of it) on a batch of one, and that period, s."""
-    whole = dataclasses.replace(config, control_dt_s=10.0, episode_s=1e5)
+    """The same episodes of the same plant (from rest, reset without a seed at their end, as
+    the env's) as compiled calls of 10 s (the longest decision period: a call's own cost is
+    then below 0.1 % of it) on a batch of one under the env's constant action, and that
+    period, s."""
+    whole = dataclasses.replace(config, control_dt_s=10.0)
     batch = StringBatch(whole, 1)
     batch.reset_string(0, 0, None)
-    action = np.zeros(1)
+    action = np.array([float(np.float32(_constant_action(config)))])
+    duration_s = whole.episode_s
 
     def run(seconds: float) -> float:
         calls = 0
@@ -98,6 +107,8 @@ def _floor_stepper(config: EnvConfig) -> tuple[object, float]:
         while time.process_time() - start < seconds:
             batch.step(action)
             calls += 1
+            if batch.report[0, REP_TIME] >= duration_s or batch.status[0] != STATUS_OK:
+                batch.reset_string(0, None, None)
         return calls
 
     run(0.0)
@@ -130,7 +141,7 @@ def kernel_throughput(num: int, seconds: float, parallel: bool) -> float:
     for i in range(num):
         batch.reset_string(i, i, None)
     dispatcher = kernel.advance_batch_parallel if parallel else kernel.advance_batch
-    batch._advance = kernel.fast_entry(dispatcher, batch.arrays, batch.settings)
+    batch._advance = kernel.fast_entry(dispatcher, batch._kernel_input, batch.settings)
     actions = np.zeros(num)
     batch.step(actions)  # warm up
     steps = 0

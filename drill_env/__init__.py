@@ -68,13 +68,17 @@ __version__ = "0.1.0"
 from drill_env.ids import COUPLED_ENV_ID, ENV_ID, FIELD_ENV_ID  # noqa: E402
 
 # No registered step limit: the envs truncate themselves after ``episode_s`` and report the
-# number of decisions that takes as ``env.spec.max_episode_steps``.
+# number of decisions that takes as ``env.spec.max_episode_steps``. No wrappers either: the envs
+# refuse a step before reset() themselves, and pass Gymnasium's env checker in the tests (each
+# wrapper layer costs every decision a Python call).
 for _id, _name in ((ENV_ID, "DrillString"), (FIELD_ENV_ID, "DrillStringField")):
     if _id not in registry:
         register(
             id=_id,
             entry_point=f"drill_env.env:{_name}Env",
             vector_entry_point=f"drill_env.vector:{_name}VectorEnv",
+            order_enforce=False,
+            disable_env_checker=True,
         )
 
 if COUPLED_ENV_ID not in registry:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import copy
 import math
 import numbers
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Final
 
@@ -296,6 +297,9 @@ class StringBatch:
         """Why each string's episode ended early, if not by diverging ("" otherwise)."""
         self._noise_rows = rows
         self._node_noise = self.chain and config.observation == "state"
+        self._compiled_loop = self.compiled or not self.controllers  # no Python controller
+        self._scalars_row = self.arrays.scalars[0]  # string 0's rows (the single env's)
+        self._ints_row = self.arrays.ints[0]
         # Action to command torque: residual_scale * a, or min + (a + 1) / 2 * (max - min).
         span = config.max_torque_nm - config.min_torque_nm
         self._action_gain = config.residual_scale_nm if self.residual else 0.5 * span
@@ -305,6 +309,10 @@ class StringBatch:
             if self.coupled
             else None
         )
+        # What the kernel's entry takes: the packed arrays (kernel.PackedArrays: the fastest
+        # call), or the arrays themselves for the coupled loop.
+        self._packed = None if self.coupled else kernel.PackedArrays(self.arrays)
+        self._kernel_input: object = self.arrays if self._packed is None else self._packed.meta
         if self.coupled_arrays is not None:
             coupled_dispatcher = (
                 coupled_chain.advance_coupled_batch_parallel
@@ -319,7 +327,7 @@ class StringBatch:
             def advance(arrays: kernel.BatchArrays, settings: kernel.LoopSettings) -> None:
                 entry(arrays, settings, coupled)
 
-            self._advance = advance
+            self._advance: Callable[..., None] = advance
             self._coupled_entry = entry
             return
         if self.chain:
@@ -328,7 +336,7 @@ class StringBatch:
             serial, parallel = kernel.advance_batch, kernel.advance_batch_parallel
         dispatcher = parallel if n >= PARALLEL_THRESHOLD else serial
         with announce_compilation(*self._kernel_name()):
-            self._advance = kernel.fast_entry(dispatcher, self.arrays, self.settings)
+            self._advance = kernel.fast_entry(dispatcher, self._kernel_input, self.settings)
 
     def _kernel_name(self) -> tuple[str, float]:
         """What compiling this batch's kernel is called, and about how long it takes, s."""
@@ -508,7 +516,7 @@ class StringBatch:
                 entry(arrays, settings, rows)
 
         with announce_compilation(*self._kernel_name()):
-            kernel.observe(advance, a, self.settings, i)
+            kernel.observe(advance, a if self._packed is None else self._packed, self.settings, i)
 
     def law_info(self) -> dict[str, npt.NDArray[np.float64]]:
         """The state slots the compiled law names (:class:`drill_env.control.CompiledLaw`
@@ -602,21 +610,25 @@ class StringBatch:
             for i in np.flatnonzero(self.status == STATUS_OK).tolist():
                 self._draw_node_noise(i)
         if self.compiled or not self.controllers:
-            self._advance(self.arrays, self.settings)
+            self._advance(self._kernel_input, self.settings)
         else:
             self._step_python_controllers()
 
-    def step_one(self, action: float) -> None:
+    def step_one(self, action: float) -> float:
         """:meth:`step` for a batch of one under ``action`` in [-1, 1] (the single env's hot
-        path: the same arithmetic, fewer Python operations)."""
-        self.arrays.scalars[0, F_COMMAND] = action * self._action_gain + self._action_offset
-        self._refill_noise()
-        if self._node_noise and self.arrays.ints[0, I_STATUS] == STATUS_OK:
+        path: the same arithmetic, fewer Python operations); returns the command torque (the
+        residual in residual mode), N m."""
+        command = action * self._action_gain + self._action_offset
+        self._scalars_row[F_COMMAND] = command
+        if self._ints_row[I_NOISE_POS] + self.substeps >= self._noise_rows:
+            self._refill_noise()
+        if self._node_noise and self._ints_row[I_STATUS] == STATUS_OK:
             self._draw_node_noise(0)
-        if self.compiled or not self.controllers:
-            self._advance(self.arrays, self.settings)
+        if self._compiled_loop:
+            self._advance(self._kernel_input, self.settings)
         else:
             self._step_python_controllers()
+        return command
 
     def _step_python_controllers(self) -> None:
         """The slow path: call each Python controller at every plant step, and the kernel
@@ -625,6 +637,8 @@ class StringBatch:
         n = self.num
         one_step = self.settings._replace(n_sub=1)
         step_arrays = a._replace(records=np.zeros((n, 1, N_RECORD)))
+        packed = None if self._packed is None else kernel.PackedArrays(step_arrays)
+        step_input = step_arrays if packed is None else packed.meta
         sums = np.zeros((n, _SUMS.stop))
         coupled = self.coupled_arrays
         if coupled is not None:  # the bit's outputs over the whole decision, not its last step
@@ -639,7 +653,7 @@ class StringBatch:
                 value = self.controllers[i].torque(measured, ref, PLANT_DT_S)
                 torque = self._base_torque(i, value)
                 a.scalars[i, F_BASE_TORQUE] = torque
-            self._advance(step_arrays, one_step)
+            self._advance(step_input, one_step)
             a.records[:, j] = step_arrays.records[:, 0]
             sums += a.report[:, _SUMS]
             if coupled is not None:

@@ -65,6 +65,8 @@ from drill_env.parameters import PLANT_DT_S, DrillStringParameters
 
 __all__ = [
     "CHAIN_HEADER",
+    "CHAIN_SPEED_ROW",
+    "CHAIN_TWIST_ROW",
     "CHAIN_WORK_ROWS",
     "CP_DW",
     "CP_MU_0",
@@ -77,11 +79,16 @@ __all__ = [
     "chain_probe_state",
     "chain_surface_torque",
     "chain_integrate_constant_torque",
+    "chain_load_rows",
+    "chain_probe_rows",
     "chain_parameter_length",
     "chain_parameter_vector",
     "chain_state_derivative",
     "chain_step",
     "chain_step_checked",
+    "chain_step_rows",
+    "chain_store_rows",
+    "chain_surface_torque_rows",
     "chain_work",
     "stack_chain_parameters",
     "steady_drilling_state",
@@ -100,10 +107,12 @@ CP_DW: Final = 5
 CHAIN_HEADER: Final = 6
 """Entries of the parameter vector before the per-node and per-element arrays."""
 
-# Rows of the scratch array: start state, crossing state, result, RK4 stage, element torques.
-# Every RK4 step runs from the START rows into the OUT rows; events copy rows around it.
+# Rows of the scratch array: start state, crossing state, result, RK4 stage, element torques,
+# and a copy of the start state that an event is about to overwrite. Every RK4 step runs from
+# the START rows into the OUT rows; events copy rows around it.
 _START_W, _START_T, _CROSS_W, _CROSS_T, _OUT_W, _OUT_T, _STAGE_W, _STAGE_T, _TAU = range(9)
-CHAIN_WORK_ROWS: Final = 9
+_KEEP_W, _KEEP_T = 9, 10
+CHAIN_WORK_ROWS: Final = 11
 """Rows of the scratch array :func:`chain_step` needs (columns: at least ``n``)."""
 
 _FALSE_POSITION_ITERATIONS = 3
@@ -317,9 +326,10 @@ def _mode_after_stop(p, n, w, t, t_a) -> int:
 
 
 @njit(cache=True)
-def _slip_step(p, n, work, mode, u, t_a, t_0, h) -> int:
+def _slip_step(p, n, work, mode, u, t_a, t_0, h, kept: bool):
     """Advance a slipping bit from the START rows by ``h`` into the OUT rows, stopping it where
-    its speed crosses zero (the START rows may then be overwritten)."""
+    its speed crosses zero (the START rows may then be overwritten, after a copy into the KEEP
+    rows unless ``kept``: one is there already). Returns ``(mode, kept)``."""
     m = n - 1
     start_w, start_t = work[_START_W], work[_START_T]
     cross_w, cross_t = work[_CROSS_W], work[_CROSS_T]
@@ -329,8 +339,8 @@ def _slip_step(p, n, work, mode, u, t_a, t_0, h) -> int:
     if mode * wb > 0.0:
         if abs(wb) < p[5] and abs(_torque_on_bit(p, n, out_w, out_t)) <= t_a:
             out_w[m] = 0.0  # Karnopp capture inside the stick band
-            return STUCK
-        return mode
+            return STUCK, kept
+        return mode, kept
     # The speed crossed zero inside the step: find the instant by regula falsi on theta.
     lo, hi = 0.0, 1.0
     f_lo, f_hi = start_w[m], wb
@@ -354,25 +364,24 @@ def _slip_step(p, n, work, mode, u, t_a, t_0, h) -> int:
     rest = (1.0 - theta) * h
     if rest <= 0.0:
         _copy_rows(n, cross_w, cross_t, out_w, out_t)
-        return new_mode
+        return new_mode, kept
+    if not kept:
+        _copy_rows(n, start_w, start_t, work[_KEEP_W], work[_KEEP_T])
     _copy_rows(n, cross_w, cross_t, start_w, start_t)
     _rk4(p, n, work, u, t_a, t_0, new_mode, rest)
-    return new_mode
+    return new_mode, True
 
 
 @njit(cache=True, inline="always")
-def _advance_work(x, mode: int, u: float, p, t_a: float, t_0: float, h: float, work) -> int:
-    """One step from ``x`` into the OUT rows of ``work``; returns the new slip mode."""
+def _advance_rows(mode: int, u: float, p, t_a: float, t_0: float, h: float, work):
+    """One step from the START rows into the OUT rows; returns the new slip mode and whether
+    an event overwrote the START rows (then a copy of them is in the KEEP rows)."""
     n = int(p[0])
-    m = n - 1
     start_w, start_t = work[_START_W], work[_START_T]
     out_w, out_t = work[_OUT_W], work[_OUT_T]
-    for i in range(m):
-        start_w[i] = x[2 * i]
-        start_t[i] = x[2 * i + 1]
-    start_w[m] = x[2 * m]
+    kept = False
     if mode != STUCK:
-        new_mode = _slip_step(p, n, work, mode, u, t_a, t_0, h)
+        new_mode, kept = _slip_step(p, n, work, mode, u, t_a, t_0, h, False)
     else:
         _rk4(p, n, work, u, t_a, t_0, mode, h)
         te_new = _torque_on_bit(p, n, out_w, out_t)
@@ -388,13 +397,23 @@ def _advance_work(x, mode: int, u: float, p, t_a: float, t_0: float, h: float, w
             direction = 1 if te_new > 0.0 else -1
             if theta > 0.0:
                 _rk4(p, n, work, u, t_a, t_0, mode, theta * h)
+                _copy_rows(n, start_w, start_t, work[_KEEP_W], work[_KEEP_T])
+                kept = True
                 _copy_rows(n, out_w, out_t, start_w, start_t)
             rest = (1.0 - theta) * h
             if rest <= 0.0:
                 _copy_rows(n, start_w, start_t, out_w, out_t)
                 new_mode = direction
             else:
-                new_mode = _slip_step(p, n, work, direction, u, t_a, t_0, rest)
+                new_mode, kept = _slip_step(p, n, work, direction, u, t_a, t_0, rest, kept)
+    return new_mode, kept
+
+
+@njit(cache=True, inline="always")
+def _advance_work(x, mode: int, u: float, p, t_a: float, t_0: float, h: float, work) -> int:
+    """One step from ``x`` into the OUT rows of ``work``; returns the new slip mode."""
+    chain_load_rows(x, p, work)
+    new_mode, _ = _advance_rows(mode, u, p, t_a, t_0, h, work)
     return new_mode
 
 
@@ -447,6 +466,96 @@ def chain_step_checked(
         x[2 * i + 1] = work[_OUT_T, i]
     x[2 * m] = work[_OUT_W, m]
     return new_mode, True
+
+
+# The kernel keeps a string's state in the START rows of its scratch array for a whole call
+# (speeds and twists each contiguous): a step then neither reads nor writes the interleaved
+# state, and the probes read contiguous rows. The arithmetic is that of chain_step.
+CHAIN_SPEED_ROW: Final = _START_W
+"""Row of the scratch array that holds the node speeds between :func:`chain_step_rows`."""
+CHAIN_TWIST_ROW: Final = _START_T
+"""Row of the scratch array that holds the element twists between :func:`chain_step_rows`."""
+
+
+@njit(cache=True)
+def chain_load_rows(x, p, work) -> None:
+    """Copy the interleaved state ``x`` into the speed and twist rows of ``work``."""
+    m = int(p[0]) - 1
+    start_w, start_t = work[_START_W], work[_START_T]
+    for i in range(m):
+        start_w[i] = x[2 * i]
+        start_t[i] = x[2 * i + 1]
+    start_w[m] = x[2 * m]
+
+
+@njit(cache=True)
+def chain_store_rows(work, p, x) -> None:
+    """Copy the speed and twist rows of ``work`` into the interleaved state ``x``."""
+    m = int(p[0]) - 1
+    start_w, start_t = work[_START_W], work[_START_T]
+    for i in range(m):
+        x[2 * i] = start_w[i]
+        x[2 * i + 1] = start_t[i]
+    x[2 * m] = start_w[m]
+
+
+@njit(cache=True)
+def chain_step_rows(
+    mode: int, u: float, p, t_a: float, t_0: float, h: float, work, max_speed: float,
+    max_twist: float,
+):  # fmt: skip
+    """:func:`chain_step_checked` on the state in the speed and twist rows of ``work``
+    (:func:`chain_load_rows`): the rows advance in place, or keep the old state when the new
+    one is not finite or beyond the bounds. Returns ``(mode, accepted)``."""
+    n = int(p[0])
+    m = n - 1
+    new_mode, kept = _advance_rows(mode, u, p, t_a, t_0, h, work)
+    out_w, out_t = work[_OUT_W], work[_OUT_T]
+    accepted = abs(out_w[m]) <= max_speed
+    for i in range(m):
+        accepted &= abs(out_w[i]) <= max_speed
+        accepted &= abs(out_t[i]) <= max_twist  # both false for NaN
+    if not accepted:
+        if kept:  # an event overwrote the start rows
+            _copy_rows(n, work[_KEEP_W], work[_KEEP_T], work[_START_W], work[_START_T])
+        return mode, False
+    _copy_rows(n, out_w, out_t, work[_START_W], work[_START_T])
+    return new_mode, True
+
+
+@njit(cache=True)
+def chain_probe_rows(work, probes):
+    """:func:`chain_probe_state` of the state in the rows of ``work``."""
+    a, b, c, d = probes[0], probes[1], probes[2], probes[3]
+    w, t = work[_START_W], work[_START_T]
+    return (
+        w[a], _row_sum(t, a, b), w[b], _row_sum(t, b, c), w[c], _row_sum(t, c, d), w[d],
+    )  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def _row_sum(t, first: int, last: int) -> float:
+    """:func:`_twist_sum` on the twist row (the same additions in the same order)."""
+    s0 = s1 = s2 = s3 = 0.0
+    e = first
+    while e + 4 <= last:
+        s0 += t[e]
+        s1 += t[e + 1]
+        s2 += t[e + 2]
+        s3 += t[e + 3]
+        e += 4
+    while e < last:
+        s0 += t[e]
+        e += 1
+    return (s0 + s1) + (s2 + s3)
+
+
+@njit(cache=True)
+def chain_surface_torque_rows(work, p) -> float:
+    """:func:`chain_surface_torque` of the state in the rows of ``work``, N m."""
+    n = int(p[CP_N])
+    w, t = work[_START_W], work[_START_T]
+    return p[CHAIN_HEADER + 2 * n] * t[0] + p[CHAIN_HEADER + 3 * n - 1] * (w[0] - w[1])
 
 
 @njit(cache=True)

@@ -15,7 +15,6 @@ from drill_env.batch import StringBatch
 from drill_env.distributed import Chain, discretize
 from drill_env.evaluation import PlantSamples
 from drill_env.layout import (
-    I_STATUS,
     OBS_BOUND,
     REP_BASE_TORQUE,
     REP_BIT_SPEED,
@@ -36,7 +35,7 @@ from drill_env.layout import (
     STATUS_OK,
 )
 from drill_env.options import EnvConfig, FieldEnvConfig
-from drill_env.rewards import TERMS, reward_terms, total_reward
+from drill_env.rewards import TERMS, report_reward
 from drill_env.validation import shown
 
 __all__ = [
@@ -323,6 +322,19 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         self._residual_scale = self.config.residual_scale_nm if self.config.residual else None
         self.action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
         self._started = False
+        self._running = False  # started, and the episode has not ended by diverging
+        # The hot path's constants: the reward of a report row, the info columns, the rows.
+        self._reward = report_reward(
+            self.config.reward_weights, self.config.max_torque_nm, self._residual_scale
+        )
+        b = self._batch
+        self._extra_columns = (*(_RESIDUAL_COLUMNS if b.residual else ()),) + (
+            *(_TELEMETRY_COLUMNS if self.config.telemetry else ()),
+        )
+        self._telemetry = self.config.telemetry
+        self._more_info = b.reports_law_slots or b.coupled
+        self._report_row = b.report[0]
+        self._obs_row = b.obs[0]
         # Rendering (drill_env.render): nothing is kept or drawn unless a render_mode is set.
         render.check_render_mode(render_mode)
         self.render_mode = render_mode
@@ -375,17 +387,20 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
             root = np.random.SeedSequence(int(self.np_random.integers(2**63)))
         self._batch.reset_string(0, seed, options, previous_root=root)
         self._started = True
-        obs = self._batch.obs[0].copy()
-        report = self._batch.report[0].tolist()
+        self._running = True
+        obs = self._obs_row.copy()
+        report = self._report_row.tolist()
         if self._rendering is not None:
             self._record(report, new_episode=True)
-        return obs, self._info(dict.fromkeys(TERMS, 0.0), report)
+        return obs, self._info(dict.fromkeys(TERMS, 0.0), report, 0.0)
 
     def step(
         self, action: Any
     ) -> tuple[npt.NDArray[np.float32], SupportsFloat, bool, bool, dict[str, Any]]:
-        if not self._started:
-            raise RuntimeError("call reset() before step()")
+        if not self._running:
+            if not self._started:
+                raise RuntimeError("call reset() before step()")
+            raise RuntimeError("the episode has ended (diverged): call reset()")
         common = type(action) is np.ndarray and action.shape == (1,) and action.dtype.kind == "f"
         value = float(action[0]) if common else 2.0
         was_clipped = False
@@ -395,23 +410,23 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         b = self._batch
         episode = b.episodes[0]
         assert episode is not None
-        if b.arrays.ints[0, I_STATUS] != STATUS_OK:
-            raise RuntimeError("the episode has ended (diverged): call reset()")
-        episode.actions_clipped += was_clipped
-        b.step_one(value)
-        report = b.report[0].tolist()
-        weights = episode.config.reward_weights
-        terms = reward_terms(report, weights, self.config.max_torque_nm, self._residual_scale)
+        if was_clipped:
+            episode.actions_clipped += 1
+        command = b.step_one(value)
+        report = self._report_row.tolist()
+        terms, reward = self._reward(report)
         terminated = report[REP_STATUS] != STATUS_OK
-        reward = -1.0 if terminated else total_reward(terms, weights)
         truncated = not terminated and report[REP_TIME] >= episode.duration_s
-        info = self._info(terms, report)
-        info["action_clipped"] = was_clipped
+        info = self._info(terms, report, command)
+        if was_clipped:
+            info["action_clipped"] = True
         if terminated:
+            reward = -1.0
+            self._running = False
             info["termination_reason"] = b.end_reason(0)
         if self._rendering is not None:
             self._record(report)
-        return b.obs[0].copy(), reward, terminated, truncated, info
+        return self._obs_row.copy(), reward, terminated, truncated, info
 
     # ------------------------------------------------------------------ rendering
     def _record(self, report: list[float], new_episode: bool = False) -> None:
@@ -445,20 +460,26 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         if self._rendering is not None:
             self._rendering.close()
 
-    def _info(self, terms: dict[str, float], report: list[float]) -> dict[str, Any]:
-        b = self._batch
-        episode = b.episodes[0]
-        assert episode is not None
-        info = report_info(report, b.residual, self.config.telemetry)
+    def _info(self, terms: dict[str, float], report: list[float], command: float) -> dict[str, Any]:
+        """The info dict of one report row (:func:`report_info`'s values, in its order) with
+        the reward ``terms`` and the step's ``command`` (the residual in residual mode), N m."""
+        info: dict[str, Any] = {key: report[index] for key, index in _INFO_COLUMNS}
+        info["bit_stuck"] = report[REP_BIT_STUCK] > 0.5
+        for key, index in self._extra_columns:
+            info[key] = report[index]
+        if self._telemetry:
+            info["telemetry_received"] = report[REP_TELEMETRY_RECEIVED] > 0.5
         info["reward_terms"] = terms
         info["action_clipped"] = False
-        info["actions_clipped_total"] = episode.actions_clipped
-        if b.residual:
-            info["residual_torque_nm"] = float(b.command[0])
-        if b.reports_law_slots:
-            info.update(b.law_info_of(0))
-        if b.coupled:
-            info.update(b.coupled_info_of(0))
+        info["actions_clipped_total"] = self._batch.episodes[0].actions_clipped  # type: ignore[union-attr]
+        if self._residual_scale is not None:
+            info["residual_torque_nm"] = command
+        if self._more_info:
+            b = self._batch
+            if b.reports_law_slots:
+                info.update(b.law_info_of(0))
+            if b.coupled:
+                info.update(b.coupled_info_of(0))
         return info
 
 

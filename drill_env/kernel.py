@@ -3,8 +3,9 @@ channel, in-loop controller and actuator, advanced by many plant steps in one ca
 
 One loop, :func:`_string_loop`, is written once and compiled once per plant, chosen by the
 type of the state it carries: :func:`advance_batch` for the 4-DOF plant (its state a tuple of
-floats, in registers) and :func:`advance_chain_batch` for a distributed string (an array state
-advanced in place by :func:`drill_env.chain.chain_step`); the few lines that differ are the
+floats, in registers) and :func:`advance_chain_batch` for a distributed string (its speeds and
+twists as two contiguous rows of its scratch array for the whole call, advanced in place by
+:func:`drill_env.chain.chain_step_rows`); the few lines that differ are the
 small functions of each plant below. Per plant step ``j`` of string ``i`` (time
 ``t_j = step_index * dt``):
 
@@ -31,7 +32,10 @@ its source vector (``drill_env.layout.SRC_*``) through the observation's source 
 scales.
 
 The kernel's inputs travel as two named tuples, :class:`BatchArrays` (the per-string arrays,
-updated in place) and :class:`LoopSettings` (what the batch shares). Each entry point has one
+updated in place) and :class:`LoopSettings` (what the batch shares). The batch passes its arrays
+as a :class:`PackedArrays` (one int64 array of their addresses and shapes): a call then unboxes
+one array instead of twenty, and the views the loop takes of them carry no reference counts
+(together about half the fixed cost of a call, which the single env pays at every decision). Each entry point has one
 signature (every batch of a plant has the same argument types), so it is compiled once and then
 loaded from numba's cache; the start of an episode (:func:`observe`) runs the same entry for no
 plant step on the views of one string instead of compiling a loop of its own.
@@ -41,23 +45,30 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import Any, Final, NamedTuple
 
 import numba
 import numpy as np
 import numpy.typing as npt
 from numba import njit, prange, types
-from numba.extending import overload
+from numba.core import cgutils
+from numba.extending import intrinsic, overload
 
 from drill_env.actuator import actuator_step
 from drill_env.chain import (
+    CHAIN_SPEED_ROW,
+    CHAIN_TWIST_ROW,
     CP_MU_0,
     CP_MU_A,
     CP_N,
     CP_R,
+    chain_load_rows,
+    chain_probe_rows,
     chain_probe_state,
-    chain_step_checked,
+    chain_step_rows,
+    chain_store_rows,
     chain_surface_torque,
+    chain_surface_torque_rows,
 )
 from drill_env.control import call_law
 from drill_env.friction import STUCK
@@ -159,6 +170,7 @@ from drill_env.sensors import (
 __all__ = [
     "BatchArrays",
     "LoopSettings",
+    "PackedArrays",
     "advance_batch",
     "advance_batch_parallel",
     "advance_chain_batch",
@@ -270,6 +282,106 @@ class LoopSettings(NamedTuple):
     lag: float
     rate_step: float
     chain: bool
+
+
+_FIELD_TYPES: Final = (
+    ("x", np.float64, 2), ("ints", np.int64, 2), ("scalars", np.float64, 2),
+    ("plant", np.float64, 2), ("work", np.float64, 3), ("probes", np.int64, 2),
+    ("profiles", np.float64, 3), ("noise", np.float64, 3), ("sensor_noise", np.float64, 3),
+    ("node_noise", np.float64, 2), ("law_params", np.float64, 2), ("law_state", np.float64, 2),
+    ("measurement", np.float64, 2), ("channel", np.float64, 2), ("delay_line", np.float64, 2),
+    ("telemetry_buffer", np.float64, 3), ("records", np.float64, 3), ("report", np.float64, 2),
+    ("sources", np.float64, 2), ("obs", np.float32, 2),
+)  # fmt: skip
+"""The dtype and dimensions of each :class:`BatchArrays` field, in order (:func:`_unpack`
+builds them in this order)."""
+assert tuple(name for name, _, _ in _FIELD_TYPES) == BatchArrays._fields
+
+
+class PackedArrays:
+    """A :class:`BatchArrays` as the compiled kernel takes it fastest: one ``(20, 4)`` int64
+    array ``meta``, each row an array's address and shape (zero-padded to 3 dimensions).
+
+    The object holds the arrays, so the addresses stay valid while it lives; pass ``meta`` only
+    with the object in hand (the batch keeps both).
+
+    Raises:
+        ValueError: naming the field whose array is not of its dtype and dimensions,
+            C-contiguous, aligned and writeable.
+    """
+
+    def __init__(self, arrays: BatchArrays) -> None:
+        meta = np.zeros((len(_FIELD_TYPES), 4), dtype=np.int64)
+        for row, (name, dtype, ndim) in enumerate(_FIELD_TYPES):
+            array = getattr(arrays, name)
+            flags = array.flags
+            if not (
+                type(array) is np.ndarray
+                and array.dtype == dtype
+                and array.ndim == ndim
+                and flags.c_contiguous
+                and flags.aligned
+                and flags.writeable
+            ):
+                raise ValueError(
+                    f"{name} must be a C-contiguous writeable {np.dtype(dtype).name} array of "
+                    f"{ndim} dimensions, got {array.dtype} with shape {array.shape}"
+                )
+            meta[row, 0] = array.__array_interface__["data"][0]
+            meta[row, 1 : 1 + ndim] = array.shape
+        self.arrays = arrays
+        self.meta = meta
+
+    def row(self, i: int) -> PackedArrays:
+        """String ``i``'s rows (views of shape ``(1, ...)``), packed."""
+        return PackedArrays(BatchArrays._make(array[i : i + 1] for array in self.arrays))
+
+
+@intrinsic
+def _void_pointer(typingctx, address):
+    """The int64 ``address`` as a ``void *`` (for :func:`numba.carray`)."""
+
+    def codegen(context, builder, signature, args):
+        return builder.inttoptr(args[0], cgutils.voidptr_t)
+
+    return types.voidptr(address), codegen
+
+
+@njit(cache=True, inline="always")
+def _array2(meta, row, dtype):
+    shape = (meta[row, 1], meta[row, 2])
+    return numba.carray(_void_pointer(meta[row, 0]), shape, dtype)  # type: ignore[call-arg]
+
+
+@njit(cache=True, inline="always")
+def _array3(meta, row, dtype):
+    shape = (meta[row, 1], meta[row, 2], meta[row, 3])
+    return numba.carray(_void_pointer(meta[row, 0]), shape, dtype)  # type: ignore[call-arg]
+
+
+@njit(cache=True, inline="always")
+def _unpack(m):
+    """The :class:`BatchArrays` of a :class:`PackedArrays` ``meta`` (fields of _FIELD_TYPES)."""
+    f, i = np.float64, np.int64
+    return BatchArrays(
+        _array2(m, 0, f), _array2(m, 1, i), _array2(m, 2, f), _array2(m, 3, f),
+        _array3(m, 4, f), _array2(m, 5, i), _array3(m, 6, f), _array3(m, 7, f),
+        _array3(m, 8, f), _array2(m, 9, f), _array2(m, 10, f), _array2(m, 11, f),
+        _array2(m, 12, f), _array2(m, 13, f), _array2(m, 14, f), _array3(m, 15, f),
+        _array3(m, 16, f), _array2(m, 17, f), _array2(m, 18, f), _array2(m, 19, np.float32),
+    )  # fmt: skip
+
+
+def _arrays(b):  # pragma: no cover
+    """The kernel's arrays from a :class:`BatchArrays` or a :class:`PackedArrays` ``meta``."""
+    raise NotImplementedError
+
+
+@overload(_arrays, inline="always")
+def _arrays_impl(b):
+    if isinstance(b, types.Array):
+        return lambda b: _unpack(b)
+    return lambda b: b
 
 
 @njit(cache=True)
@@ -453,7 +565,7 @@ def _step(state, mi, u, p, t_a, t_0, dt, work):  # pragma: no cover
     raise NotImplementedError
 
 
-def _store(state, xs) -> None:  # pragma: no cover
+def _store(state, xs, p) -> None:  # pragma: no cover
     """Write the carried state back to the string's row."""
     raise NotImplementedError
 
@@ -477,7 +589,7 @@ def _probe_impl(state, p, probes):
         return lumped
 
     def chain(state, p, probes):
-        return chain_probe_state(state, probes), chain_surface_torque(state, p)
+        return chain_probe_rows(state, probes), chain_surface_torque_rows(state, p)
 
     return chain
 
@@ -503,8 +615,8 @@ def _step_impl(state, mi, u, p, t_a, t_0, dt, work):
 
     def chain(state, mi, u, p, t_a, t_0, dt, work):
         if math.isfinite(u):
-            mn, accepted = chain_step_checked(
-                state, mi, u, p, t_a, t_0, dt, work, MAX_SPEED_RAD_S, MAX_TWIST_RAD
+            mn, accepted = chain_step_rows(
+                mi, u, p, t_a, t_0, dt, state, MAX_SPEED_RAD_S, MAX_TWIST_RAD
             )
             return state, mn, accepted
         return state, mi, False
@@ -513,15 +625,15 @@ def _step_impl(state, mi, u, p, t_a, t_0, dt, work):
 
 
 @overload(_store, inline="always")
-def _store_impl(state, xs):
+def _store_impl(state, xs, p):
     if _is_lumped(state):
 
-        def lumped(state, xs):
+        def lumped(state, xs, p):
             for c in range(N_STATE):
                 xs[c] = state[c]
 
         return lumped
-    return lambda state, xs: None  # advanced in place
+    return lambda state, xs, p: chain_store_rows(state, p, xs)
 
 
 @overload(_measured_state, inline="always")
@@ -535,8 +647,10 @@ def _measured_state_impl(src, state, std, noise, row, node_noise, p):
         return lumped
 
     def chain(src, state, std, noise, row, node_noise, p):
+        w, t = state[CHAIN_SPEED_ROW], state[CHAIN_TWIST_ROW]
         for c in range(2 * int(p[CP_N]) - 1):  # every node
-            src[SRC_STATE + c] = state[c] + std * node_noise[c // 2] if c % 2 == 0 else state[c]
+            e = c // 2
+            src[SRC_STATE + c] = w[e] + std * node_noise[e] if c % 2 == 0 else t[e]
 
     return chain
 
@@ -627,7 +741,7 @@ def _string_loop(i, b, s, state):
     _sums(rep, tracking, variation, stuck, n_done, torque_squared, residual_squared)
     if not active:
         return
-    _store(state, xs)
+    _store(state, xs, p)
     ints[I_MODE] = mi
     ints[I_STEP] = k
     f[F_LAST_TORQUE] = u_prev
@@ -703,41 +817,54 @@ def _check_noise_room(noise, ints, n_sub):
 
 @njit(cache=True)
 def advance_batch(b, s):
-    """Advance every string of the batch ``b`` (:class:`BatchArrays`) by ``s.n_sub`` plant steps
-    of ``s.dt`` seconds under the settings ``s`` (:class:`LoopSettings`)."""
-    _check_noise_room(b.noise, b.ints, s.n_sub)
-    for i in range(b.x.shape[0]):
-        _advance_lumped(i, b, s)
+    """Advance every string of the batch ``b`` (:class:`BatchArrays`, or the ``meta`` of a
+    :class:`PackedArrays`) by ``s.n_sub`` plant steps of ``s.dt`` seconds under the settings
+    ``s`` (:class:`LoopSettings`)."""
+    arrays = _arrays(b)
+    _check_noise_room(arrays.noise, arrays.ints, s.n_sub)
+    for i in range(arrays.x.shape[0]):
+        _advance_lumped(i, arrays, s)
 
 
 @njit(cache=True, parallel=True)
 def advance_batch_parallel(b, s):
     """:func:`advance_batch` with the strings spread over numba's threads (large batches)."""
-    _check_noise_room(b.noise, b.ints, s.n_sub)
-    for i in prange(b.x.shape[0]):
-        _advance_lumped(i, b, s)
+    arrays = _arrays(b)
+    _check_noise_room(arrays.noise, arrays.ints, s.n_sub)
+    for i in prange(arrays.x.shape[0]):
+        _advance_lumped(i, arrays, s)
 
 
 @njit(cache=True)
 def advance_chain_batch(b, s):
     """:func:`advance_batch` for distributed strings."""
-    _check_noise_room(b.noise, b.ints, s.n_sub)
-    for i in range(b.x.shape[0]):
-        _string_loop(i, b, s, b.x[i])
+    arrays = _arrays(b)
+    _check_noise_room(arrays.noise, arrays.ints, s.n_sub)
+    for i in range(arrays.x.shape[0]):
+        chain_load_rows(arrays.x[i], arrays.plant[i], arrays.work[i])
+        _string_loop(i, arrays, s, arrays.work[i])
 
 
 @njit(cache=True, parallel=True)
 def advance_chain_batch_parallel(b, s):
     """:func:`advance_chain_batch` with the strings spread over numba's threads."""
-    _check_noise_room(b.noise, b.ints, s.n_sub)
-    for i in prange(b.x.shape[0]):
-        _string_loop(i, b, s, b.x[i])
+    arrays = _arrays(b)
+    _check_noise_room(arrays.noise, arrays.ints, s.n_sub)
+    for i in prange(arrays.x.shape[0]):
+        chain_load_rows(arrays.x[i], arrays.plant[i], arrays.work[i])
+        _string_loop(i, arrays, s, arrays.work[i])
 
 
-def observe(advance: Callable[..., None], b: BatchArrays, s: LoopSettings, i: int) -> None:
+def observe(
+    advance: Callable[..., None], b: BatchArrays | PackedArrays, s: LoopSettings, i: int
+) -> None:
     """The observation and the report of string ``i`` at its current step without stepping
     (the start of an episode): ``advance`` (the batch's entry point, :func:`fast_entry`) for no
-    plant step on a batch of the views of string ``i``."""
+    plant step on a batch of the views of string ``i`` (packed when ``b`` is)."""
+    if isinstance(b, PackedArrays):
+        row = b.row(i)  # holds the views while the kernel runs on their addresses
+        advance(row.meta, s._replace(n_sub=0))
+        return
     one = BatchArrays._make(array[i : i + 1] for array in b)
     advance(one, s._replace(n_sub=0))
 

@@ -26,7 +26,7 @@ scale keeps the chattering term below its cap under the default 0.1 rad/s measur
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Final, TypeVar
 
@@ -48,6 +48,7 @@ __all__ = [
     "FIELD_REWARD_WEIGHTS",
     "TERMS",
     "RewardWeights",
+    "report_reward",
     "reward_terms",
     "total_reward",
     "tracking_error",
@@ -166,4 +167,47 @@ def total_reward(terms: Mapping[str, Term], weights: RewardWeights) -> Term:
         reward = reward - weights.torque * terms["torque"]
     if weights.residual > 0:
         reward = reward - weights.residual * terms["residual"]
+    return reward
+
+
+def report_reward(
+    weights: RewardWeights, torque_scale_nm: float, residual_scale_nm: float | None
+) -> Callable[[Sequence[float]], tuple[dict[str, float], float]]:
+    """:func:`reward_terms` and :func:`total_reward` of one report row (a list of floats) as
+    one function, with the constants of ``weights`` and the scales taken once (the single env's
+    hot path): it returns ``(terms, reward)``, the same floats bit for bit.
+
+    Args:
+        weights: The reward weights.
+        torque_scale_nm: Scale of the torque term, N m (the upper torque limit).
+        residual_scale_nm: Scale of the residual term, N m; ``None`` outside residual mode.
+    """
+    chattering_scale = weights.chattering_scale_nm
+    torque_squared = torque_scale_nm**2
+    residual_squared = None if residual_scale_nm is None else max(residual_scale_nm, 1.0) ** 2
+    w_tracking, w_chattering, w_stuck = weights.tracking, weights.chattering, weights.stuck
+    w_sum = w_tracking + w_chattering + w_stuck
+    w_torque = weights.torque if weights.torque > 0 else None
+    w_residual = weights.residual if weights.residual > 0 else None
+
+    def reward(report: Sequence[float]) -> tuple[dict[str, float], float]:
+        n = max(report[REP_STEPS], 1)
+        tracking = report[REP_TRACKING_SUM] / n
+        chattering = min(report[REP_VARIATION] / chattering_scale, 1.0)
+        stuck = report[REP_STUCK_STEPS] / n
+        torque = report[REP_TORQUE_SQUARED] / n / torque_squared
+        residual = 0.0 if residual_squared is None else (
+            report[REP_RESIDUAL_SQUARED] / n / residual_squared
+        )  # fmt: skip
+        total = -(w_tracking * tracking + w_chattering * chattering + w_stuck * stuck) / w_sum
+        if w_torque is not None:
+            total = total - w_torque * torque
+        if w_residual is not None:
+            total = total - w_residual * residual
+        terms = {
+            "tracking": tracking, "chattering": chattering, "stuck": stuck, "torque": torque,
+            "residual": residual,
+        }  # fmt: skip
+        return terms, total
+
     return reward

@@ -65,6 +65,8 @@ class DrillStringVectorEnv(VectorEnv):
         self._residual_scale = self.config.residual_scale_nm if self.config.residual else None
         self._needs_reset = np.zeros(num_envs, dtype=bool)
         self._started = False
+        self._duration_s = np.zeros(num_envs)  # each string's episode length, s (at reset)
+        self._no_reasons = np.array([""] * num_envs)  # termination_reason when none ended
 
     @property
     def batch(self) -> StringBatch:
@@ -112,6 +114,7 @@ class DrillStringVectorEnv(VectorEnv):
             if s is None and self._batch.episodes[i] is None:
                 root = np.random.SeedSequence(int(self.np_random.integers(2**63)))
             self._batch.reset_string(i, s, options, previous_root=root)
+            self._duration_s[i] = self._episode_duration_s(i)
         self._needs_reset[mask] = False
         self._started = True
         zeros = np.zeros(self.num_envs)
@@ -131,8 +134,9 @@ class DrillStringVectorEnv(VectorEnv):
         a, clipped = validate_actions(actions, self.num_envs, batched=True)
         b = self._batch
         resetting = self._needs_reset.copy()
-        for i in np.flatnonzero(resetting):
-            b.reset_string(int(i), None, None)
+        for i in np.flatnonzero(resetting).tolist():
+            b.reset_string(i, None, None)
+            self._duration_s[i] = self._episode_duration_s(i)
         a[resetting] = 0.0
         clipped[resetting] = False
         for i in np.flatnonzero(clipped):
@@ -144,13 +148,12 @@ class DrillStringVectorEnv(VectorEnv):
         b.step(a)
         b.status[resetting] = STATUS_OK
         report = b.report
-        episodes = [e for e in b.episodes if e is not None]
         weights = self.config.reward_weights  # fixed at make: the same for every string
         terms = reward_terms(report, weights, self.config.max_torque_nm, self._residual_scale)
         rewards = total_reward(terms, weights)
         terminated = b.status == STATUS_DIVERGED
         rewards[terminated] = -1.0
-        end_s = np.array([e.duration_s for e in episodes])
+        end_s = self._duration_s
         if self.max_episode_steps is not None:
             end_s = np.minimum(end_s, self.max_episode_steps * self.config.control_dt_s)
         truncated = (report[:, REP_TIME] >= end_s - 1e-9) & ~terminated
@@ -161,11 +164,21 @@ class DrillStringVectorEnv(VectorEnv):
         infos = self._infos(terms)
         infos["action_clipped"] = clipped
         infos["_action_clipped"] = np.ones(self.num_envs, dtype=bool)
-        infos["termination_reason"] = np.array(
-            [b.end_reason(i) if ended else "" for i, ended in enumerate(terminated.tolist())]
+        infos["termination_reason"] = (
+            np.array(
+                [b.end_reason(i) if ended else "" for i, ended in enumerate(terminated.tolist())]
+            )
+            if terminated.any()
+            else self._no_reasons.copy()
         )
         infos["_termination_reason"] = terminated
         return b.observations(), rewards, terminated, truncated, infos
+
+    def _episode_duration_s(self, i: int) -> float:
+        """The length of string ``i``'s episode, s (it may change at reset with ``options``)."""
+        episode = self._batch.episodes[i]
+        assert episode is not None
+        return episode.duration_s
 
     def _infos(self, terms: dict[str, npt.NDArray[np.float64]]) -> dict[str, Any]:
         b = self._batch

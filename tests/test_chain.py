@@ -386,3 +386,44 @@ def test_elements_change_the_string_not_the_statics() -> None:
     assert steady_drilling_torque_nm(coarse, WOB_N, 8.0) == pytest.approx(
         steady_drilling_torque_nm("field_2500m", WOB_N, 8.0), rel=1e-12
     )
+
+
+def test_steps_on_the_rows_are_those_of_chain_step_and_refuse_like_it() -> None:
+    """``chain_step_rows`` (the kernel's: the state kept in the scratch rows) gives the states
+    and modes of ``chain_step`` bit for bit through stick, break-away and stop events, and a
+    step beyond the bounds keeps the old state (also when an event moved the start rows)."""
+    from drill_env.chain import (
+        CHAIN_SPEED_ROW,
+        CHAIN_TWIST_ROW,
+        chain_load_rows,
+        chain_step_rows,
+        chain_store_rows,
+    )
+
+    chain = discretize(DISTRIBUTED_PRESETS["field_2500m"])
+    p = chain_parameter_vector(chain)
+    n = int(p[0])
+    work = chain_work(n)
+    x = np.zeros(2 * n - 1)
+    chain_load_rows(x, p, work)
+    mode_x = mode_rows = STUCK
+    wob = 100_000.0
+    t_a, t_0 = chain.static_torque_nm(wob), chain.sliding_torque_nm(wob)
+    switches = 0
+    state_rows = [CHAIN_SPEED_ROW, CHAIN_TWIST_ROW]
+    for k in range(16_000):
+        u = 0.0 if 8_000 <= k < 12_000 else 15_000.0  # break away, stop and stick, again
+        # Refused (bounds 0: any motion is beyond them): the rows keep the state.
+        trial = work.copy()
+        mode, accepted = chain_step_rows(mode_rows, u, p, t_a, t_0, PLANT_DT, trial, 0.0, 0.0)
+        assert not accepted and mode == mode_rows
+        np.testing.assert_array_equal(trial[state_rows], work[state_rows])
+        new_x = chain_step(x, mode_x, u, p, t_a, t_0, PLANT_DT, chain_work(n))
+        switches += new_x != mode_x
+        mode_x = new_x
+        mode_rows, accepted = chain_step_rows(mode_rows, u, p, t_a, t_0, PLANT_DT, work, 1e3, 1e3)
+        assert accepted and mode_rows == mode_x
+    rows = np.zeros_like(x)
+    chain_store_rows(work, p, rows)
+    np.testing.assert_array_equal(rows, x)
+    assert switches >= 3  # break-away, stop and stick happened

@@ -111,3 +111,30 @@ def test_the_fast_entry_is_the_compiled_kernel() -> None:
         kernel.advance_batch(b.arrays, b.settings)
         np.testing.assert_array_equal(a.records, b.records)
         np.testing.assert_array_equal(a.obs, b.obs)
+
+
+def test_packed_arrays_run_the_same_kernel() -> None:
+    """The packed arrays (addresses and shapes, the batch's fast call) and the arrays
+    themselves give the same records, report and observation, bit for bit."""
+    a, b = _batch(2, base_controller="proposed"), _batch(2, base_controller="proposed")
+    packed = kernel.PackedArrays(a.arrays)
+    assert packed.meta.shape == (len(kernel.BatchArrays._fields), 4)
+    for action in (0.2, -0.4, 0.0):
+        for batch in (a, b):
+            batch._refill_noise()
+            batch.command[:] = action * batch._action_gain + batch._action_offset
+        kernel.advance_batch(packed.meta, a.settings)
+        kernel.advance_batch(b.arrays, b.settings)
+        for name in ("x", "records", "report", "obs", "law_state"):
+            np.testing.assert_array_equal(getattr(a.arrays, name), getattr(b.arrays, name))
+
+
+def test_packed_arrays_refuse_what_the_kernel_cannot_read() -> None:
+    """Packing checks each array's dtype, dimensions and layout, naming the field."""
+    arrays = _batch(1).arrays
+    with pytest.raises(ValueError, match=r"ints must be a C-contiguous writeable int64 array"):
+        kernel.PackedArrays(arrays._replace(ints=arrays.ints.astype(np.float64)))
+    with pytest.raises(ValueError, match=r"x must be a C-contiguous writeable float64 array"):
+        kernel.PackedArrays(arrays._replace(x=np.zeros((1, 14))[:, ::2]))
+    with pytest.raises(ValueError, match=r"records must be .* of 3 dimensions"):
+        kernel.PackedArrays(arrays._replace(records=np.zeros((1, 5))))

@@ -93,3 +93,30 @@ def test_env_reward_is_the_total_of_its_terms() -> None:
             assert reward <= 0.0
             if not kwargs:
                 assert reward >= -2.0
+
+
+@pytest.mark.parametrize(
+    "weights, residual_scale",
+    [
+        (RewardWeights(), None),
+        (RewardWeights(stuck=0.5, torque=2.0, residual=0.5), 10_000.0),
+        (RewardWeights(tracking=0.0, chattering=1.0, torque=0.0), 0.5),
+    ],
+)
+def test_the_single_envs_reward_is_that_of_the_terms(
+    weights: RewardWeights, residual_scale: float | None
+) -> None:
+    """``report_reward`` (the single env's hot path) gives the terms and the total of
+    ``reward_terms`` and ``total_reward``, bit for bit, on random report rows."""
+    from drill_env.rewards import report_reward
+
+    rng = np.random.default_rng(0)
+    reward = report_reward(weights, 50_000.0, residual_scale)
+    for _ in range(200):
+        row = rng.uniform(0.0, 1e6, layout.N_REPORT)
+        row[layout.REP_STEPS] = float(rng.integers(0, 200))
+        report = row.tolist()
+        terms, total = reward(report)
+        expected = reward_terms(report, weights, 50_000.0, residual_scale)
+        assert terms == expected
+        assert total == total_reward(expected, weights)
