@@ -407,7 +407,7 @@ def _hand_two_level(grids: list[np.ndarray], resamples: int, seed: int) -> tuple
     for _ in range(resamples):
         drawn = []
         for grid in grids:
-            for row in rng.integers(grid.shape[0], size=grid.shape[0]):
+            for row in rng.integers(grid.shape[0], size=(grid.shape[0],)):
                 drawn.append(rng.choice(grid[row], size=grid.shape[1], replace=True))
         pooled = np.sort(np.concatenate(drawn))
         cut = int(0.25 * pooled.size)
