@@ -476,6 +476,8 @@ def test_score_suite_over_training_seeds(tmp_path: Path) -> None:
 
 def test_a_folder_of_training_seeds_is_one_method(tmp_path: Path) -> None:
     _seed_models(tmp_path / "sweep" / "runs", [4, 2, 3])
+    (tmp_path / "sweep" / "runs" / "run_5").mkdir()  # a run that has not finished: no model/
+    (tmp_path / "sweep" / "runs" / "run_5" / "config.json").write_text("{}")
     entry = make_entry(str(tmp_path / "sweep"))  # the sweep-train folder: its runs/
     assert entry.name == "residual_ppo" and entry.seed_count == 3
     assert [k for k, _ in entry.training_seeds] == [2, 3, 4]
