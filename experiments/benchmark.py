@@ -115,6 +115,7 @@ __all__ = [
     "MIN_SEEDS",
     "PRONE_ONLY",
     "SUITE_DIR",
+    "SEED_KEYS",
     "SUITE_FORMAT",
     "Entry",
     "Suite",
