@@ -35,11 +35,20 @@ stick-slip-prone scenarios, RMS torque deviation, chattering; all lower is bette
 * performance profiles: the fraction of runs at or below each value of the metric, one curve
   per entry (``profiles.png``).
 
-The intervals say how much the IQM moves with the noise seeds; the shipped agents were each
-trained with one seed, so they say nothing of how much a retrained agent would differ.
+A learned method may be given as several models, one per training seed: a folder whose
+subfolders each hold one (``drill-gym sweep-train``'s ``OUT/runs/*/model``, or ``OUT``
+itself), or ``NAME=FOLDER`` repeated under one ``NAME`` (:func:`make_entry`,
+:func:`merge_entries`). Its IQM is then over every training seed, scenario and reset seed, and
+its interval resamples, within each scenario, the training seeds and then each drawn seed's
+reset seeds (a two-level stratified bootstrap), so it covers the spread between training
+seeds; the scorecard says how many training seeds each entry has and gives each seed's own
+IQM. The interval of an entry of one model says how much the IQM moves with the noise seeds
+only, nothing of how much a retrained agent would differ.
 
 Outputs (``--out``, default ``results/benchmark``): ``scorecard.md``, ``scorecard.csv`` (one
-row per suite, entry and metric), ``runs.csv`` (one row per run) and ``profiles.png``.
+row per suite, entry and metric), ``runs.csv`` (one row per run) and ``profiles.png``; with a
+method of several training seeds ``runs.csv`` has a ``training_seed`` column and
+``scorecard.csv`` a ``training_seeds`` column (:data:`SEED_KEYS`).
 """
 
 from __future__ import annotations
@@ -57,8 +66,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
+import numpy.typing as npt
 
-from agents.policy import load_policy
+from agents.policy import is_model_folder, load_policy
 from drill_env.control import controller_names
 from drill_env.distributed import DISTRIBUTED_PRESETS
 from drill_env.evaluation import Policy, ZeroAction, episode_metrics
@@ -66,7 +76,7 @@ from drill_env.metrics import METRIC_KEYS
 from drill_env.scenarios import WobProfile
 from experiments.arguments import SEED_HIGH, ArgumentParser, one_line, output_folder
 from experiments.controllers import (
-    CONTROLLERS_HELP,
+    CONTROLLERS_OPTION_HELP,
     controller_type,
     is_user_controller,
     resolve_controller_name,
@@ -99,6 +109,7 @@ __all__ = [
     "MIN_SEEDS",
     "PRONE_ONLY",
     "SUITE_DIR",
+    "SEED_KEYS",
     "SUITE_FORMAT",
     "BenchmarkOptions",
     "BenchmarkSpec",
@@ -106,18 +117,23 @@ __all__ = [
     "Suite",
     "SuiteScenario",
     "content_hash",
+    "csv_columns",
     "iqm",
     "iqm_interval",
     "load_suite",
     "main",
     "make_entry",
+    "merge_entries",
     "normalised_score",
     "profiles_figure",
     "run_benchmark",
     "run_suite",
     "score_suite",
     "scorecard_markdown",
+    "seed_folders",
     "shipped_suites",
+    "training_seed",
+    "training_seed_table",
 ]
 
 SUITE_DIR: Final = Path(__file__).resolve().with_name("suites")
@@ -151,8 +167,26 @@ RUN_KEYS: Final = (
 )  # fmt: skip
 """Columns of ``runs.csv``."""
 
+SEED_KEYS: Final = {"training_seed": "entry", "training_seeds": "entry"}
+"""Columns of ``runs.csv`` (the run's training seed) and ``scorecard.csv`` (an entry's number
+of training seeds) written only when a method has several training seeds, and the column
+each follows."""
+
+
+def csv_columns(keys: Sequence[str], rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """``keys`` (:data:`RUN_KEYS` or :data:`SCORE_KEYS`) with the columns of
+    :data:`SEED_KEYS` that some row of ``rows`` has, each after the column it follows."""
+    out = list(keys)
+    for key, after in SEED_KEYS.items():
+        if key not in out and any(key in r for r in rows):
+            out.insert(out.index(after) + 1, key)
+    return out
+
+
 _NAME: Final = re.compile(r"[a-z][a-z0-9_]*")
 _FILE_NAME: Final = re.compile(r"([a-z][a-z0-9_]*)-v([1-9][0-9]*)\.json")
+_NAMED_FOLDER: Final = re.compile(r"([a-z][a-z0-9_]*)=(.+)", re.DOTALL)
+"""``NAME=FOLDER``: a model folder, or a folder of training seeds, under a name of its own."""
 
 
 # ---------------------------------------------------------------------------------- suites
@@ -489,22 +523,32 @@ def load_suite(suite: str | Path) -> Suite:
 # --------------------------------------------------------------------------------- entries
 @dataclass(frozen=True)
 class Entry:
-    """One line of the scorecard: a registered controller or a learned agent.
+    """One line of the scorecard: a registered controller or a learned method.
 
     Attributes:
         name: The controller's registered name or the agent's name.
-        agent: The agent (``None`` for a controller).
+        agent: The agent (``None`` for a controller); of a method trained with several seeds,
+            the model of its first training seed.
         source: What the user named (a controller's name or spec, a model folder).
+        training_seeds: Of a method given as several models (one per training seed), every
+            ``(training seed, model)`` by seed; empty for a controller or a single model.
     """
 
     name: str
     agent: ResidualPolicy | None = None
     source: str = ""
+    training_seeds: tuple[tuple[int, ResidualPolicy], ...] = ()
+
+    @property
+    def seed_count(self) -> int:
+        """Training seeds of the entry (1 for a single model, 0 for a controller)."""
+        return len(self.training_seeds) or int(self.agent is not None)
 
     def run(self, suite: Suite) -> tuple[str, Policy, dict[str, Any]] | None:
         """``(label, policy, env keywords)`` of this entry's runs on ``suite`` (the
         scenario's keywords are added per run), or ``None`` when it does not run there (an
-        agent made for another env)."""
+        agent made for another env). Of a method with several training seeds: its first
+        model's (:meth:`runs` gives them all)."""
         on_field = is_field(suite.env_id)
         if self.agent is None:
             kwargs: dict[str, Any] = {
@@ -517,33 +561,169 @@ class Entry:
                 kwargs["observation"] = observation
             label = run_label({"controller": self.name, "observation": observation})
             return label, ZeroAction(), kwargs
-        if self.agent.env_id != suite.env_id:
-            return None
-        own = dict(self.agent.env_kwargs)
-        observation = own.get("observation", "surface") if on_field else None
-        return run_label({"controller": self.name, "observation": observation}), self.agent, own
+        return _agent_run(self.name, self.agent, suite)
+
+    def runs(self, suite: Suite) -> list[tuple[int | None, str, Policy, dict[str, Any]]]:
+        """``(training seed, label, policy, env keywords)`` of every model of this entry on
+        ``suite``: one with seed ``None`` for a controller or a single model, one per training
+        seed for a method given with several; empty when it does not run there."""
+        if not self.training_seeds:
+            job = self.run(suite)
+            return [] if job is None else [(None, *job)]
+        out: list[tuple[int | None, str, Policy, dict[str, Any]]] = []
+        for seed, agent in self.training_seeds:
+            job = _agent_run(self.name, agent, suite)
+            if job is not None:
+                out.append((seed, *job))
+        return out
+
+
+def _agent_run(
+    name: str, agent: ResidualPolicy, suite: Suite
+) -> tuple[str, Policy, dict[str, Any]] | None:
+    """``(label, agent, its env keywords)`` of an agent's runs on ``suite``, or ``None`` when
+    it is made for another env."""
+    if agent.env_id != suite.env_id:
+        return None
+    own = dict(agent.env_kwargs)
+    observation = own.get("observation", "surface") if is_field(suite.env_id) else None
+    return run_label({"controller": name, "observation": observation}), agent, own
+
+
+def training_seed(agent: ResidualPolicy, where: str) -> int:
+    """The training seed of a model (``train_config.seed`` of its ``config.json``).
+
+    Raises:
+        ValueError: naming ``where`` when the model records none.
+    """
+    config = agent.metadata.get("train_config")
+    seed = config.get("seed") if isinstance(config, Mapping) else None
+    if isinstance(seed, bool) or not isinstance(seed, int):
+        raise ValueError(
+            f"{where}: the model records no training seed (train_config.seed of its "
+            "config.json): a method with several training seeds needs one per model"
+        )
+    return seed
+
+
+def seed_folders(folder: Path) -> list[Path]:
+    """The model folders of the training seeds of one method under ``folder``: its
+    subfolders that are model folders or hold one as ``model/`` (the run folders of
+    ``drill-gym train`` and ``drill-gym sweep-train``), else those of ``folder/runs``
+    (a ``drill-gym sweep-train`` output folder); by name."""
+    for parent in (folder, folder / "runs"):
+        if not parent.is_dir():
+            continue
+        found = []
+        for child in sorted(p for p in parent.iterdir() if p.is_dir()):
+            if is_model_folder(child):
+                found.append(child)
+            elif is_model_folder(child / "model"):
+                found.append(child / "model")
+        if found:
+            return found
+    return []
+
+
+def _combine(name: str, models: Sequence[tuple[ResidualPolicy, str]], source: str) -> Entry:
+    """One entry named ``name`` of ``models`` (``(model, where it was read)``, one per
+    training seed); a single model is an entry of one model.
+
+    Raises:
+        ValueError: naming the models that disagree on their env or repeat a training seed.
+    """
+    if len(models) == 1:
+        return Entry(name, models[0][0], source)
+    first, first_where = models[0]
+    seen: dict[int, tuple[ResidualPolicy, str]] = {}
+    for agent, where in models:
+        if (agent.env_id, agent.env_kwargs) != (first.env_id, first.env_kwargs):
+            raise ValueError(
+                f"{name}: {where} is made for {agent.env_id} with {agent.env_kwargs}, "
+                f"{first_where} for {first.env_id} with {first.env_kwargs}: the training seeds "
+                "of one method share their env and its keywords"
+            )
+        seed = training_seed(agent, where)
+        if seed in seen:
+            raise ValueError(
+                f"{name}: training seed {seed} appears twice ({seen[seed][1]} and {where}): "
+                "give each training seed once"
+            )
+        seen[seed] = agent, where
+    seeds = tuple((k, seen[k][0]) for k in sorted(seen))
+    return Entry(name, seeds[0][1], source, seeds)
 
 
 def make_entry(text: str) -> Entry:
     """An :class:`Entry` from what the user typed: a registered controller name,
     ``MODULE:CLASS`` or ``PATH.py:CLASS`` (:func:`experiments.controllers.load_controller`),
-    or a model folder (:func:`agents.policy.load_policy`).
+    a model folder (:func:`agents.policy.load_policy`), or a folder of model folders, one
+    per training seed (:func:`seed_folders`; a ``drill-gym sweep-train`` output). Any folder
+    may be given as ``NAME=FOLDER``: the entry is named ``NAME`` (lower case, digits,
+    underscores), and entries of the same ``NAME`` are one method
+    (:func:`merge_entries`).
 
     Raises:
         ValueError: naming ``text`` and what it could have been.
         FileNotFoundError: for an incomplete model folder.
     """
 
-    path = Path(text)
-    if text not in controller_names() and ":" not in text and path.exists():
-        agent = load_policy(path)
-        return Entry(agent.name, agent, text)
+    named = _NAMED_FOLDER.fullmatch(text)
+    name, folder = (named.group(1), named.group(2)) if named else (None, text)
+    path = Path(folder)
+    if named or (text not in controller_names() and ":" not in text and path.exists()):
+        if not path.is_dir() or is_model_folder(path):
+            agent = load_policy(path)
+            return Entry(name or agent.name, agent, text)
+        found = seed_folders(path)
+        if not found:
+            load_policy(path)  # the error of an incomplete model folder
+        entry = _combine(name or text, [(load_policy(f), str(f)) for f in found], text)
+        if name is None:  # named after its models
+            names = sorted({agent.name for _, agent in entry.training_seeds} or {entry.name})
+            if len(names) > 1:
+                raise ValueError(
+                    f"{text!r}: its models are named {', '.join(names)}: give the method a "
+                    "name as NAME=FOLDER"
+                )
+            entry = replace(entry, name=names[0])
+        return entry
     try:
         return Entry(resolve_controller_name(text), None, text)
     except ValueError as err:
         if ":" in text:
             raise
         raise ValueError(f"{err}; or a model folder (no such folder {text!r})") from None
+
+
+def merge_entries(entries: Sequence[Entry]) -> list[Entry]:
+    """``entries`` with those given as ``NAME=FOLDER`` under one ``NAME`` made one method
+    whose training seeds are all of theirs (in the place of the first).
+
+    Raises:
+        ValueError: when the merged models disagree on their env or repeat a training seed.
+    """
+    out: list[Entry] = []
+    groups: dict[str, list[Entry]] = {}
+    place: dict[str, int] = {}
+    for entry in entries:
+        named = _NAMED_FOLDER.fullmatch(entry.source)
+        if named is None or entry.agent is None:
+            out.append(entry)
+            continue
+        if entry.name not in groups:
+            groups[entry.name], place[entry.name] = [], len(out)
+            out.append(entry)
+        groups[entry.name].append(entry)
+    for name, group in groups.items():
+        if len(group) > 1:
+            models = [
+                (agent, e.source)
+                for e in group
+                for agent in [a for _, a in e.training_seeds] or ([e.agent] if e.agent else [])
+            ]
+            out[place[name]] = _combine(name, models, " ".join(e.source for e in group))
+    return out
 
 
 def _default_entries() -> list[str]:
@@ -556,9 +736,10 @@ def run_suite(
 ) -> list[dict[str, Any]]:
     """Every run of every entry on ``suite``: one row per (entry, scenario, seed) with the
     suite, the label, the scenario, the seed, ``prone`` and the metrics of
-    :data:`drill_env.metrics.METRIC_KEYS`. Entries that do not run on the suite's env are left
-    out."""
-    jobs = [(e, job) for e in entries if (job := e.run(suite)) is not None]
+    :data:`drill_env.metrics.METRIC_KEYS`; a method with several training seeds has one row
+    per (training seed, scenario, seed), with its ``training_seed``. Entries that do not run
+    on the suite's env are left out."""
+    jobs = [(e, job) for e in entries for job in e.runs(suite)]
     total = len(jobs) * suite.runs
     bar = None
     if progress:
@@ -567,13 +748,14 @@ def run_suite(
         bar = tqdm(total=total, desc=suite.label, unit="run", file=sys.stderr)
     on_field = is_field(suite.env_id)
     rows: list[dict[str, Any]] = []
-    for entry, (label, policy, kwargs) in jobs:
+    for entry, (trained, label, policy, kwargs) in jobs:
         mine = entry.agent is None and is_user_controller(entry.name)
         for scenario in suite.scenarios:
             for seed in scenario.seeds:
                 head = {
                     "suite": suite.label,
                     "entry": label,
+                    **({} if trained is None else {"training_seed": trained}),
                     "scenario": scenario.id,
                     "seed": seed,
                     "prone": scenario.prone,
@@ -628,7 +810,9 @@ def iqm_interval(
     """The IQM over every value of ``strata`` and its stratified-bootstrap interval.
 
     Args:
-        strata: One 1-D array per scenario: its runs' values (one per seed, at least two).
+        strata: One array per scenario: 1-D, its runs' values (one per reset seed, at least
+            two); or 2-D, shape ``(training seeds, reset seeds)``, the runs of a method
+            trained with several seeds (at least two reset seeds).
         resamples: Bootstrap resamples.
         seed: Seed of the resampling generator.
         confidence: Confidence level.
@@ -636,16 +820,27 @@ def iqm_interval(
     Returns:
         ``(iqm, low, high)``: each resample draws every scenario's runs with replacement from
         that scenario's own runs (the scenarios are fixed, as in rliable), and the interval is
-        the percentile interval of the resampled IQMs (``scipy.stats.bootstrap``).
+        the percentile interval of the resampled IQMs (``scipy.stats.bootstrap``). With
+        several training seeds in a scenario the draw has two levels
+        (:func:`_two_level_bootstrap`): its training seeds with replacement, then each drawn
+        seed's reset seeds with replacement; with one training seed everywhere it is the
+        draw of the reset seeds above.
 
     Raises:
-        ValueError: for no strata or a stratum with fewer than two values.
+        ValueError: for no strata, a stratum with fewer than two reset seeds, or one of more
+            than two dimensions.
     """
     from scipy.stats import bootstrap
 
-    data = tuple(np.asarray(s, dtype=float).ravel() for s in strata)
-    if not data or any(d.size < MIN_SEEDS for d in data):
+    arrays = [np.asarray(s, dtype=float) for s in strata]
+    if any(a.ndim > 2 for a in arrays):
+        raise ValueError("a stratum is 1-D (reset seeds) or 2-D (training x reset seeds)")
+    grids = [a.reshape(1, -1) if a.ndim < 2 else a for a in arrays]
+    if not grids or any(g.shape[0] < 1 or g.shape[1] < MIN_SEEDS for g in grids):
         raise ValueError(f"every stratum needs at least {MIN_SEEDS} values")
+    if any(g.shape[0] > 1 for g in grids):
+        return _two_level_bootstrap(grids, resamples, seed, confidence)
+    data = tuple(a.ravel() for a in arrays)
     point = iqm(np.concatenate(data))
     if all(np.ptp(d) == 0.0 for d in data):  # nothing to resample: the interval is the point
         return point, point, point
@@ -663,12 +858,68 @@ def iqm_interval(
     return point, float(ci.low), float(ci.high)
 
 
+def _two_level_bootstrap(
+    grids: Sequence[npt.NDArray[np.float64]],
+    resamples: int,
+    seed: int | Sequence[int],
+    confidence: float,
+) -> tuple[float, float, float]:
+    """The IQM of every value of ``grids`` (one ``(training seeds, reset seeds)`` array per
+    scenario) and its percentile interval under a stratified two-level bootstrap: per
+    resample and scenario, its training seeds drawn with replacement (independently in every
+    scenario, as rliable resamples the runs of each task), then each drawn seed's reset seeds
+    with replacement; the IQM of the pooled draw."""
+    from scipy.stats import trim_mean
+
+    point = iqm(np.concatenate([g.ravel() for g in grids]))
+    if all(np.ptp(g) == 0.0 for g in grids):
+        return point, point, point
+    rng = np.random.default_rng(seed)
+    n = int(resamples)
+    drawn = []
+    for grid in grids:
+        trained, reset = grid.shape
+        rows = rng.integers(trained, size=(n, trained))
+        columns = rng.integers(reset, size=(n, trained, reset))
+        drawn.append(grid[rows[:, :, None], columns].reshape(n, trained * reset))
+    stats = trim_mean(np.concatenate(drawn, axis=1), TRIM, axis=1)
+    tail = 50.0 * (1.0 - confidence)
+    low, high = np.percentile(stats, [tail, 100.0 - tail])
+    return point, float(low), float(high)
+
+
 def normalised_score(value: float, reference: float, best: float) -> float:
     """``(reference - value) / (reference - best)`` for a lower-is-better metric: 0 at the
     reference, 1 at the best; NaN when the best is not below the reference."""
     if not (math.isfinite(reference) and math.isfinite(best) and best < reference):
         return math.nan
     return (reference - value) / (reference - best)
+
+
+def _stratum(runs: Sequence[Mapping[str, Any]], metric: str, where: str) -> Any:
+    """The values of ``metric`` in one scenario's ``runs`` of one entry: 1-D (one per reset
+    seed), or of a method with several training seeds 2-D, ``(training seeds, reset seeds)``
+    (NaN for a run without a value)."""
+
+    def value(r: Mapping[str, Any]) -> float:
+        return math.nan if r[metric] is None else float(r[metric])
+
+    if not any("training_seed" in r for r in runs):
+        return np.array([value(r) for r in runs])
+    by_seed: dict[Any, list[float]] = {}
+    for r in runs:
+        by_seed.setdefault(r.get("training_seed"), []).append(value(r))
+    if len({len(v) for v in by_seed.values()}) > 1:
+        raise ValueError(f"{where}: the training seeds have different numbers of runs")
+    return np.array([by_seed[k] for k in sorted(by_seed, key=_seed_order)])
+
+
+def _seed_order(seed: Any) -> tuple[int, str]:
+    """Sort key of training seeds: by number (read from CSV they are text)."""
+    try:
+        return int(seed), ""
+    except (TypeError, ValueError):
+        return 0, str(seed)
 
 
 def score_suite(
@@ -679,7 +930,9 @@ def score_suite(
 ) -> list[dict[str, Any]]:
     """The scorecard rows of ``suite``: one per (entry, metric of :data:`METRICS`) with the
     number of runs, the IQM and its interval, the normalised score and its interval, the
-    reference's and the best entry's labels.
+    reference's and the best entry's labels; of a method whose runs carry a
+    ``training_seed``, also ``training_seeds`` (their number), its interval resampling them
+    (:func:`iqm_interval`).
 
     Raises:
         ValueError: when the suite's reference controller has no runs in ``rows``.
@@ -710,8 +963,7 @@ def score_suite(
                     continue
                 runs = [r for r in mine if r["entry"] == label and r["scenario"] == scenario.id]
                 diverged += sum(bool(r.get("diverged")) for r in runs)
-                values = [math.nan if r[metric] is None else float(r[metric]) for r in runs]
-                strata.append(np.array(values))
+                strata.append(_stratum(runs, metric, f"{suite.label} {label} {scenario.id}"))
             counts[(label, metric)] = {
                 "runs": sum(s.size for s in strata),
                 "missing": sum(int((~np.isfinite(s)).sum()) for s in strata),
@@ -722,6 +974,11 @@ def score_suite(
                 stats[(label, metric)] = (math.nan, math.nan, math.nan)
                 continue
             stats[(label, metric)] = iqm_interval(strata, resamples, (seed, m_index, e_index))
+    trained = {
+        label: len({r["training_seed"] for r in mine if r["entry"] == label})
+        for label in labels
+        if any("training_seed" in r for r in mine if r["entry"] == label)
+    }
     out: list[dict[str, Any]] = []
     for metric in METRICS:
         finite = {
@@ -742,6 +999,7 @@ def score_suite(
                     "suite_sha256": suite.sha256,
                     "env_id": suite.env_id,
                     "entry": label,
+                    **({"training_seeds": trained[label]} if label in trained else {}),
                     "metric": metric,
                     "prone_only": metric in PRONE_ONLY,
                     **counts[(label, metric)],
@@ -800,7 +1058,9 @@ def suite_table(suite: Suite, scores: Sequence[Mapping[str, Any]]) -> str:
             row = by[(label, m)]
             cells.append(_interval(row, ("iqm", "ci_low", "ci_high"), m))
             cells.append(_interval(row, ("score", "score_low", "score_high"), None))
-        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+        seeds = by[(label, first)].get("training_seeds")
+        name = f"{label}, {seeds} training seeds" if seeds else label
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
     notes = [
         f"{label}: {by[(label, first)]['missing']} runs without a value, "
         f"{by[(label, first)]['diverged']} diverged"
@@ -812,6 +1072,38 @@ def suite_table(suite: Suite, scores: Sequence[Mapping[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def training_seed_table(suite: Suite, rows: Sequence[Mapping[str, Any]]) -> str:
+    """Of every method of ``rows`` with several training seeds on ``suite``: one line per
+    training seed with its own IQM of each metric (over the scenarios and reset seeds) and
+    its rank by the first metric's (1: lowest); empty when there is none."""
+    mine = [r for r in rows if r["suite"] == suite.label and "training_seed" in r]
+    if not mine:
+        return ""
+    prone_ids = {s.id for s in suite.scenarios if s.prone}
+    first = METRICS[0]
+    head = "| entry | training seed | rank | " + " | ".join(metric_title(m) for m in METRICS)
+    lines = [head + " |", "|---|---:|---:|" + "---:|" * len(METRICS)]
+    for label in dict.fromkeys(r["entry"] for r in mine):
+        values: dict[Any, dict[str, float]] = {}
+        for k in sorted({r["training_seed"] for r in mine if r["entry"] == label}, key=_seed_order):
+            runs = [r for r in mine if r["entry"] == label and r["training_seed"] == k]
+            values[k] = {}
+            for m in METRICS:
+                got = [
+                    math.nan if r[m] is None else float(r[m])
+                    for r in runs
+                    if m not in PRONE_ONLY or r["scenario"] in prone_ids
+                ]
+                values[k][m] = iqm(got) if got and all(map(math.isfinite, got)) else math.nan
+        ranked = sorted(
+            values, key=lambda k: (not math.isfinite(values[k][first]), values[k][first])
+        )
+        for k in values:
+            cells = " | ".join(_number(values[k][m], m) for m in METRICS)
+            lines.append(f"| {label} | {k} | {ranked.index(k) + 1} | {cells} |")
+    return "\n".join(lines)
+
+
 def scorecard_markdown(
     suites: Sequence[Suite],
     scores: Sequence[Mapping[str, Any]],
@@ -820,8 +1112,11 @@ def scorecard_markdown(
     seed: int,
     command: str = "",
     wall_s: float | None = None,
+    rows: Sequence[Mapping[str, Any]] = (),
 ) -> str:
-    """The scorecard as markdown: how it was made, then one table per suite."""
+    """The scorecard as markdown: how it was made, then one table per suite (and, with the
+    runs ``rows``, one per suite of the training seeds of the methods that have several:
+    :func:`training_seed_table`)."""
     lines = ["# Benchmark scorecard", ""]
     if command:
         lines += [f"Command: `{command}`" + (f" ({wall_s:.0f} s wall)" if wall_s else ""), ""]
@@ -835,13 +1130,28 @@ def scorecard_markdown(
         "reference, 1 the best entry of the table; n/a when no entry beats the reference.",
         "",
     ]
-    agents = [e for e in entries if e.agent is not None]
+    agents = [e for e in entries if e.agent is not None and not e.training_seeds]
     if agents:
         lines += [
             "Learned agents ("
             + ", ".join(e.name for e in agents)
             + ") are one trained model each (one training seed): their intervals cover the "
             "noise seeds of the runs, not the spread between training seeds.",
+            "",
+        ]
+    methods = [e for e in entries if e.training_seeds]
+    if methods:
+        lines += [
+            "Scored over training seeds: "
+            + ", ".join(
+                f"{e.name} ({e.seed_count} training seeds: "
+                f"{', '.join(str(k) for k, _ in e.training_seeds)})"
+                for e in methods
+            )
+            + ". Their IQM pools every training seed, scenario and reset seed; their interval "
+            "resamples, within each scenario, the training seeds and then each drawn seed's "
+            "reset seeds, so it covers the spread between training seeds. The table under a "
+            "suite gives each training seed's own IQM.",
             "",
         ]
     for suite in suites:
@@ -856,6 +1166,9 @@ def scorecard_markdown(
             suite_table(suite, scores),
             "",
         ]
+        per_seed = training_seed_table(suite, rows)
+        if per_seed:
+            lines += [per_seed, ""]
     return "\n".join(lines)
 
 
@@ -967,7 +1280,11 @@ and performance profiles. Shipped suites (experiments/suites/NAME-vVERSION.json)
 corners-v1 (DrillString-v0), field-v1, deep-v1 (DrillStringField-v0). Writes scorecard.md,
 scorecard.csv, runs.csv and profiles.png to --out. More: docs/reports/benchmark.md.
 
-example: drill-gym benchmark proposed agents/models/residual_ppo --suites heldout corners
+examples:
+  drill-gym benchmark                                  # every shipped controller and agent
+  drill-gym benchmark proposed agents/models/residual_ppo --suites heldout corners
+  drill-gym benchmark examples/custom_controller.py:SpeedPI --suites heldout-v1
+  drill-gym benchmark field_x10=results/sweep-train --suites field deep   # training seeds
 """
 
 
@@ -977,11 +1294,12 @@ def _parser() -> ArgumentParser:
         "policies",
         nargs="*",
         metavar="POLICY",
-        help="what to score: registered controller names, model folders (config.json, "
-        "policy.safetensors, obs_norm.safetensors) "
-        + CONTROLLERS_HELP
-        + ". Default: every registered controller and every model in agents/models/; each "
-        "suite's reference controller is always added",
+        help="what to score: controllers ("
+        + CONTROLLERS_OPTION_HELP
+        + "), model folders, folders of model folders (one per training seed, as drill-gym "
+        "sweep-train writes them: one method over its seeds), NAME=FOLDER to name one "
+        "(repeated: one method). Default: every registered controller and every model in "
+        "agents/models/; each suite's reference controller is always added",
     )
     spec_options(parser, BenchmarkOptions)
     return parser
@@ -1019,6 +1337,10 @@ def run_benchmark(spec: BenchmarkSpec, command: str = "drill-gym benchmark") -> 
             entries.append(make_entry(text))
         except ValueError as err:
             raise ValueError(f"POLICY: {err}") from None
+    try:
+        entries = merge_entries(entries)
+    except ValueError as err:
+        raise ValueError(f"POLICY: {err}") from None
     names = {e.name for e in entries}
     for suite in suites:
         if suite.reference not in names:
@@ -1037,12 +1359,14 @@ def run_benchmark(spec: BenchmarkSpec, command: str = "drill-gym benchmark") -> 
     wall = time.perf_counter() - start
     out = spec.out
     out.mkdir(parents=True, exist_ok=True)
-    text = scorecard_markdown(suites, scores, entries, spec.resamples, spec.seed, command, wall)
+    text = scorecard_markdown(
+        suites, scores, entries, spec.resamples, spec.seed, command, wall, rows
+    )
     (out / "scorecard.md").write_text(text + "\n", encoding="utf-8")
     written = [
         out / "scorecard.md",
-        write_csv(json_clean(scores), out / "scorecard.csv", SCORE_KEYS),
-        write_csv(rows, out / "runs.csv", RUN_KEYS),
+        write_csv(json_clean(scores), out / "scorecard.csv", csv_columns(SCORE_KEYS, scores)),
+        write_csv(rows, out / "runs.csv", csv_columns(RUN_KEYS, rows)),
     ]
     if not spec.no_plots:
         written.append(save_figure(profiles_figure(suites, rows), out / "profiles.png"))

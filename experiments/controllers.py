@@ -38,7 +38,6 @@ from drill_env.control import controller_names, register_controller
 from experiments.sweep import Backend
 
 __all__ = [
-    "CONTROLLERS_HELP",
     "CONTROLLERS_OPTION_HELP",
     "controller_type",
     "is_user_controller",
@@ -48,20 +47,12 @@ __all__ = [
     "user_controllers",
 ]
 
-CONTROLLERS_HELP: Final = (
-    "or your own controller class as MODULE:CLASS (an importable module) or PATH.py:CLASS (a "
-    "Python file), with reset() and torque(measurement, reference_speed_rad_s, dt_s); naming "
-    "it runs its code, so name only code you trust. A Python torque() runs at every 1 ms plant "
-    "step, 20-40 x slower than a compiled law: add compiled_law() returning a "
-    "drill_env.control.CompiledLaw to run it inside the compiled plant loop (see "
-    "examples/compiled_controller.py)"
-)
-"""The help of the ``--controllers`` options on user classes (after the registered names)."""
 CONTROLLERS_OPTION_HELP: Final = (
     "registered names, or your class as MODULE:CLASS or PATH.py:CLASS (naming it runs its "
     "code: name only code you trust)"
 )
-"""The short help of a study's ``--controllers`` option."""
+"""The help of the ``--controllers`` options (and of benchmark's POLICY) on user classes;
+how to compile one is in docs/controllers.md."""
 
 _LOADED: dict[str, str] = {}
 """Spec as typed -> the name it was registered under (a spec is loaded once per process)."""

@@ -13,6 +13,7 @@ import os
 import re
 import subprocess
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -27,9 +28,12 @@ from experiments.benchmark import (
     iqm,
     iqm_interval,
     load_suite,
+    make_entry,
+    merge_entries,
     normalised_score,
     score_suite,
     shipped_suites,
+    training_seed_table,
 )
 from experiments.cli import main
 from experiments.heldout import CORNERS, FIELD_HELD_OUT, HELD_OUT
@@ -385,3 +389,164 @@ def test_the_command_line_is_the_spec() -> None:
     assert (
         "proposed" in every.entry_names() and "--policies" not in benchmark._parser().format_help()
     )
+
+
+# ----------------------------------------------------------------------- training seeds
+def _seed_models(folder: Path, seeds: Sequence[int], name: str = "residual_ppo") -> list[Path]:
+    """Model folders ``folder/run_S/model`` (as sweep-train writes them): the shipped
+    ``residual_ppo`` with its action weights scaled per seed and ``train_config.seed = S``."""
+    from agents.policy import ResidualPolicy, load_policy
+
+    shipped = load_policy(ROOT / "agents" / "models" / "residual_ppo")
+    out = []
+    for seed in seeds:
+        factor = 1.0 + 0.5 * (seed - seeds[0])  # different models: different runs
+        weights = {k: v * factor if "action" in k else v for k, v in shipped.weights.items()}
+        config = {**shipped.metadata["train_config"], "seed": seed}
+        model = ResidualPolicy(
+            shipped.spec, weights, shipped.obs_norm, shipped.env_kwargs, name,
+            {**shipped.metadata, "train_config": config}, env_id=shipped.env_id,
+        )  # fmt: skip
+        out.append(model.save(folder / f"run_{seed}" / "model"))
+    return out
+
+
+def test_a_stratum_of_one_training_seed_is_the_one_level_bootstrap() -> None:
+    rng = np.random.default_rng(3)
+    strata = [rng.normal(loc, 1.0, size=5) for loc in (10, 20, 15)]
+    flat = iqm_interval(strata, resamples=500, seed=4)
+    assert iqm_interval([s.reshape(1, -1) for s in strata], resamples=500, seed=4) == flat
+
+
+def _hand_two_level(grids: list[np.ndarray], resamples: int, seed: int) -> tuple[float, float]:
+    """The two-level stratified bootstrap written out: per scenario, its training seeds with
+    replacement, then each drawn seed's reset seeds with replacement."""
+    rng = np.random.default_rng(seed)
+    stats = []
+    for _ in range(resamples):
+        drawn = []
+        for grid in grids:
+            for row in rng.integers(grid.shape[0], size=(grid.shape[0],)):
+                drawn.append(rng.choice(grid[row], size=grid.shape[1], replace=True))
+        pooled = np.sort(np.concatenate(drawn))
+        cut = int(0.25 * pooled.size)
+        stats.append(pooled[cut : pooled.size - cut].mean())
+    return float(np.percentile(stats, 2.5)), float(np.percentile(stats, 97.5))
+
+
+def test_the_interval_over_training_seeds_matches_a_hand_two_level_bootstrap() -> None:
+    rng = np.random.default_rng(11)
+    # 4 scenarios x 5 training seeds x 3 reset seeds: a seed offset shared by its runs
+    grids = [
+        loc + rng.normal(0.0, 3.0, size=(5, 1)) + rng.normal(0.0, 0.3, size=(5, 3))
+        for loc in (10.0, 20.0, 15.0, 30.0)
+    ]
+    point, low, high = iqm_interval(grids, resamples=4000, seed=1)
+    assert point == pytest.approx(iqm(np.concatenate([g.ravel() for g in grids])))
+    hand_low, hand_high = _hand_two_level(grids, 4000, 2)
+    width = hand_high - hand_low
+    assert low == pytest.approx(hand_low, abs=0.08 * width)
+    assert high == pytest.approx(hand_high, abs=0.08 * width)
+
+
+def test_the_interval_covers_the_spread_between_training_seeds() -> None:
+    # Each training seed's runs agree closely (little reset-seed noise) and the seeds differ:
+    # resampling the training seeds gives a wide interval; resampling the runs as if they
+    # were independent (one training seed of 15 runs) a much narrower one.
+    rng = np.random.default_rng(5)
+    grids = [
+        loc + rng.normal(0.0, 2.0, size=(5, 1)) + rng.normal(0.0, 0.05, size=(5, 3))
+        for loc in (10.0, 20.0, 15.0)
+    ]
+    _, low, high = iqm_interval(grids, resamples=2000)
+    _, flat_low, flat_high = iqm_interval([g.ravel() for g in grids], resamples=2000)
+    assert high - low > 1.3 * (flat_high - flat_low)
+    # identical training seeds: only the reset seeds move the IQM
+    same = [np.tile(g[:1], (5, 1)) for g in grids]
+    _, low, high = iqm_interval(same, resamples=2000)
+    assert high - low < 0.5 * (flat_high - flat_low)
+    # the scenarios stay strata: one always 0, one always 1, whatever the training seed
+    assert iqm_interval([np.zeros((3, 2)), np.ones((3, 2))], resamples=200) == (0.5, 0.5, 0.5)
+
+
+def test_score_suite_over_training_seeds(tmp_path: Path) -> None:
+    suite = load_suite(_tiny(tmp_path))
+    rows = []
+    for scenario in suite.scenarios:
+        for seed in scenario.seeds:
+            head = {"suite": suite.label, "scenario": scenario.id, "seed": seed,
+                    "prone": scenario.prone}  # fmt: skip
+            rows.append({**head, "entry": "proposed", **dict.fromkeys(METRICS, 5.0)})
+            for trained, value in ((1, 1.0), (2, 3.0), (3, 2.0)):
+                rows.append(
+                    {**head, "entry": "method", "training_seed": trained,
+                     **dict.fromkeys(METRICS, value + 0.01 * (seed % 7))}
+                )  # fmt: skip
+    scores = {(s["entry"], s["metric"]): s for s in score_suite(suite, rows, resamples=300)}
+    method = scores[("method", "iae")]
+    assert method["training_seeds"] == 3 and "training_seeds" not in scores[("proposed", "iae")]
+    assert method["runs"] == 3 * suite.runs
+    assert method["ci_low"] < 1.9 and method["ci_high"] > 2.1  # the seeds' spread, 1 to 3
+    table = training_seed_table(suite, rows)
+    lines = table.splitlines()
+    assert len(lines) == 2 + 3 and lines[2].startswith("| method | 1 | 1 |")
+    assert lines[3].startswith("| method | 2 | 3 |") and lines[4].startswith("| method | 3 | 2 |")
+
+
+def test_a_folder_of_training_seeds_is_one_method(tmp_path: Path) -> None:
+    _seed_models(tmp_path / "sweep" / "runs", [4, 2, 3])
+    (tmp_path / "sweep" / "runs" / "run_5").mkdir()  # a run that has not finished: no model/
+    (tmp_path / "sweep" / "runs" / "run_5" / "config.json").write_text("{}")
+    entry = make_entry(str(tmp_path / "sweep"))  # the sweep-train folder: its runs/
+    assert entry.name == "residual_ppo" and entry.seed_count == 3
+    assert [k for k, _ in entry.training_seeds] == [2, 3, 4]
+    named = make_entry(f"seeds_x3={tmp_path / 'sweep' / 'runs'}")
+    assert named.name == "seeds_x3" and named.seed_count == 3
+    one = make_entry(f"only={tmp_path / 'sweep' / 'runs' / 'run_2' / 'model'}")
+    assert one.name == "only" and one.seed_count == 1 and not one.training_seeds
+    parts = merge_entries(
+        [make_entry(f"m={tmp_path / 'sweep' / 'runs' / f'run_{k}'}") for k in (3, 2)]
+    )
+    assert len(parts) == 1 and [k for k, _ in parts[0].training_seeds] == [2, 3]
+
+
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (lambda p: [f"m={p / 'a' / 'run_1'}", f"m={p / 'b' / 'run_1'}"], "training seed 1 appears twice"),
+        (lambda p: [f"m={p / 'a'}", f"m={ROOT / 'agents' / 'models' / 'field_agent'}"], "share their env"),
+        (lambda p: [str(p / "empty")], "no model at|expected a model folder"),
+    ],
+    ids=["same-seed", "other-env", "no-models"],
+)  # fmt: skip
+def test_bad_training_seeds_are_an_error_naming_them(
+    tmp_path: Path, make: Any, message: str
+) -> None:
+    _seed_models(tmp_path / "a", [1, 2])
+    _seed_models(tmp_path / "b", [1])
+    (tmp_path / "empty").mkdir()
+    with pytest.raises((ValueError, FileNotFoundError), match=message):
+        merge_entries([make_entry(text) for text in make(tmp_path)])
+
+
+def test_the_command_scores_a_method_over_its_training_seeds(tmp_path: Path) -> None:
+    _seed_models(tmp_path / "sweep" / "runs", [1, 2])
+    suite = _tiny(tmp_path)
+    out = tmp_path / "out"
+    code = main(["benchmark", f"seeds={tmp_path / 'sweep'}", "--suites", str(suite),
+                 "--out", str(out), "--resamples", "200", "--no-progress", "--no-plots"])  # fmt: skip
+    assert code == 0
+    with (out / "runs.csv").open() as f:
+        runs = list(csv.DictReader(f))
+    assert list(runs[0])[:3] == ["suite", "entry", "training_seed"]
+    mine = [r for r in runs if r["entry"] == "seeds"]
+    assert len(mine) == 2 * 2 * 2 and {r["training_seed"] for r in mine} == {"1", "2"}
+    assert {r["training_seed"] for r in runs if r["entry"] == "proposed"} == {""}
+    assert len({r["iae"] for r in mine}) > 2  # the two models differ
+    with (out / "scorecard.csv").open() as f:
+        scores = {(r["entry"], r["metric"]): r for r in csv.DictReader(f)}
+    assert scores[("seeds", "iae")]["training_seeds"] == "2"
+    text = (out / "scorecard.md").read_text()
+    assert "seeds (2 training seeds: 1, 2)" in text and "| seeds, 2 training seeds |" in text
+    assert "| seeds | 1 |" in text and "| seeds | 2 |" in text
+    assert "one training seed" not in text
