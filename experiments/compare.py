@@ -107,7 +107,6 @@ from experiments.sweep import (
     check_observations,
     check_task_size,
     chunks,
-    report_outcome,
     run_sweep,
 )
 from experiments.tables import Column, write_csv, write_json
@@ -975,17 +974,7 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
     except ValueError as err:
         parser.error(str(err))
     start = time.perf_counter()
-    backend = runner.backend()
-    outcome = run_sweep(
-        study,
-        backend,
-        runner.results_path(spec.out / "compare.sqlite"),
-        runner.resume,
-        not spec.no_progress,
-        overwrite=runner.overwrite,
-    )
-    if runner.requested:
-        report_outcome(study.name, outcome, backend)
+    outcome = runner.run(study, spec.out / "compare.sqlite", progress=not spec.no_progress)
     rows, traces = study.results(outcome)
     figures = not spec.no_plots and outcome.loaded == 0
     if not spec.no_plots and not figures:

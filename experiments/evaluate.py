@@ -95,8 +95,6 @@ from experiments.sweep import (
     check_observations,
     check_task_size,
     chunks,
-    report_outcome,
-    run_sweep,
 )
 from experiments.tables import write_csv, write_json
 
@@ -779,17 +777,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     except ValueError as err:
         parser.error(str(err))
-    backend = runner.backend()
-    outcome = run_sweep(
-        study,
-        backend,
-        runner.results_path(out / "heldout.sqlite"),
-        runner.resume,
-        not spec.no_progress,
-        overwrite=runner.overwrite,
-    )
-    if runner.requested:
-        report_outcome(study.name, outcome, backend)
+    outcome = runner.run(study, out / "heldout.sqlite", progress=not spec.no_progress)
     rows, traces = study.results(outcome)
     figures = not spec.no_plots and outcome.loaded == 0
     if not spec.no_plots and not figures:

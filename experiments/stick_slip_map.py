@@ -94,8 +94,6 @@ from experiments.sweep import (
     check_observations,
     check_task_size,
     chunks,
-    report_outcome,
-    run_sweep,
 )
 from experiments.tables import write_csv
 
@@ -852,17 +850,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         study = spec.study(tuple(policies), task_cells)
     except ValueError as err:
         parser.error(str(err))
-    backend = runner.backend()
-    outcome = run_sweep(
-        study,
-        backend,
-        runner.results_path(spec.out / "stick_slip_map.sqlite"),
-        runner.resume,
-        not spec.no_progress,
-        overwrite=runner.overwrite,
-    )
-    if runner.requested:
-        report_outcome(study.name, outcome, backend)
+    outcome = runner.run(study, spec.out / "stick_slip_map.sqlite", progress=not spec.no_progress)
     results: dict[float | None, list[StickSlipMap]] = {}
     for result in study.maps(outcome):
         stem = result.file_stem()

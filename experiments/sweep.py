@@ -522,6 +522,23 @@ class RunnerSpec:
             max_retries=self.max_retries,
         )
 
+    def run(self, study: Study, default_results: Path, progress: bool = True) -> SweepOutcome:
+        """Run ``study`` as these options ask (:func:`run_sweep` on :meth:`backend`, into
+        :meth:`results_path` of ``default_results``, resumed or overwritten); says where it ran
+        and what it read when anything beyond a plain serial run was asked for."""
+        backend = self.backend()
+        outcome = run_sweep(
+            study,
+            backend,
+            self.results_path(default_results),
+            self.resume,
+            progress,
+            overwrite=self.overwrite,
+        )
+        if self.requested:
+            report_outcome(study.name, outcome, backend)
+        return outcome
+
     def results_path(self, default: Path) -> Path | None:
         """The results database: ``results``, else ``default`` when the sweep is on Ray,
         resumes or overwrites, else ``None``."""
