@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 from drill_env.coupled import (
-    RGD_PRESETS,
     SURFACE_RULES,
     critical_speed_rad_s,
     run_features,
@@ -124,7 +123,6 @@ def test_database_and_resume_write_the_serial_file(tmp_path: Path) -> None:
 def test_settings_hash_changes_with_every_setting_of_the_numbers() -> None:
     base = small_study()
     changes: dict[str, Any] = {
-        "parameters": next(p for p in sorted(RGD_PRESETS) if p != "rgd_a"),
         "points": ("P4",),
         "duration_s": 5.0,
         "window_s": (1.0, 4.0),
