@@ -409,7 +409,7 @@ def small_waves(**changes: Any) -> waves.WavesStudy:
         "window_s": 1.0,
         **changes,
     }
-    return waves.WavesStudy(waves.WavesSpec(**settings))  # type: ignore[arg-type]
+    return waves.WavesStudy(waves.WavesSpec(**settings))
 
 
 def test_waves_items_are_the_recorded_runs() -> None:
