@@ -488,7 +488,8 @@ def run_coupled(spec: CoupledSpec, runner: RunnerSpec | None = None) -> int:
     print(f"1. Standard run ({spec.parameters}, surface '{spec.surface}', step {spec.step_s:g} s, "
           f"{spec.duration_s:g} s, features over [{start_s:g}, {end_s:g}] s):\n")  # fmt: skip
     print(markdown_table(rows, FEATURE_COLUMNS))
-    print(f"\n(standard runs: {runs_s:.1f} s wall)")
+    what = "standard runs and simulated map" if study.simulates_map else "standard runs"
+    print(f"\n({what}: {runs_s:.1f} s wall)")
 
     forces_n = [f * 1e3 for f in spec.forces_kn]
     hopf = 2 * np.sqrt(2 * parameters.k_a / parameters.axial_mass_kg) / parameters.blades
