@@ -10,6 +10,11 @@ stability map.
 3. **The stability map** over (applied force, top-drive speed): the rightmost root's real part
    beside the simulated stick-slip and bounce fractions on the same grid.
 
+The standard runs and the simulated map's cells are the items of a study on the sweep runner
+(:class:`CoupledStudy`, :mod:`experiments.sweep`): serial by default, on Ray with
+``--workers``, kept in a results database with ``--results`` and resumed with ``--resume``; the
+roots (critical speeds, linear map) are computed directly, they are cheap.
+
 Outputs (``--out``, default ``results/coupled``): ``coupled.json`` (the features, critical
 speeds and maps) and ``figures/coupled_stability_map.png``.
 """
@@ -17,9 +22,10 @@ speeds and maps) and ``figures/coupled_stability_map.png``.
 from __future__ import annotations
 
 import dataclasses
+import math
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
@@ -42,10 +48,28 @@ from drill_env.coupled import (
 )
 from experiments.arguments import ArgumentParser
 from experiments.plots import save_figure
+from experiments.results_db import Fields, Name, Number, Schema
 from experiments.spec_cli import option, spec_from_args, spec_parser
+from experiments.sweep import (
+    RunnerSpec,
+    Task,
+    TaskResult,
+    chunks,
+    report_outcome,
+    run_sweep,
+)
 from experiments.tables import Column, markdown_table, write_json
 
-__all__ = ["FEATURE_COLUMNS", "CoupledSpec", "main", "run_coupled", "stability_figure"]
+__all__ = [
+    "FEATURE_COLUMNS",
+    "CoupledSpec",
+    "CoupledStudy",
+    "cell_task",
+    "main",
+    "point_task",
+    "run_coupled",
+    "stability_figure",
+]
 
 DEFAULT_FORCES_KN: Final = (40.0, 50.0, 60.0, 75.0, 90.0, 105.0, 120.0)
 """Applied forces of the map, kN."""
@@ -53,6 +77,10 @@ DEFAULT_SPEEDS_RAD_S: Final = (2.0, 3.0, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 
 """Top-drive speeds of the map, rad/s."""
 SPEED_RANGE_RAD_S: Final = (1.0, 60.0)
 """Speeds scanned for the critical speed, rad/s."""
+MAP_NAMES: Final = ("frac_stick", "frac_bounce", "om_amp_rel")
+"""Features of each simulated map cell (the keys of :func:`drill_env.coupled.simulated_map`)."""
+TASK_ITEMS: Final = 1
+"""Default items per task: a standard run or a map cell is a task of its own."""
 
 FEATURE_COLUMNS: Final = (
     Column("point", "point", align="left"),
@@ -170,6 +198,170 @@ def stability_figure(
     return fig
 
 
+def point_task(
+    parameters: str,
+    points: Sequence[str],
+    duration_s: float,
+    window_s: Sequence[float],
+    step_s: float,
+    surface: str,
+) -> TaskResult:
+    """A task of the sweep runner: the standard run at each of ``points``, one feature row
+    (:data:`FEATURE_COLUMNS`) per item ``point/<name>``."""
+    start_s, end_s = window_s
+    records = {}
+    for point in points:
+        force, speed = STANDARD_POINTS[point]
+        cpu = time.process_time()
+        trace = simulate(
+            RGD_PRESETS[parameters], speed, force, duration_s, step_s=step_s, surface=surface
+        )
+        cpu = time.process_time() - cpu
+        features = run_features(trace, (start_s, end_s))
+        i1 = round(start_s / trace.step_s)
+        om_min = float(trace.bit_speed_rad_s[i1:].min())
+        records[f"point/{point}"] = _feature_row(point, features, om_min, cpu)
+        del trace
+    return TaskResult(records)
+
+
+def cell_task(
+    parameters: str,
+    cells: Sequence[Sequence[Any]],
+    duration_s: float,
+    step_s: float,
+    surface: str,
+) -> TaskResult:
+    """A task of the sweep runner: each of ``cells`` (item key, applied force in N, top-drive
+    speed in rad/s) simulated as one cell of :func:`drill_env.coupled.simulated_map`, its
+    features over the second half of the run."""
+    records = {}
+    for item, force_n, speed_rad_s in cells:
+        cell = simulated_map(
+            RGD_PRESETS[parameters],
+            [force_n],
+            [speed_rad_s],
+            duration_s=duration_s,
+            window_s=(duration_s / 2, duration_s),
+            step_s=step_s,
+            surface=surface,
+        )
+        records[str(item)] = {name: float(cell[name][0, 0]) for name in MAP_NAMES}
+    return TaskResult(records)
+
+
+@dataclass(frozen=True)
+class CoupledStudy:
+    """The study on the sweep runner: one item per standard run (``point/P3``) and, with the
+    simulated map, one per map cell (``cell/<force index>/<speed index>``).
+
+    Attributes:
+        settings: The command's settings.
+        task_items: Items per task.
+    """
+
+    settings: CoupledSpec
+    task_items: int = TASK_ITEMS
+
+    @property
+    def name(self) -> str:
+        """The sweep's name."""
+        return "coupled"
+
+    @property
+    def simulates_map(self) -> bool:
+        """Whether the simulated map is part of the study."""
+        return not (self.settings.no_map or self.settings.no_simulated_map)
+
+    def spec(self) -> dict[str, Any]:
+        """Everything the results depend on."""
+        s = self.settings
+        return {
+            "parameters": s.parameters,
+            "parameter_values": dataclasses.asdict(RGD_PRESETS[s.parameters]),
+            "points": list(s.points),
+            "duration_s": s.duration_s,
+            "window_s": list(s.window_s),
+            "step_s": s.step_s,
+            "surface": s.surface,
+            "map": self.simulates_map,
+            "forces_kn": list(s.forces_kn),
+            "speeds_rad_s": list(s.speeds_rad_s),
+            "map_duration_s": s.map_duration_s,
+        }
+
+    def cells(self) -> list[tuple[str, float, float]]:
+        """The simulated map's cells: item key, applied force (N), top-drive speed (rad/s)."""
+        if not self.simulates_map:
+            return []
+        return [
+            (f"cell/{i}/{j}", force * 1e3, speed)
+            for i, force in enumerate(self.settings.forces_kn)
+            for j, speed in enumerate(self.settings.speeds_rad_s)
+        ]
+
+    def items(self) -> list[str]:
+        """Every item key: the standard runs, then the map cells row by row."""
+        return [f"point/{p}" for p in self.settings.points] + [c[0] for c in self.cells()]
+
+    def record_schema(self, item: str) -> Schema:
+        """A feature row (the point's name and numbers) or a cell's fractions."""
+        if item.startswith("point/"):
+            return Fields({"point": Name()}, rest=Number())
+        unit = Number(nullable=False, low=0.0, high=1.0)
+        return Fields({"frac_stick": unit, "frac_bounce": unit, "om_amp_rel": Number()})
+
+    def tasks(self, missing: Sequence[str]) -> list[Task]:
+        """The missing standard runs and cells in tasks of :attr:`task_items`."""
+        s = self.settings
+        wanted = set(missing)
+        points = [p for p in s.points if f"point/{p}" in wanted]
+        tasks = [
+            Task(
+                f"coupled/point/{chunk[0]}",
+                point_task,
+                {
+                    "parameters": s.parameters,
+                    "points": chunk,
+                    "duration_s": s.duration_s,
+                    "window_s": list(s.window_s),
+                    "step_s": s.step_s,
+                    "surface": s.surface,
+                },
+                tuple(f"point/{p}" for p in chunk),
+            )
+            for chunk in chunks(points, self.task_items)
+        ]
+        cells = [list(c) for c in self.cells() if c[0] in wanted]
+        tasks += [
+            Task(
+                f"coupled/{chunk[0][0]}",
+                cell_task,
+                {
+                    "parameters": s.parameters,
+                    "cells": chunk,
+                    "duration_s": s.map_duration_s,
+                    "step_s": s.step_s,
+                    "surface": s.surface,
+                },
+                tuple(c[0] for c in chunk),
+            )
+            for chunk in chunks(cells, self.task_items)
+        ]
+        return tasks
+
+    def simulated(self, records: Mapping[str, Mapping[str, Any]]) -> dict[str, Any]:
+        """The simulated map from the cells' records: each feature as (forces, speeds)."""
+        shape = (len(self.settings.forces_kn), len(self.settings.speeds_rad_s))
+        result = {name: np.zeros(shape) for name in MAP_NAMES}
+        for item, *_ in self.cells():
+            i, j = (int(k) for k in item.split("/")[1:])
+            for name in MAP_NAMES:
+                value = records[item][name]
+                result[name][i, j] = math.nan if value is None else value
+        return result
+
+
 @dataclass(frozen=True)
 class CoupledSpec:
     """Settings of ``drill-gym coupled`` (each field is the option of the same name)."""
@@ -254,16 +446,19 @@ class CoupledSpec:
 
 
 def _parser() -> ArgumentParser:
-    return spec_parser("drill-gym coupled", DESCRIPTION, CoupledSpec)
+    return spec_parser("drill-gym coupled", DESCRIPTION, CoupledSpec, RunnerSpec)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``drill-gym coupled``: run, print the tables, write ``coupled.json`` and the figure."""
-    return run_coupled(spec_from_args(CoupledSpec, _parser().parse_args(argv)))
+    args = _parser().parse_args(argv)
+    return run_coupled(spec_from_args(CoupledSpec, args), spec_from_args(RunnerSpec, args))
 
 
-def run_coupled(spec: CoupledSpec) -> int:
-    """Run the study of ``spec``, print its tables, write ``coupled.json`` and the figure."""
+def run_coupled(spec: CoupledSpec, runner: RunnerSpec | None = None) -> int:
+    """Run the study of ``spec`` on ``runner`` (default: serially), print its tables, write
+    ``coupled.json`` and the figure."""
+    runner = runner or RunnerSpec()
     start_s, end_s = spec.window_s
     parameters = RGD_PRESETS[spec.parameters]
     started = time.perf_counter()
@@ -272,25 +467,29 @@ def run_coupled(spec: CoupledSpec) -> int:
         if not spec.no_progress:
             print(f"coupled: {text}", file=sys.stderr)
 
-    rows = []
-    for point in spec.points:
-        force, speed = STANDARD_POINTS[point]
-        note(f"standard run at {point} ({force / 1e3:g} kN, {speed:g} rad/s)")
-        cpu = time.process_time()
-        trace = simulate(
-            parameters, speed, force, spec.duration_s, step_s=spec.step_s, surface=spec.surface
+    study = CoupledStudy(spec, runner.task_size or TASK_ITEMS)
+    records: dict[str, dict[str, Any]] = {}
+    if study.items():
+        note(f"{len(spec.points)} standard runs, {len(study.cells())} simulated map cells")
+        backend = runner.backend()
+        outcome = run_sweep(
+            study,
+            backend,
+            runner.results_path(spec.out / "coupled.sqlite"),
+            runner.resume,
+            not spec.no_progress,
+            overwrite=runner.overwrite,
         )
-        cpu = time.process_time() - cpu
-        features = run_features(trace, (start_s, end_s))
-        i1 = round(start_s / trace.step_s)
-        om_min = float(trace.bit_speed_rad_s[i1:].min())
-        rows.append(_feature_row(point, features, om_min, cpu))
-        del trace
+        if runner.requested:
+            report_outcome(study.name, outcome, backend)
+        records = outcome.records
+    rows = [records[f"point/{p}"] for p in spec.points]
     runs_s = time.perf_counter() - started
     print(f"1. Standard run ({spec.parameters}, surface '{spec.surface}', step {spec.step_s:g} s, "
           f"{spec.duration_s:g} s, features over [{start_s:g}, {end_s:g}] s):\n")  # fmt: skip
     print(markdown_table(rows, FEATURE_COLUMNS))
-    print(f"\n(standard runs: {runs_s:.1f} s wall)")
+    what = "standard runs and simulated map" if study.simulates_map else "standard runs"
+    print(f"\n({what}: {runs_s:.1f} s wall)")
 
     forces_n = [f * 1e3 for f in spec.forces_kn]
     hopf = 2 * np.sqrt(2 * parameters.k_a / parameters.axial_mass_kg) / parameters.blades
@@ -326,20 +525,7 @@ def run_coupled(spec: CoupledSpec) -> int:
         print(markdown_table(crit_rows, CRITICAL_COLUMNS))
         note("stability map from the roots")
         abscissa = stability_map(parameters, forces_n, spec.speeds_rad_s)
-        simulated = None
-        if not spec.no_simulated_map:
-            note(
-                f"simulated map: {len(forces_n) * len(spec.speeds_rad_s)} runs of {spec.map_duration_s:g} s"
-            )
-            simulated = simulated_map(
-                parameters,
-                forces_n,
-                spec.speeds_rad_s,
-                duration_s=spec.map_duration_s,
-                window_s=(spec.map_duration_s / 2, spec.map_duration_s),
-                step_s=spec.step_s,
-                surface=spec.surface,
-            )
+        simulated = study.simulated(records) if study.simulates_map else None
         result.update(
             critical_speeds=crit_rows,
             map_forces_n=forces_n,

@@ -23,6 +23,12 @@ string's lowest mode with the top drive held (top clamped, bit free), whose peri
    equivalent itself (``DrillString-v0`` with ``parameters=lumped_equivalent(string)``) and on
    the distributed string it stands for.
 
+The recorded runs (the stiff loop at each depth of table 1, every controller of table 3, each
+controller and scenario of table 4) are the items of a study on the sweep runner
+(:class:`WavesStudy`, :mod:`experiments.sweep`): serial by default, on Ray with ``--workers``,
+kept in a results database with ``--results`` and resumed with ``--resume`` (runs read back
+keep no node history: no figures then). Tables 1 and 2 are computed directly.
+
 Outputs (``--out``, default ``results/waves``): ``waves.json`` (the three tables) and, under
 ``figures/``, ``field_response.png`` (bit speed, top-drive speed and surface torque of every
 run) and ``field_space_time_<run>.png`` (node speed and element torque along the depth
@@ -81,7 +87,16 @@ from experiments.field import (
 )
 from experiments.paths import output_file
 from experiments.plots import color_of, new_figure, save_figure, suptitle
+from experiments.results_db import Fields, Flag, Name, Number, Schema
 from experiments.spec_cli import option, spec_from_args, spec_parser
+from experiments.sweep import (
+    RunnerSpec,
+    Task,
+    TaskResult,
+    chunks,
+    report_outcome,
+    run_sweep,
+)
 from experiments.tables import Column, markdown_table, write_json
 
 __all__ = [
@@ -89,6 +104,7 @@ __all__ = [
     "RunRecord",
     "StringHistory",
     "WavesSpec",
+    "WavesStudy",
     "cycle_period_s",
     "equivalent_table",
     "main",
@@ -98,6 +114,7 @@ __all__ = [
     "space_time_figure",
     "string_response_figure",
     "string_table",
+    "waves_task",
 ]
 
 RECORD_DT_S: Final = 0.02
@@ -107,6 +124,8 @@ DEFAULT_DEPTHS_M: Final = (1_500.0, 2_500.0, 4_000.0)
 """Depths of the string table, m."""
 WINDOW_S: Final = 50.0
 """Analysis window at the end of each run, s (as ``drill-gym map`` on the field string)."""
+TASK_RUNS: Final = 1
+"""Default items per task: a recorded run is a task of its own."""
 SPACE_TIME_S: Final = 12.0
 """Length of the space-time figures, s (two stick-slip cycles at 2,500 m)."""
 RESPONSE_S: Final = 30.0
@@ -230,8 +249,12 @@ def cycle_period_s(
     return float(lags[best] * dt_s)
 
 
-def _case(depth_m: float, wob_n: float, rpm: float, condition: str) -> FieldCase:
-    return FieldCase(
+def _case(
+    depth_m: float, wob_n: float, rpm: float, condition: str, deep: bool = False
+) -> FieldCase:
+    """The field case at ``depth_m``; ``deep``: the same id and operating point on the whole
+    ``deep_5000m`` string instead."""
+    case = FieldCase(
         f"{depth_m / 1e3:g}km-{wob_n / 1e3:g}kN-{rpm:g}rpm-{condition}",
         "field_2500m",
         float(depth_m),
@@ -239,6 +262,12 @@ def _case(depth_m: float, wob_n: float, rpm: float, condition: str) -> FieldCase
         float(rpm),
         FIELD_CONDITIONS[condition],
     )
+    if deep:
+        deep_string = DISTRIBUTED_PRESETS["deep_5000m"]
+        case = dataclasses.replace(
+            case, parameters="deep_5000m", measured_depth_m=deep_string.measured_depth_m
+        )
+    return case
 
 
 def record_run(
@@ -499,6 +528,163 @@ def equivalent_table(
     return rows
 
 
+def waves_task(jobs: Sequence[Mapping[str, Any]]) -> TaskResult:
+    """A task of the sweep runner: each of ``jobs`` (its item key, its kind and arguments) run
+    in turn. Kinds: ``string`` (the stiff loop's metrics on a string of table 1, seed 0),
+    ``run`` (a controller's metrics of table 3; its node history in the extras, by item) and
+    ``equivalent`` (a row of table 4)."""
+    records: dict[str, dict[str, Any]] = {}
+    histories: dict[str, StringHistory] = {}
+    for job in jobs:
+        item = str(job["item"])
+        depth_m, wob_n, rpm, condition = job["case"]
+        case = _case(depth_m, wob_n, rpm, condition, deep=bool(job.get("deep", False)))
+        if job["kind"] == "equivalent":
+            records[item] = equivalent_table(
+                [case],
+                [job["controller"]],
+                duration_s=job["duration_s"],
+                window_s=job["window_s"],
+                seed=job["seed"],
+            )[0]
+            continue
+        run = record_run(
+            case,
+            job["controller"],
+            job["observation"],
+            duration_s=job["duration_s"],
+            window_s=job["window_s"],
+            seed=job["seed"],
+        )
+        if job["kind"] == "string":
+            records[item] = dict(run.metrics)
+        else:
+            records[item] = {"label": run.label, **run.metrics}
+            histories[item] = run.history
+    return TaskResult(records, histories or None)
+
+
+@dataclass(frozen=True)
+class WavesStudy:
+    """The study on the sweep runner: one item per recorded run, ``string/<k>`` (the stiff
+    loop on the k-th string of table 1), ``run/<k>/<controller>/<observation>`` (table 3) and
+    ``equivalent/<k>/<controller>`` (the k-th scenario of table 4).
+
+    Attributes:
+        settings: The command's settings.
+        task_runs: Runs per task.
+    """
+
+    settings: WavesSpec
+    task_runs: int = TASK_RUNS
+
+    @property
+    def name(self) -> str:
+        """The sweep's name."""
+        return "waves"
+
+    def controllers(self) -> list[str]:
+        """The controllers of table 3, each once, in order."""
+        return list(dict.fromkeys(self.settings.controllers or controller_names()))
+
+    def jobs(self) -> list[dict[str, Any]]:
+        """Every recorded run, in the order of the tables."""
+        s = self.settings
+        timing = {"duration_s": s.duration_s, "window_s": s.window_s}
+        jobs: list[dict[str, Any]] = []
+        depths = [*s.depths_m, s.depths_m[-1]]
+        for k, depth in enumerate(depths):
+            jobs.append(
+                {
+                    "item": f"string/{k}",
+                    "kind": "string",
+                    "case": [depth, s.wob_n, s.rpm, s.condition],
+                    "deep": k == len(s.depths_m),
+                    "controller": "stiff_pi",
+                    "observation": "surface",
+                    "seed": 0,
+                    **timing,
+                }
+            )
+        case = [s.depth_m, s.wob_n, s.rpm, s.condition]
+        names = self.controllers()
+        k = 0
+        for name in names:
+            for obs in observations_of(name, s.observations):
+                jobs.append(
+                    {
+                        "item": f"run/{k}/{name}/{obs}",
+                        "kind": "run",
+                        "case": case,
+                        "controller": name,
+                        "observation": obs,
+                        "seed": s.seed,
+                        **timing,
+                    }
+                )
+                k += 1
+        smcs = [n for n in names if needs_full_state(n)]
+        if not s.no_equivalent and smcs:
+            cases = [[d, w * 1e3, r, s.condition] for w, r in COMPARE_POINTS for d in s.depths_m]
+            for k, scenario in enumerate(cases):
+                for name in smcs:
+                    jobs.append(
+                        {
+                            "item": f"equivalent/{k}/{name}",
+                            "kind": "equivalent",
+                            "case": scenario,
+                            "controller": name,
+                            "seed": s.seed,
+                            **timing,
+                        }
+                    )
+        return jobs
+
+    def spec(self) -> dict[str, Any]:
+        """Everything the results depend on."""
+        s = self.settings
+        return {
+            "controllers": self.controllers(),
+            "observations": list(s.observations),
+            "depth_m": s.depth_m,
+            "depths_m": list(s.depths_m),
+            "wob_n": s.wob_n,
+            "rpm": s.rpm,
+            "condition": s.condition,
+            "duration_s": s.duration_s,
+            "window_s": s.window_s,
+            "seed": s.seed,
+            "equivalent": not s.no_equivalent,
+            "record_dt_s": RECORD_DT_S,
+        }
+
+    def items(self) -> list[str]:
+        """Every item key."""
+        return [j["item"] for j in self.jobs()]
+
+    def record_schema(self, item: str) -> Schema:
+        """A run's metrics (numbers, ``None``: not defined, and ``diverged``), with its label
+        in table 3; a row of table 4."""
+        if item.startswith("equivalent/"):
+            return Fields({"scenario": Name(), "controller": Name()}, rest=Number())
+        named = {"label": Name()} if item.startswith("run/") else {}
+        return Fields({**named, "diverged": Flag()}, rest=Number())
+
+    def tasks(self, missing: Sequence[str]) -> list[Task]:
+        """The missing runs in tasks of :attr:`task_runs`."""
+        wanted = set(missing)
+        jobs = [j for j in self.jobs() if j["item"] in wanted]
+        return [
+            Task(
+                f"waves/{chunk[0]['item']}",
+                waves_task,
+                {"jobs": chunk},
+                tuple(j["item"] for j in chunk),
+            )
+            for chunk in chunks(jobs, self.task_runs)
+        ]
+
+
 STRING_COLUMNS: Final = (
     Column("string", "string", align="left"),
     Column("pipe_length_m", "pipe (m)", "{:,.0f}"),
@@ -637,64 +823,53 @@ example: drill-gym waves --controllers stiff_pi soft_speed --depth 4000 --out re
 
 
 def _parser() -> ArgumentParser:
-    return spec_parser("drill-gym waves", DESCRIPTION, WavesSpec)
+    return spec_parser("drill-gym waves", DESCRIPTION, WavesSpec, RunnerSpec)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``drill-gym waves``: run, print the tables, write ``waves.json`` and the figures."""
-    return run_waves(spec_from_args(WavesSpec, _parser().parse_args(argv)))
+    args = _parser().parse_args(argv)
+    return run_waves(spec_from_args(WavesSpec, args), spec_from_args(RunnerSpec, args))
 
 
-def run_waves(spec: WavesSpec) -> int:
-    """Run the study of ``spec``, print the tables, write ``waves.json`` and the figures."""
-    names = list(dict.fromkeys(spec.controllers or controller_names()))
+def run_waves(spec: WavesSpec, runner: RunnerSpec | None = None) -> int:
+    """Run the study of ``spec`` on ``runner`` (default: serially), print the tables, write
+    ``waves.json`` and the figures."""
+    runner = runner or RunnerSpec()
     start = time.perf_counter()
     case = _case(spec.depth_m, spec.wob_n, spec.rpm, spec.condition)
-
-    def note(text: str) -> None:
-        if not spec.no_progress:
-            print(f"waves: {text}", file=sys.stderr)
-
-    strings = string_table(spec.depths_m)
-    prone = [_case(d, spec.wob_n, spec.rpm, spec.condition) for d in spec.depths_m]
-    deep = DISTRIBUTED_PRESETS["deep_5000m"]
-    prone.append(
-        dataclasses.replace(
-            prone[-1], parameters="deep_5000m", measured_depth_m=deep.measured_depth_m
-        )
+    study = WavesStudy(spec, runner.task_size or TASK_RUNS)
+    if not spec.no_progress:
+        print(f"waves: {len(study.items())} recorded runs", file=sys.stderr)
+    backend = runner.backend()
+    outcome = run_sweep(
+        study,
+        backend,
+        runner.results_path(spec.out / "waves.sqlite"),
+        runner.resume,
+        not spec.no_progress,
+        overwrite=runner.overwrite,
     )
-    for row, c in zip(strings, prone, strict=False):
-        note(f"stiff_pi at {c.measured_depth_m:g} m")
-        run = record_run(
-            c, "stiff_pi", "surface", duration_s=spec.duration_s, window_s=spec.window_s
-        )
-        row["stiff_pi_cycle_s"] = run.metrics["cycle_period_s"]
+    if runner.requested:
+        report_outcome(study.name, outcome, backend)
+    records = outcome.records
+    strings = string_table(spec.depths_m)
+    for k, row in enumerate(strings[: len(spec.depths_m) + 1]):
+        row["stiff_pi_cycle_s"] = records[f"string/{k}"]["cycle_period_s"]
     reflections = reflection_table(case.string())
-    runs: list[RunRecord] = []
-    for name in names:
-        for obs in observations_of(name, spec.observations):
-            note(f"{name} ({obs}) on {case.id}")
-            runs.append(
-                record_run(
-                    case,
-                    name,
-                    obs,
-                    duration_s=spec.duration_s,
-                    window_s=spec.window_s,
-                    seed=spec.seed,
-                )
-            )
-    run_rows = [{"label": r.label, **r.metrics} for r in runs]
-    equivalent: list[dict[str, Any]] = []
-    smcs = [n for n in names if needs_full_state(n)]
-    if not spec.no_equivalent and smcs:
-        cases = [
-            _case(d, w * 1e3, r, spec.condition) for w, r in COMPARE_POINTS for d in spec.depths_m
-        ]
-        note(f"4-DOF equivalent against the string: {len(cases)} scenarios x {len(smcs)}")
-        equivalent = equivalent_table(
-            cases, smcs, duration_s=spec.duration_s, window_s=spec.window_s, seed=spec.seed
+    run_items = [i for i in study.items() if i.startswith("run/")]
+    run_rows = [records[i] for i in run_items]
+    equivalent = [records[i] for i in study.items() if i.startswith("equivalent/")]
+    histories: dict[str, StringHistory] = {}
+    for extras in outcome.extras.values():
+        histories.update(extras)
+    runs = [
+        RunRecord(
+            records[i]["label"], histories[i], {k: v for k, v in records[i].items() if k != "label"}
         )
+        for i in run_items
+        if i in histories
+    ]
     out = spec.out
     out.mkdir(parents=True, exist_ok=True)
     print(f"1. The strings (stiff_pi cycle at {spec.wob_n / 1e3:g} kN, {spec.rpm:g} rpm, "
@@ -724,10 +899,13 @@ def run_waves(spec: WavesSpec) -> int:
             indent=2,
         )
     ]
-    if not spec.no_plots and runs:
+    if not spec.no_plots and run_items and len(runs) < len(run_items):
+        print("no figures: runs read from the results file keep no node history (rerun "
+              "without --resume for the figures)")  # fmt: skip
+    elif not spec.no_plots and runs:
         written += write_figures(runs, case, out / "figures", spec.duration_s)
     print(
-        f"\n{len(runs)} recorded runs in {time.perf_counter() - start:.1f} s; wrote "
+        f"\n{len(run_rows)} recorded runs in {time.perf_counter() - start:.1f} s; wrote "
         f"{len(written)} files to {out}/"
     )
     return 0

@@ -20,6 +20,7 @@ from drill_env.modes import natural_frequencies_hz
 from experiments import compare, evaluate, field, stick_slip_map, waves
 from experiments.plots import text_problems
 from experiments.spec_cli import spec_from_args
+from experiments.sweep import Backend, run_sweep, spec_hash
 from experiments.waves import space_time_figure, string_response_figure
 
 FIELD = field.FIELD_ENV
@@ -395,3 +396,90 @@ def test_waves_options_make_the_spec() -> None:
 def test_waves_spec_refuses_what_cannot_run(kwargs: dict[str, float], message: str) -> None:
     with pytest.raises(ValueError, match=message):
         waves.WavesSpec(**kwargs)  # type: ignore[arg-type]
+
+
+# ------------------------------------------------------------------- waves, on the runner
+def small_waves(**changes: Any) -> waves.WavesStudy:
+    settings = {
+        "controllers": ("stiff_pi", "proposed"),
+        "observations": ("surface",),
+        "depth_m": 1500.0,
+        "depths_m": (1500.0,),
+        "duration_s": 2.0,
+        "window_s": 1.0,
+        **changes,
+    }
+    return waves.WavesStudy(waves.WavesSpec(**settings))
+
+
+def test_waves_items_are_the_recorded_runs() -> None:
+    study = small_waves()
+    assert study.items() == [
+        "string/0",
+        "string/1",
+        "run/0/stiff_pi/surface",
+        "run/1/proposed/state",
+        "equivalent/0/proposed",
+        "equivalent/1/proposed",
+    ]
+    assert small_waves(no_equivalent=True).items() == study.items()[:4]
+    outcome = run_sweep(study, progress=False)
+    case = waves._case(1500.0, 150e3, 60.0, "nominal")
+    alone = waves.record_run(case, "proposed", "state", duration_s=2.0, window_s=1.0)
+    assert outcome.records["run/1/proposed/state"] == {"label": alone.label, **alone.metrics}
+    history = outcome.extras["waves/run/1/proposed/state"]["run/1/proposed/state"]
+    np.testing.assert_array_equal(history.speed_rad_s, alone.history.speed_rad_s)
+
+
+def test_waves_database_and_resume_write_the_serial_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["--controllers", "stiff_pi", "proposed", "--observations", "surface"]
+    argv += ["--depth", "1500", "--depths", "1500", "--duration-s", "2", "--window-s", "1"]
+    argv += ["--no-progress"]
+    results = str(tmp_path / "results.sqlite")
+    assert waves.main([*argv, "--no-plots", "--out", str(tmp_path / "serial")]) == 0
+    assert (
+        waves.main([*argv, "--no-plots", "--out", str(tmp_path / "db"), "--results", results]) == 0
+    )
+    capsys.readouterr()
+    assert (
+        waves.main([*argv, "--out", str(tmp_path / "again"), "--results", results, "--resume"]) == 0
+    )
+    out = capsys.readouterr().out
+    assert "0 tasks run" in out and "6 items read from the results database" in out
+    assert "no figures: runs read from the results file" in out
+    texts = {n: (tmp_path / n / "waves.json").read_text() for n in ("serial", "db", "again")}
+    assert texts["serial"] == texts["db"] == texts["again"]
+
+
+def test_waves_settings_hash_changes_with_every_setting_of_the_numbers() -> None:
+    base = small_waves()
+    changes: dict[str, Any] = {
+        "controllers": ("stiff_pi",),
+        "observations": ("state",),
+        "depth_m": 1600.0,
+        "depths_m": (1600.0,),
+        "wob_n": 140e3,
+        "rpm": 70.0,
+        "condition": next(c for c in field.FIELD_CONDITIONS if c != "nominal"),
+        "duration_s": 4.0,
+        "window_s": 2.0,
+        "seed": 1,
+        "no_equivalent": True,
+    }
+    hashes = {spec_hash(base.name, base.spec())}
+    for key, value in changes.items():
+        study = small_waves(**{key: value})
+        hashes.add(spec_hash(study.name, study.spec()))
+    assert len(hashes) == 1 + len(changes)
+    same = small_waves(out=Path("elsewhere"), no_plots=True, no_progress=True)
+    assert spec_hash(same.name, same.spec()) == spec_hash(base.name, base.spec())
+
+
+def test_waves_on_ray_equals_the_serial_run() -> None:
+    pytest.importorskip("ray")
+    study = small_waves(no_equivalent=True)
+    serial = run_sweep(study, progress=False)
+    swept = run_sweep(study, Backend(workers=2), progress=False, results_path=None)
+    assert swept.records == serial.records
