@@ -55,8 +55,6 @@ from experiments.sweep import (
     Task,
     TaskResult,
     chunks,
-    report_outcome,
-    run_sweep,
 )
 from experiments.tables import Column, markdown_table, write_json
 
@@ -471,17 +469,7 @@ def run_coupled(spec: CoupledSpec, runner: RunnerSpec | None = None) -> int:
     records: dict[str, dict[str, Any]] = {}
     if study.items():
         note(f"{len(spec.points)} standard runs, {len(study.cells())} simulated map cells")
-        backend = runner.backend()
-        outcome = run_sweep(
-            study,
-            backend,
-            runner.results_path(spec.out / "coupled.sqlite"),
-            runner.resume,
-            not spec.no_progress,
-            overwrite=runner.overwrite,
-        )
-        if runner.requested:
-            report_outcome(study.name, outcome, backend)
+        outcome = runner.run(study, spec.out / "coupled.sqlite", progress=not spec.no_progress)
         records = outcome.records
     rows = [records[f"point/{p}"] for p in spec.points]
     runs_s = time.perf_counter() - started

@@ -94,8 +94,6 @@ from experiments.sweep import (
     Task,
     TaskResult,
     chunks,
-    report_outcome,
-    run_sweep,
 )
 from experiments.tables import Column, markdown_table, write_json
 
@@ -841,17 +839,7 @@ def run_waves(spec: WavesSpec, runner: RunnerSpec | None = None) -> int:
     study = WavesStudy(spec, runner.task_size or TASK_RUNS)
     if not spec.no_progress:
         print(f"waves: {len(study.items())} recorded runs", file=sys.stderr)
-    backend = runner.backend()
-    outcome = run_sweep(
-        study,
-        backend,
-        runner.results_path(spec.out / "waves.sqlite"),
-        runner.resume,
-        not spec.no_progress,
-        overwrite=runner.overwrite,
-    )
-    if runner.requested:
-        report_outcome(study.name, outcome, backend)
+    outcome = runner.run(study, spec.out / "waves.sqlite", progress=not spec.no_progress)
     records = outcome.records
     strings = string_table(spec.depths_m)
     for k, row in enumerate(strings[: len(spec.depths_m) + 1]):
