@@ -13,6 +13,12 @@ rock volume cut in the window), bit-speed error and the env's reward per decisio
 
 Outputs (``--out``, default ``results/coupled-controllers``): ``coupled_controllers.json``
 and ``.csv`` (one row per run) and ``figures/coupled_controllers_map.png``.
+
+Every episode (a grid run, an evaluation episode of the agent or of its base loops) is an item
+of the sweep runner (:class:`CoupledStudy`, :mod:`experiments.sweep`): serially by default, on
+Ray with ``--workers N``, into the SQLite results database ``OUT/coupled_controllers.sqlite``
+with ``--results`` (or on Ray, ``--resume``); ``--resume`` runs only the missing episodes and
+the tables are made from the records, so they are those of a clean run.
 """
 
 from __future__ import annotations
