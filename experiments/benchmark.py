@@ -49,10 +49,18 @@ Outputs (``--out``, default ``results/benchmark``): ``scorecard.md``, ``scorecar
 row per suite, entry and metric), ``runs.csv`` (one row per run) and ``profiles.png``; with a
 method of several training seeds ``runs.csv`` has a ``training_seed`` column and
 ``scorecard.csv`` a ``training_seeds`` column (:data:`SEED_KEYS`).
+
+The runs go through the sweep runner (:class:`BenchmarkStudy`, :mod:`experiments.sweep`): an
+item is one run (suite, entry, training seed, scenario, reset seed), serially by default, on
+Ray with ``--workers N``; with ``--results`` (or on Ray, ``--resume``) each run is a row of the
+SQLite results database ``OUT/benchmark.sqlite``, keyed by the suites' content hashes and the
+entries (a model by the SHA-256 of its weights), and ``--resume`` runs only those missing. The
+scorecard is computed from the runs' records, so a resumed benchmark writes the same one.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib.util
 import json
@@ -79,6 +87,7 @@ from experiments.controllers import (
     CONTROLLERS_OPTION_HELP,
     controller_type,
     is_user_controller,
+    refuse_on_ray,
     resolve_controller_name,
 )
 from experiments.evaluate import shipped_models
@@ -94,7 +103,19 @@ from experiments.field import (
 )
 from experiments.heldout import HeldOutScenario, held_out_scenario
 from experiments.plots import METRIC_LABELS, save_figure
+from experiments.results_db import Fields, Flag, Number, Schema, Text, exactly
 from experiments.spec_cli import option, spec_from_args, spec_options
+from experiments.sweep import (
+    Backend,
+    RunnerSpec,
+    SweepOutcome,
+    Task,
+    TaskResult,
+    agent_fingerprint,
+    check_task_size,
+    chunks,
+    run_sweep,
+)
 from experiments.tables import json_clean, write_csv
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -113,6 +134,7 @@ __all__ = [
     "SUITE_FORMAT",
     "BenchmarkOptions",
     "BenchmarkSpec",
+    "BenchmarkStudy",
     "Entry",
     "Suite",
     "SuiteScenario",
@@ -738,52 +760,184 @@ def run_suite(
     suite, the label, the scenario, the seed, ``prone`` and the metrics of
     :data:`drill_env.metrics.METRIC_KEYS`; a method with several training seeds has one row
     per (training seed, scenario, seed), with its ``training_seed``. Entries that do not run
-    on the suite's env are left out."""
-    jobs = [(e, job) for e in entries for job in e.runs(suite)]
-    total = len(jobs) * suite.runs
-    bar = None
-    if progress:
-        from tqdm import tqdm
+    on the suite's env are left out. (The :class:`BenchmarkStudy` of ``suite`` run serially in
+    this process, no results database.)"""
+    study = BenchmarkStudy((suite,), tuple(entries))
+    if not study.runs():
+        return []
+    return study.rows(run_sweep(study, Backend(), progress=progress))
 
-        bar = tqdm(total=total, desc=suite.label, unit="run", file=sys.stderr)
-    on_field = is_field(suite.env_id)
-    rows: list[dict[str, Any]] = []
-    for entry, (trained, label, policy, kwargs) in jobs:
-        mine = entry.agent is None and is_user_controller(entry.name)
-        for scenario in suite.scenarios:
-            for seed in scenario.seeds:
-                head = {
-                    "suite": suite.label,
-                    "entry": label,
-                    **({} if trained is None else {"training_seed": trained}),
-                    "scenario": scenario.id,
-                    "seed": seed,
-                    "prone": scenario.prone,
-                }
-                try:
-                    trace = run_on(
-                        suite.env_id, {**suite.env_kwargs(scenario), **kwargs}, policy, seed
-                    )
-                except ValueError as err:
-                    if not on_field:
-                        raise
-                    # A controller that cannot be made for this string (its tuning or model
-                    # has no solution there): a row without metrics, and the reason.
-                    rows.append({**head, **dict.fromkeys(METRIC_KEYS), "note": one_line(str(err))})
-                except Exception as err:
-                    if not mine:
-                        raise
-                    raise ValueError(
-                        f"{label} failed on {suite.label} {scenario.id} seed {seed}: "
-                        f"{type(err).__name__}: {err}"
-                    ) from err
-                else:
-                    rows.append({**head, **episode_metrics(trace), "note": ""})
-                if bar is not None:
-                    bar.update()
-    if bar is not None:
-        bar.close()
-    return rows
+
+@dataclass(frozen=True)
+class BenchmarkRun:
+    """One episode of the benchmark: an entry's model (or controller) on one scenario of a
+    suite with one reset seed.
+
+    Attributes:
+        suite: The suite.
+        label: The entry's label on the suite (with the observation mode on the field string).
+        trained: The model's training seed (``None``: a controller or a method of one model).
+        policy: The policy (:class:`ZeroAction` for a controller).
+        kwargs: Its env keywords (the scenario's are added).
+        scenario: The scenario.
+        seed: The reset seed.
+        user: Whether it is a user's controller class (its failures name the run).
+    """
+
+    suite: Suite
+    label: str
+    trained: int | None
+    policy: Any
+    kwargs: Mapping[str, Any]
+    scenario: SuiteScenario
+    seed: int
+    user: bool = False
+
+    @property
+    def item(self) -> str:
+        """The item key of the run."""
+        seed = "" if self.trained is None else f"training_seed={self.trained}/"
+        return f"{self.suite.label}/{self.label}/{seed}{self.scenario.id}/seed={self.seed}"
+
+    def head(self) -> dict[str, Any]:
+        """The run's row without its metrics."""
+        return {
+            "suite": self.suite.label,
+            "entry": self.label,
+            **({} if self.trained is None else {"training_seed": self.trained}),
+            "scenario": self.scenario.id,
+            "seed": self.seed,
+            "prone": self.scenario.prone,
+        }
+
+
+def run_once(run: BenchmarkRun) -> dict[str, Any]:
+    """The row of one run: its head, the metrics of :func:`episode_metrics` and an empty
+    ``note``; on the field string, for a controller that cannot be made for the string (its
+    tuning or model has no solution there), metrics ``None`` and the reason in ``note``."""
+    suite, scenario = run.suite, run.scenario
+    try:
+        trace = run_on(
+            suite.env_id, {**suite.env_kwargs(scenario), **run.kwargs}, run.policy, run.seed
+        )
+    except ValueError as err:
+        if not is_field(suite.env_id):
+            raise
+        return {**run.head(), **dict.fromkeys(METRIC_KEYS), "note": one_line(str(err))}
+    except Exception as err:
+        if not run.user:
+            raise
+        raise ValueError(
+            f"{run.label} failed on {suite.label} {scenario.id} seed {run.seed}: "
+            f"{type(err).__name__}: {err}"
+        ) from err
+    return {**run.head(), **episode_metrics(trace), "note": ""}
+
+
+def benchmark_runs_task(runs: Sequence[BenchmarkRun]) -> TaskResult:
+    """Runs of the benchmark (:func:`run_once`), records by :attr:`BenchmarkRun.item`."""
+    return TaskResult({run.item: run_once(run) for run in runs})
+
+
+BENCHMARK_TASK_RUNS: Final = 5
+"""Default runs per benchmark task (a scenario's five reset seeds)."""
+
+
+def entry_fingerprint(entry: Entry) -> dict[str, Any]:
+    """What identifies an entry in the benchmark's settings: a controller's name and what the
+    user typed; a learned method's name and each model's :func:`agent_fingerprint` with its
+    training seed."""
+    if entry.agent is None:
+        return {"controller": entry.name, "source": entry.source}
+    models = [(None, entry.agent)] if not entry.training_seeds else list(entry.training_seeds)
+    return {
+        "method": entry.name,
+        "models": [{"training_seed": k, **(agent_fingerprint(a) or {})} for k, a in models],
+    }
+
+
+@dataclass(frozen=True)
+class BenchmarkStudy:
+    """The benchmark on the sweep runner: an item is one run (:class:`BenchmarkRun`: suite,
+    entry, training seed, scenario, reset seed), a task ``task_runs`` of them; the scorecard
+    is computed from the records (:func:`score_suite`), so a resumed benchmark gives the same
+    scorecard."""
+
+    suites: tuple[Suite, ...]
+    entries: tuple[Entry, ...] = field(compare=False)
+    task_runs: int = BENCHMARK_TASK_RUNS
+    name: str = "benchmark"
+
+    def __post_init__(self) -> None:
+        check_task_size("task_runs", self.task_runs)
+
+    @functools.cached_property
+    def _runs(self) -> list[BenchmarkRun]:
+        out = []
+        for suite in self.suites:
+            for entry in self.entries:
+                user = entry.agent is None and is_user_controller(entry.name)
+                for trained, label, policy, kwargs in entry.runs(suite):
+                    for scenario in suite.scenarios:
+                        for seed in scenario.seeds:
+                            out.append(
+                                BenchmarkRun(
+                                    suite, label, trained, policy, kwargs, scenario, seed, user
+                                )
+                            )
+        return out
+
+    def runs(self) -> list[BenchmarkRun]:
+        """Every run, in the order of ``runs.csv``: by suite, entry, training seed, scenario
+        and reset seed."""
+        return list(self._runs)
+
+    @functools.cached_property
+    def _run_of_item(self) -> dict[str, BenchmarkRun]:
+        return {r.item: r for r in self._runs}
+
+    def spec(self) -> dict[str, Any]:
+        """The suites (label and content hash) and the entries (:func:`entry_fingerprint`)."""
+        return {
+            "suites": [[s.label, s.sha256] for s in self.suites],
+            "entries": [entry_fingerprint(e) for e in self.entries],
+            "idle_decision_s": IDLE_DECISION_S,
+        }
+
+    def items(self) -> list[str]:
+        """One item per run."""
+        return [r.item for r in self._runs]
+
+    def record_schema(self, item: str) -> Schema:
+        """A run's row: its head as this study's, the metrics (numbers, ``None``: not defined
+        or not run), ``diverged`` when it ran, and the note."""
+        return Fields(
+            {
+                **exactly(self._run_of_item[item].head()),
+                **{key: Number() for key in METRIC_KEYS},
+                "note": Text(),
+            },
+            optional={"diverged": Flag()},
+        )
+
+    def tasks(self, missing: Sequence[str]) -> list[Task]:
+        """``task_runs`` missing runs per task."""
+        wanted = set(missing)
+        runs = [r for r in self._runs if r.item in wanted]
+        return [
+            Task(
+                key=block[0].item if len(block) == 1 else f"{block[0].item}+{len(block) - 1}",
+                function=benchmark_runs_task,
+                kwargs={"runs": block},
+                items=tuple(r.item for r in block),
+            )
+            for block in chunks(runs, self.task_runs)
+        ]
+
+    def rows(self, outcome: SweepOutcome) -> list[dict[str, Any]]:
+        """The run rows in order, as read back from JSON (a metric without a value:
+        ``None``)."""
+        return [dict(outcome.records[item]) for item in self.items()]
 
 
 # ------------------------------------------------------------------------------ statistics
@@ -1273,12 +1427,11 @@ class BenchmarkSpec(BenchmarkOptions):
 
 
 DESCRIPTION: Final = """\
-Score controllers and agents on fixed, versioned scenario suites and write a scorecard: per
-suite and metric, the interquartile mean over every scenario and seed with its 95 % stratified-
-bootstrap interval, a score from 0 (the suite's reference controller) to 1 (the best entry),
-and performance profiles. Shipped suites (experiments/suites/NAME-vVERSION.json): heldout-v1,
-corners-v1 (DrillString-v0), field-v1, deep-v1 (DrillStringField-v0). Writes scorecard.md,
-scorecard.csv, runs.csv and profiles.png to --out. More: docs/reports/benchmark.md.
+Score controllers and agents on fixed, versioned scenario suites: per suite and metric, the
+interquartile mean over every scenario and seed with its 95 % stratified-bootstrap interval, a
+score from 0 (the suite's reference) to 1 (the best entry), performance profiles. Suites:
+heldout-v1, corners-v1 (DrillString-v0), field-v1, deep-v1 (DrillStringField-v0). Writes
+scorecard.md/.csv, runs.csv, profiles.png to --out. More: docs/reports/benchmark.md.
 
 examples:
   drill-gym benchmark                                  # every shipped controller and agent
@@ -1296,26 +1449,35 @@ def _parser() -> ArgumentParser:
         metavar="POLICY",
         help="what to score: controllers ("
         + CONTROLLERS_OPTION_HELP
-        + "), model folders, folders of model folders (one per training seed, as drill-gym "
-        "sweep-train writes them: one method over its seeds), NAME=FOLDER to name one "
-        "(repeated: one method). Default: every registered controller and every model in "
-        "agents/models/; each suite's reference controller is always added",
+        + "), model folders, folders of model folders (one method, its training seeds), "
+        "NAME=FOLDER; default: every controller and shipped model, and each suite's reference",
     )
     spec_options(parser, BenchmarkOptions)
+    spec_options(parser, RunnerSpec)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``drill-gym benchmark``: run, score and write; returns the exit code (see ``--help``)."""
     argv = list(argv) if argv is not None else None
-    spec = spec_from_args(BenchmarkSpec, _parser().parse_args(argv))
+    args = _parser().parse_args(argv)
+    spec = spec_from_args(BenchmarkSpec, args)
+    runner = spec_from_args(RunnerSpec, args)
     given = argv if argv is not None else sys.argv[1:]
-    return run_benchmark(spec, ("drill-gym benchmark " + " ".join(given)).strip())
+    return run_benchmark(spec, ("drill-gym benchmark " + " ".join(given)).strip(), runner)
 
 
-def run_benchmark(spec: BenchmarkSpec, command: str = "drill-gym benchmark") -> int:
-    """Run, score and write what ``spec`` asks for (``command``: the command line written in
-    the scorecard); returns the exit code."""
+def _policy_error(option: str, message: str) -> None:
+    raise ValueError(f"POLICY: {message}")
+
+
+def run_benchmark(
+    spec: BenchmarkSpec, command: str = "drill-gym benchmark", runner: RunnerSpec | None = None
+) -> int:
+    """Run, score and write what ``spec`` asks for on the runner ``runner`` (default:
+    serially, no results database; ``command``: the command line written in the scorecard);
+    returns the exit code."""
+    runner = runner or RunnerSpec()
     if importlib.util.find_spec("scipy") is None:  # before minutes of runs, not after
         raise ValueError(
             "needs the package 'scipy' for the bootstrap, which is not installed (the bench "
@@ -1350,11 +1512,15 @@ def run_benchmark(spec: BenchmarkSpec, command: str = "drill-gym benchmark") -> 
     twice = sorted({n for n in taken if taken.count(n) > 1})
     if twice:
         raise ValueError(f"POLICY: two entries are named {', '.join(twice)}")
-    rows: list[dict[str, Any]] = []
+    refuse_on_ray(_policy_error, runner.backend(), [e.name for e in entries if not e.agent])
+    study = BenchmarkStudy(
+        tuple(suites), tuple(entries), task_runs=runner.task_size or BENCHMARK_TASK_RUNS
+    )
+    outcome = runner.run(study, spec.out / "benchmark.sqlite", progress=not spec.no_progress)
+    rows = study.rows(outcome)
     scores: list[dict[str, Any]] = []
     for suite in suites:
-        suite_rows = run_suite(suite, entries, progress=not spec.no_progress)
-        rows += suite_rows
+        suite_rows = [r for r in rows if r["suite"] == suite.label]
         scores += score_suite(suite, suite_rows, spec.resamples, spec.seed)
     wall = time.perf_counter() - start
     out = spec.out

@@ -13,12 +13,17 @@ rock volume cut in the window), bit-speed error and the env's reward per decisio
 
 Outputs (``--out``, default ``results/coupled-controllers``): ``coupled_controllers.json``
 and ``.csv`` (one row per run) and ``figures/coupled_controllers_map.png``.
+
+Every episode (a grid run, an evaluation episode of the agent or of its base loops) is an item
+of the sweep runner (:class:`CoupledStudy`, :mod:`experiments.sweep`): serially by default, on
+Ray with ``--workers N``, into the SQLite results database ``OUT/coupled_controllers.sqlite``
+with ``--results`` (or on Ray, ``--resume``); ``--resume`` runs only the missing episodes and
+the tables are made from the records, so they are those of a clean run.
 """
 
 from __future__ import annotations
 
 import math
-import sys
 import textwrap
 import time
 from collections.abc import Sequence
@@ -34,14 +39,27 @@ import drill_env
 from agents import load_policy
 from drill_env.coupled_env import DrillStringCoupledEnv
 from experiments.arguments import ArgumentParser, names_type, output_folder
+from experiments.controllers import refuse_on_ray
 from experiments.plots import save_figure
+from experiments.results_db import Exactly, Fields, Flag, Name, Number, Schema, Values, exactly
 from experiments.spec_cli import option, spec_from_args, spec_parser
+from experiments.sweep import (
+    Backend,
+    RunnerSpec,
+    Task,
+    TaskResult,
+    agent_fingerprint,
+    check_task_size,
+    chunks,
+    run_sweep,
+)
 from experiments.tables import Column, markdown_table, write_csv, write_json
 
 __all__ = [
     "AXIAL_LOOPS",
     "TORQUE_LOOPS",
     "CoupledControllersSpec",
+    "CoupledStudy",
     "main",
     "map_figure",
     "run_point",
@@ -186,56 +204,99 @@ AGENT_COLUMNS: Final = (
 )
 
 
-def evaluate_agent(model: Path, episodes: int) -> list[dict[str, Any]]:
-    """A trained ``DrillStringCoupled-v0`` agent and its base loops alone (zero action) on the
-    same randomised episodes (reset seeds ``AGENT_SEED + k``): the mean of each reward term
-    per decision and the episode metrics, averaged over the episodes."""
+def agent_episode(policy: Any, agent: bool, episode: int) -> dict[str, Any]:
+    """One randomised episode (reset seed ``AGENT_SEED + episode``) of ``DrillStringCoupled-v0``
+    with ``policy``'s env keywords, driven by ``policy`` (``agent``) or by its base loops alone
+    (zero action): per decision, the reward, each reward term, the applied force (N) and the
+    top-drive torque (N m); the episode metrics at its end."""
+    env = gym.make(drill_env.COUPLED_ENV_ID, **policy.env_kwargs).unwrapped
+    assert isinstance(env, DrillStringCoupledEnv)
+    steps: dict[str, list[float]] = {}
+    obs, _ = env.reset(seed=AGENT_SEED + episode)
+    done = False
+    while not done:
+        if agent:
+            action, _ = policy.predict(obs, deterministic=True)
+        else:
+            action = np.zeros(2 if env.config.action_mode == "both" else 1, np.float32)
+        obs, reward, terminated, truncated, info = env.step(action)
+        done = terminated or truncated
+        for key, value in {
+            "reward": float(reward),
+            **info["reward_terms"],
+            "applied_force_n": info["applied_force_n"],
+            "applied_force_sq": info["applied_force_n"] ** 2,
+            "torque_nm": info["top_drive_torque_nm"],
+        }.items():
+            steps.setdefault(key, []).append(float(value))
+    metrics = env.episode_metrics()
+    return {
+        "controller": _agent_label(policy, agent),
+        "episode": episode,
+        "reset_seed": AGENT_SEED + episode,
+        "keys": list(steps),
+        "steps": list(steps.values()),
+        "metrics": {key: float(metrics[key]) for key in AGENT_METRICS},
+    }
+
+
+AGENT_METRICS: Final = ("rop_m_s", "stuck_fraction", "bounce_fraction", "mse_pa")
+"""Episode metrics of an agent evaluation episode (:meth:`DrillStringCoupledEnv.episode_metrics`)."""
+
+
+def _agent_label(policy: Any, agent: bool) -> str:
+    return f"agent {policy.name}" if agent else "base loops"
+
+
+def agent_row(episodes: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """The evaluation row of one controller (the agent or its base loops) from its episodes
+    (:func:`agent_episode`, in episode order): the mean of each reward term per decision over
+    every decision, the episode metrics averaged over the episodes."""
+    sums: dict[str, float] = {}
+    decisions = 0
+    for record in episodes:
+        columns = dict(zip(record["keys"], record["steps"], strict=True))
+        for k in range(len(record["steps"][0])):
+            decisions += 1
+            for key, values in columns.items():
+                sums[key] = sums.get(key, 0.0) + values[k]
+    row: dict[str, Any] = {key: value / decisions for key, value in sums.items()}
+    metrics = [record["metrics"] for record in episodes]
+    row.update(
+        controller=episodes[0]["controller"],
+        rop_mm_s=1e3 * float(np.mean([m["rop_m_s"] for m in metrics])),
+        stuck_fraction=float(np.mean([m["stuck_fraction"] for m in metrics])),
+        bounce_fraction=float(np.mean([m["bounce_fraction"] for m in metrics])),
+        mse_mpa=float(np.mean([m["mse_pa"] for m in metrics])) / 1e6,
+        applied_force_kn=row["applied_force_n"] / 1e3,
+        applied_force_std_kn=math.sqrt(
+            max(row.pop("applied_force_sq") - row.pop("applied_force_n") ** 2, 0.0)
+        )
+        / 1e3,
+        torque_knm=row.pop("torque_nm") / 1e3,
+    )
+    return row
+
+
+def load_coupled_agent(model: Path) -> Any:
+    """The ``DrillStringCoupled-v0`` model at ``model``.
+
+    Raises:
+        ValueError: it is a model for another env (or no model).
+    """
     policy = load_policy(model)
     if policy.env_id != drill_env.COUPLED_ENV_ID:
         raise ValueError(f"{str(model)!r} is a model for {policy.env_id}, not the coupled env")
-    rows = []
-    for label, agent in (("base loops", None), (f"agent {policy.name}", policy)):
-        env = gym.make(drill_env.COUPLED_ENV_ID, **policy.env_kwargs).unwrapped
-        assert isinstance(env, DrillStringCoupledEnv)
-        sums: dict[str, float] = {}
-        decisions = 0
-        metrics: list[dict[str, float]] = []
-        for k in range(episodes):
-            obs, _ = env.reset(seed=AGENT_SEED + k)
-            done = False
-            while not done:
-                if agent is None:
-                    action = np.zeros(2 if env.config.action_mode == "both" else 1, np.float32)
-                else:
-                    action, _ = agent.predict(obs, deterministic=True)
-                obs, reward, terminated, truncated, info = env.step(action)
-                done = terminated or truncated
-                decisions += 1
-                for key, value in {
-                    "reward": float(reward),
-                    **info["reward_terms"],
-                    "applied_force_n": info["applied_force_n"],
-                    "applied_force_sq": info["applied_force_n"] ** 2,
-                    "torque_nm": info["top_drive_torque_nm"],
-                }.items():
-                    sums[key] = sums.get(key, 0.0) + value
-            metrics.append(env.episode_metrics())
-        row: dict[str, Any] = {key: value / decisions for key, value in sums.items()}
-        row.update(
-            controller=label,
-            rop_mm_s=1e3 * float(np.mean([m["rop_m_s"] for m in metrics])),
-            stuck_fraction=float(np.mean([m["stuck_fraction"] for m in metrics])),
-            bounce_fraction=float(np.mean([m["bounce_fraction"] for m in metrics])),
-            mse_mpa=float(np.mean([m["mse_pa"] for m in metrics])) / 1e6,
-            applied_force_kn=row["applied_force_n"] / 1e3,
-            applied_force_std_kn=math.sqrt(
-                max(row.pop("applied_force_sq") - row.pop("applied_force_n") ** 2, 0.0)
-            )
-            / 1e3,
-            torque_knm=row.pop("torque_nm") / 1e3,
-        )
-        rows.append(row)
-    return rows
+    return policy
+
+
+def evaluate_agent(model: Path, episodes: int) -> list[dict[str, Any]]:
+    """A trained ``DrillStringCoupled-v0`` agent and its base loops alone (zero action) on the
+    same randomised episodes (reset seeds ``AGENT_SEED + k``): the mean of each reward term
+    per decision and the episode metrics, averaged over the episodes (serially, through the
+    runner)."""
+    study = CoupledStudy(agent=load_coupled_agent(model), agent_episodes=episodes, grid=False)
+    return study.agent_rows(run_sweep(study, Backend(), progress=False).records)
 
 
 def holds(row: dict[str, Any]) -> bool:
@@ -386,25 +447,219 @@ class CoupledControllersSpec:
 
 
 def _parser() -> ArgumentParser:
-    return spec_parser("drill-gym coupled-controllers", DESCRIPTION, CoupledControllersSpec)
+    return spec_parser(
+        "drill-gym coupled-controllers", DESCRIPTION, CoupledControllersSpec, RunnerSpec
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``drill-gym coupled-controllers``: run the grid, print the tables, write the files."""
-    return run_study(spec_from_args(CoupledControllersSpec, _parser().parse_args(argv)))
+    parser = _parser()
+    args = parser.parse_args(argv)
+    runner = spec_from_args(RunnerSpec, args)
+    spec = spec_from_args(CoupledControllersSpec, args)
+    refuse_on_ray(parser.fail, runner.backend(), [n for n in spec.torque_loops if n != "pi"])
+    return run_study(spec, runner)
 
 
-def run_study(spec: CoupledControllersSpec) -> int:
-    """Run what ``spec`` asks for, print the tables, write the files; returns the exit code."""
+# ---------------------------------------------------------------------------- the study
+def grid_item(torque_loop: str, axial_loop: str, force_kn: float, speed_rad_s: float) -> str:
+    """The item key of one grid run."""
+    return f"{torque_loop}/{axial_loop}/W0={float(force_kn)!r}kN/ref={float(speed_rad_s)!r}"
+
+
+def agent_item(agent: bool, episode: int) -> str:
+    """The item key of one evaluation episode of the agent (or of its base loops)."""
+    return f"{'agent' if agent else 'base loops'}/episode={episode}"
+
+
+GridPoint = tuple[str, str, float, float]
+"""``(top-drive loop, axial loop, applied force in kN, reference speed in rad/s)``."""
+
+
+def coupled_points_task(points: Sequence[GridPoint], duration_s: float) -> TaskResult:
+    """Grid runs (:func:`run_point`), records by :func:`grid_item`."""
+    return TaskResult(
+        {
+            grid_item(*point): run_point(point[0], point[1], point[2] * 1e3, point[3], duration_s)
+            for point in points
+        }
+    )
+
+
+def coupled_agent_task(policy: Any, episodes: Sequence[tuple[bool, int]]) -> TaskResult:
+    """Evaluation episodes (:func:`agent_episode`) of ``(agent or base loops, episode)``,
+    records by :func:`agent_item`."""
+    return TaskResult(
+        {agent_item(agent, k): agent_episode(policy, agent, k) for agent, k in episodes}
+    )
+
+
+_NUMBERS: Final = tuple(c.key for c in ROW_COLUMNS[4:])
+"""The scores of a grid row (``None`` in its record where not defined)."""
+
+
+@dataclass(frozen=True)
+class CoupledStudy:
+    """The study on the sweep runner: an item is one grid run (top-drive loop, axial loop,
+    applied force, reference speed) or one evaluation episode of the agent or its base loops;
+    a task ``task_items`` of them.
+
+    Attributes: as :class:`CoupledControllersSpec` (``grid``: run the grid), ``agent`` the
+    loaded ``DrillStringCoupled-v0`` model (``None``: no evaluation).
+    """
+
+    torque_loops: tuple[str, ...] = TORQUE_LOOPS
+    axial_loops: tuple[str, ...] = tuple(AXIAL_LOOPS)
+    forces_kn: tuple[float, ...] = DEFAULT_FORCES_KN
+    speeds_rad_s: tuple[float, ...] = DEFAULT_SPEEDS_RAD_S
+    duration_s: float = 30.0
+    grid: bool = True
+    agent: Any = field(default=None, compare=False)
+    agent_episodes: int = 8
+    task_items: int = 1
+    name: str = "coupled-controllers"
+
+    def __post_init__(self) -> None:
+        check_task_size("task_items", self.task_items)
+        if not self.grid and self.agent is None:
+            raise ValueError("nothing to run: no grid and no agent")
+
+    def points(self) -> list[GridPoint]:
+        """The grid runs, in table order (axial loop, top-drive loop, force, speed)."""
+        if not self.grid:
+            return []
+        return [
+            (loop, axial, float(force), float(speed))
+            for axial in self.axial_loops
+            for loop in self.torque_loops
+            for force in self.forces_kn
+            for speed in self.speeds_rad_s
+        ]
+
+    def episodes(self) -> list[tuple[bool, int]]:
+        """The evaluation episodes: the base loops' then the agent's."""
+        if self.agent is None:
+            return []
+        return [(agent, k) for agent in (False, True) for k in range(self.agent_episodes)]
+
+    def spec(self) -> dict[str, Any]:
+        """The study's settings (not the task size)."""
+        return {
+            "points": [list(p) for p in self.points()],
+            "duration_s": float(self.duration_s),
+            "agent": agent_fingerprint(self.agent),
+            "agent_episodes": int(self.agent_episodes) if self.agent is not None else 0,
+            "agent_seed": AGENT_SEED,
+        }
+
+    def items(self) -> list[str]:
+        """The agent's episodes, then the grid runs."""
+        return [agent_item(*e) for e in self.episodes()] + [grid_item(*p) for p in self.points()]
+
+    def record_schema(self, item: str) -> Schema:
+        """A grid run's row (:func:`run_point`) or an evaluation episode
+        (:func:`agent_episode`), each setting this study's."""
+        for agent, k in self.episodes():
+            if item == agent_item(agent, k):
+                return Fields(
+                    {
+                        "controller": Exactly(_agent_label(self.agent, agent)),
+                        "episode": Exactly(k),
+                        "reset_seed": Exactly(AGENT_SEED + k),
+                        "keys": Values(Name()),
+                        "steps": Values(Values(Number(nullable=False))),
+                        "metrics": Fields({key: Number(nullable=False) for key in AGENT_METRICS}),
+                    }
+                )
+        loop, axial, force, speed = next(p for p in self.points() if grid_item(*p) == item)
+        return Fields(
+            {
+                **exactly(
+                    {
+                        "torque_loop": loop,
+                        "axial_loop": axial,
+                        "applied_force_kn": force * 1e3 / 1e3,
+                        "reference_rad_s": speed,
+                    }
+                ),
+                "diverged": Flag(),
+                **{key: Number() for key in _NUMBERS},
+            }
+        )
+
+    def tasks(self, missing: Sequence[str]) -> list[Task]:
+        """``task_items`` missing episodes or runs per task."""
+        wanted = set(missing)
+        episodes = [e for e in self.episodes() if agent_item(*e) in wanted]
+        points = [p for p in self.points() if grid_item(*p) in wanted]
+        tasks = [
+            Task(
+                key="/".join(agent_item(*e) for e in block),
+                function=coupled_agent_task,
+                kwargs={"policy": self.agent, "episodes": block},
+                items=tuple(agent_item(*e) for e in block),
+            )
+            for block in chunks(episodes, self.task_items)
+        ]
+        return tasks + [
+            Task(
+                key="/".join(grid_item(*p) for p in block),
+                function=coupled_points_task,
+                kwargs={"points": block, "duration_s": self.duration_s},
+                items=tuple(grid_item(*p) for p in block),
+            )
+            for block in chunks(points, self.task_items)
+        ]
+
+    def agent_rows(self, records: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
+        """The evaluation rows (:func:`agent_row`): the base loops', then the agent's."""
+        return [
+            agent_row([records[agent_item(agent, k)] for k in range(self.agent_episodes)])
+            for agent in (False, True)
+        ]
+
+    def grid_rows(self, records: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
+        """The grid rows in table order (an undefined score as NaN)."""
+        rows = []
+        for point in self.points():
+            row = dict(records[grid_item(*point)])
+            rows.append({k: math.nan if v is None and k in _NUMBERS else v for k, v in row.items()})
+        return rows
+
+
+def run_study(spec: CoupledControllersSpec, runner: RunnerSpec | None = None) -> int:
+    """Run what ``spec`` asks for on the runner ``runner`` (default: serially, no results
+    database), print the tables, write the files; returns the exit code."""
+    runner = runner or RunnerSpec()
     if spec.agent is not None and not spec.agent.exists():
         raise ValueError(f"--agent: {str(spec.agent)!r} does not exist")
-    out = spec.out
-    out.mkdir(parents=True, exist_ok=True)
+    agent = None
     if spec.agent is not None:
         try:
-            agent_rows = evaluate_agent(spec.agent, spec.agent_episodes)
+            agent = load_coupled_agent(spec.agent)
         except ValueError as err:
             raise ValueError(f"--agent: {err}") from None
+    out = spec.out
+    out.mkdir(parents=True, exist_ok=True)
+    if spec.no_grid and agent is None:
+        return 0
+    study = CoupledStudy(
+        torque_loops=spec.torque_loops,
+        axial_loops=spec.axial_loops,
+        forces_kn=spec.forces_kn,
+        speeds_rad_s=spec.speeds_rad_s,
+        duration_s=spec.duration_s,
+        grid=not spec.no_grid,
+        agent=agent,
+        agent_episodes=spec.agent_episodes,
+        task_items=runner.task_size or 1,
+    )
+    started = time.perf_counter()
+    outcome = runner.run(study, out / "coupled_controllers.sqlite", progress=not spec.no_progress)
+    wall = time.perf_counter() - started
+    if agent is not None:
+        agent_rows = study.agent_rows(outcome.records)
         print(f"Agent against its base loops ({spec.agent_episodes} randomised episodes, "
               f"reset seeds {AGENT_SEED}+k; reward terms are means per decision):\n")  # fmt: skip
         print(markdown_table(agent_rows, AGENT_COLUMNS))
@@ -412,16 +667,7 @@ def run_study(spec: CoupledControllersSpec) -> int:
         write_json({"model": str(spec.agent), "rows": agent_rows}, out / "coupled_agent.json")
     if spec.no_grid:
         return 0
-    started = time.perf_counter()
-    rows = []
-    for axial in spec.axial_loops:
-        for loop in spec.torque_loops:
-            if not spec.no_progress:
-                print(f"coupled-controllers: {loop} / {axial}", file=sys.stderr)
-            for force in spec.forces_kn:
-                for speed in spec.speeds_rad_s:
-                    rows.append(run_point(loop, axial, force * 1e3, speed, spec.duration_s))
-    wall = time.perf_counter() - started
+    rows = study.grid_rows(outcome.records)
     print(f"Controllers on DrillStringCoupled-v0 ({spec.duration_s:g} s episodes, scored over "
           f"the second half; a point is held with stuck < {HOLD_STUCK:g} and bounce < "
           f"{HOLD_BOUNCE:g}):\n")  # fmt: skip

@@ -11,6 +11,7 @@ import json
 import math
 import os
 import re
+import sqlite3
 import subprocess
 import sys
 from collections.abc import Sequence
@@ -24,6 +25,7 @@ from experiments import benchmark
 from experiments.benchmark import (
     METRICS,
     SUITE_DIR,
+    BenchmarkStudy,
     content_hash,
     iqm,
     iqm_interval,
@@ -38,6 +40,7 @@ from experiments.benchmark import (
 from experiments.cli import main
 from experiments.heldout import CORNERS, FIELD_HELD_OUT, HELD_OUT
 from experiments.spec_cli import spec_from_args
+from experiments.sweep import spec_hash
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -550,3 +553,70 @@ def test_the_command_scores_a_method_over_its_training_seeds(tmp_path: Path) -> 
     assert "seeds (2 training seeds: 1, 2)" in text and "| seeds, 2 training seeds |" in text
     assert "| seeds | 1 |" in text and "| seeds | 2 |" in text
     assert "one training seed" not in text
+
+
+# ------------------------------------------------------------------------------- the runner
+def _tables(out: Path) -> dict[str, str]:
+    """The CSV tables and the scorecard without its command line (it names the folder)."""
+    tables = {p.name: p.read_text() for p in sorted(out.glob("*.csv"))}
+    text = (out / "scorecard.md").read_text()
+    tables["scorecard.md"] = "\n".join(
+        line for line in text.splitlines() if not line.startswith("Command:")
+    )
+    return tables
+
+
+def test_a_results_database_and_a_resume_give_the_serial_scorecard(tmp_path: Path) -> None:
+    _seed_models(tmp_path / "sweep" / "runs", [1, 2])
+    base = ["benchmark", "stiff_pi", f"seeds={tmp_path / 'sweep'}", "--suites",
+            str(_tiny(tmp_path)), "--resamples", "200", "--no-progress", "--no-plots"]  # fmt: skip
+    database = tmp_path / "b.sqlite"
+    assert main([*base, "--out", str(tmp_path / "serial")]) == 0
+    assert main([*base, "--out", str(tmp_path / "db"), "--results", str(database)]) == 0
+    # a run lost from the database is run again on resume; the rest are read back
+    with sqlite3.connect(database) as db:
+        assert db.execute("SELECT COUNT(*) FROM results").fetchone() == ((1 + 2 + 1) * 2 * 2,)
+        db.execute("DELETE FROM results WHERE item = (SELECT MAX(item) FROM results)")
+    again = [*base, "--out", str(tmp_path / "again"), "--results", str(database), "--resume"]
+    assert main([*again, "--task-size", "3"]) == 0
+    serial = _tables(tmp_path / "serial")
+    assert _tables(tmp_path / "db") == serial == _tables(tmp_path / "again")
+
+
+def test_the_settings_hash_follows_the_suites_and_the_models(tmp_path: Path) -> None:
+    models = _seed_models(tmp_path / "sweep" / "runs", [1, 2])
+    suite = load_suite(_tiny(tmp_path))
+    (tmp_path / "longer").mkdir()
+    other_suite = load_suite(_tiny(tmp_path / "longer", episode_s=20.0))
+    entries = (make_entry("proposed"), make_entry(str(models[0])))
+    study = BenchmarkStudy((suite,), entries)
+    hashes = {
+        spec_hash("benchmark", s.spec())
+        for s in (
+            study,
+            BenchmarkStudy((other_suite,), entries),
+            BenchmarkStudy((suite,), (entries[0], make_entry(str(models[1])))),
+            BenchmarkStudy((suite,), (entries[0], make_entry("stiff_pi"))),
+        )
+    }
+    assert len(hashes) == 4
+    same = BenchmarkStudy((suite,), entries, task_runs=1)
+    assert spec_hash("benchmark", same.spec()) == spec_hash("benchmark", study.spec())
+    assert len(study.items()) == len(set(study.items())) == 2 * 2 * 2
+
+
+def test_a_user_class_cannot_run_on_ray(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    argv = ["benchmark", "examples/custom_controller.py:SpeedPI", "--suites",
+            str(_tiny(tmp_path)), "--workers", "2", "--out", str(tmp_path / "out")]  # fmt: skip
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is your own class, registered in this process only" in err
+
+
+def test_on_ray_the_scorecard_is_the_serial_one(tmp_path: Path) -> None:
+    pytest.importorskip("ray")
+    base = ["benchmark", "stiff_pi", "agents/models/residual_ppo", "--suites",
+            str(_tiny(tmp_path)), "--resamples", "200", "--no-progress", "--no-plots"]  # fmt: skip
+    assert main([*base, "--out", str(tmp_path / "serial")]) == 0
+    assert main([*base, "--out", str(tmp_path / "ray"), "--workers", "2"]) == 0
+    assert _tables(tmp_path / "ray") == _tables(tmp_path / "serial")
