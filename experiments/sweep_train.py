@@ -60,12 +60,15 @@ from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final
 
+import gymnasium as gym
+
 from agents import train as training
 from agents.checkpoints import find_last_checkpoint
 from agents.config import TrainConfig
 from agents.policy import is_model_folder, load_policy
 from agents.train import planned_timesteps, train, validation_scenarios, validation_score
 from baselines.registry import REFERENCE_CONTROLLER
+from drill_env.evaluation import ZeroAction, episode_metrics, rollout
 from experiments.arguments import SEED_HIGH, ArgumentParser, names_type, output_folder
 from experiments.evaluate import (
     FIELD_HELD_OUT,
@@ -360,10 +363,6 @@ def final_validation(config: TrainConfig, model: Path) -> dict[str, float]:
     (``validate_every`` 0): the ratios to the base controller on the run's validation
     scenarios (:func:`agents.train.validation_scenarios`, :func:`agents.train.validation_score`)
     and the decisions the run took."""
-    import gymnasium as gym
-
-    from drill_env.evaluation import ZeroAction, episode_metrics, rollout
-
     policy = load_policy(model)
     kwargs, seeds = validation_scenarios(config)
     base = kwargs["base_controller"] or REFERENCE_CONTROLLER[config.env_id]
@@ -742,7 +741,7 @@ class SweepTrainSpec:
     )
     """early stopping of weak trials"""
     grace_period: int = dataclasses.field(default=2, metadata=option(low=1, high=10_000))
-    """validations every trial reports before the scheduler may stop it"""
+    """validations before a trial may be stopped"""
     settings: tuple[str, ...] = dataclasses.field(
         default=(),
         metadata=option(
@@ -770,7 +769,7 @@ class SweepTrainSpec:
     )
     """only these held-out scenarios"""
     workers: int = dataclasses.field(default=2, metadata=option(low=1, high=4096))
-    """trials at a time (CPUs of the local Ray cluster)"""
+    """trials at a time, a CPU each"""
     address: str | None = dataclasses.field(
         default=None,
         metadata=option(metavar="ADDR", default_text=f"${ADDRESS_VARIABLE}, else a local one"),
@@ -783,15 +782,14 @@ class SweepTrainSpec:
     no_progress: bool = False
     """no Tune progress output"""
     resume: bool = False
-    """finish the interrupted sweep in --out (run with the same options): its finished trials
-    are kept, the others continue from their last checkpoint (reads Tune's pickled state in
-    --out/tune: resume only a sweep you ran)"""
-    grid: tuple[str, ...] = dataclasses.field(
-        default=(), metadata=option(repeat=True, metavar="NAME=V1,V2")
+    """finish the interrupted sweep in --out, same options (unpickles Tune's state: only a
+    sweep you ran)"""
+    grid: tuple[str, ...] | None = dataclasses.field(
+        default=None, metadata=option(repeat=True, metavar="NAME=V1,V2")
     )
     """a training setting's values: every combination a trial"""
-    sample: tuple[str, ...] = dataclasses.field(
-        default=(), metadata=option(repeat=True, metavar="NAME=KIND:LOW:HIGH")
+    sample: tuple[str, ...] | None = dataclasses.field(
+        default=None, metadata=option(repeat=True, metavar="NAME=KIND:LOW:HIGH")
     )
     """a training setting drawn per trial, KIND uniform, loguniform or int (or choice:A,B)"""
 
@@ -805,8 +803,8 @@ class SweepTrainSpec:
             ValueError: a setting that does not parse or does not fit (naming its option).
         """
         try:
-            grid = dict(parse_grid(g) for g in self.grid)
-            samples = dict(parse_sample(s) for s in self.sample)
+            grid = dict(parse_grid(g) for g in self.grid or ())
+            samples = dict(parse_sample(s) for s in self.sample or ())
             fields = _fields()
             explicit: dict[str, Any] = {}
             for text in self.settings:
