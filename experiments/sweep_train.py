@@ -507,13 +507,17 @@ def _check_resume(out: Path, recorded: Mapping[str, Any], resume: bool) -> None:
 
 
 def _trial_row(result: Any, spec: SweepSpec, runs_dir: Path) -> dict[str, Any]:
-    """One row of the summary table from a Tune result."""
+    """One row of the summary table from a Tune result (the validations as the run's
+    ``validation.csv`` records them, which a resumed trial continues; without one, as reported
+    to Tune)."""
     config = result.config
     seed = int(config.get("seed", spec.seeds[0]))
     history = result.metrics_dataframe
     records = [] if history is None else history.to_dict("records")
     trial = str(result.metrics.get("trial_id", "")) if result.metrics else ""
     folder = next(runs_dir.glob(f"{trial}__seed{seed}"), None) if trial else None
+    if folder is not None and (folder / "validation.csv").is_file():
+        records = _validations(folder / "validation.csv")
     row: dict[str, Any] = {"trial": trial, "seed": seed}
     for name in (*spec.grid, *spec.samples):
         row[name] = config.get(name)
