@@ -69,7 +69,11 @@ def test_the_options_are_the_spec_and_grid_and_sample_repeat() -> None:
     argv = ["--seeds", "3", "3", "4", "--grid", "gamma=0.9,0.99", "--grid", "n_steps=64,128"]
     argv += ["--sample", "ent_coef=uniform:0:0.01", "--sample", "vf_coef=choice:0.5,1"]
     spec = spec_from_args(sweep_train.SweepTrainSpec, sweep_train._parser().parse_args(argv))
-    assert spec.grid == ("gamma=0.9,0.99", "n_steps=64,128") and len(spec.sample) == 2
+    assert (
+        spec.grid == ("gamma=0.9,0.99", "n_steps=64,128")
+        and spec.sample is not None
+        and len(spec.sample) == 2
+    )
     sweep = spec.sweep_spec()
     assert sweep.seeds == (3, 4) and dict(sweep.grid) == {
         "gamma": [0.9, 0.99],
