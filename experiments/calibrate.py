@@ -17,10 +17,11 @@ not a directory is refused before any work.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Final, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -39,8 +40,17 @@ from experiments.calibration_fit import (
     simulate_plant,
     stuck_threshold,
 )
+from experiments.spec_cli import option, spec_from_args, spec_parser
 
-__all__ = ["main", "replay_main", "replay_parser", "window_type"]
+__all__ = [
+    "CalibrateSpec",
+    "ReplaySpec",
+    "Window",
+    "main",
+    "replay_main",
+    "replay_parser",
+    "window_type",
+]
 
 CALIBRATE_FILES = ("plant.json", "report.md", "fit.png", "loop.png", "uncertainty.png")
 """The files ``calibrate`` writes into ``--out``."""
@@ -48,7 +58,16 @@ REPLAY_FILES = ("replay.csv", "features.csv", "replay.md", "replay.png")
 """The files ``replay`` writes into ``--out``."""
 
 
-def window_type(text: str) -> tuple[float, float]:
+class Window(NamedTuple):
+    """A time window of a log, ``--window A:B``."""
+
+    start_s: float
+    """start (s)"""
+    end_s: float
+    """end (s), after the start"""
+
+
+def window_type(text: str) -> Window:
     """Parse ``A:B`` (seconds, ``A < B``) for ``--window``."""
     parts = text.split(":")
     if len(parts) != 2:
@@ -59,7 +78,7 @@ def window_type(text: str) -> tuple[float, float]:
         raise argparse.ArgumentTypeError(f"{text!r} is not A:B with numbers (s)") from None
     if not (math.isfinite(a) and math.isfinite(b) and a < b):
         raise argparse.ArgumentTypeError(f"{text!r}: allowed finite A < B (s)")
-    return a, b
+    return Window(a, b)
 
 
 def fix_type(text: str) -> tuple[str, float]:
@@ -315,29 +334,49 @@ def _top_drive_lines(result: FitResult) -> list[str]:
     ]
 
 
+LOG_HELP: Final = "the measured log (.csv, or .parquet with pyarrow)"
+"""Help of the LOG argument of ``calibrate`` and ``replay``."""
+OUT_HELP: Final = "output directory, made if missing (required)"
+"""Help of ``--out`` of ``calibrate`` and ``replay``."""
+
+
+@dataclasses.dataclass(frozen=True)
+class CalibrateSpec:
+    """Settings of ``drill-gym calibrate``; its arguments are generated from these fields."""
+
+    log: str | None = dataclasses.field(
+        default=None, metadata=option(positional=True, metavar="LOG", help=LOG_HELP)
+    )
+    """the measured log (required)"""
+    window: Window | None = dataclasses.field(
+        default=None, metadata=option(parse=window_type, metavar="A:B")
+    )
+    """fitted window, start:end in s (required)"""
+    out: Path | None = dataclasses.field(
+        default=None, metadata=option(metavar="DIR", help=OUT_HELP)
+    )
+    """output directory (required)"""
+    family: str = dataclasses.field(default="auto", metadata=option(choices=("auto", *FAMILIES)))
+    """friction family; auto fits all and keeps the lowest BIC"""
+    no_wob: bool = False
+    """friction in N m, not proportional to the log's wob_n"""
+    fix: tuple[tuple[str, float], ...] | None = dataclasses.field(
+        default=None, metadata=option(parse=fix_type, metavar="NAME=VALUE", repeat=True)
+    )
+    """hold a parameter at a value (SI unit)"""
+
+
+CALIBRATE_DESCRIPTION: Final = (
+    "Fit a lumped bit-side torsional plant to a measured log (CSV or Parquet, SI\n"
+    "columns time_s, top_speed_rad_s, bit_speed_rad_s, bit_torque_nm, optional wob_n):\n"
+    "the measured top-drive speed drives the model; every friction family is fitted\n"
+    "and the one of lowest BIC kept. Writes plant.json, report.md and figures."
+)
+
+
 def _parser() -> ArgumentParser:
     """The parser of ``drill-gym calibrate``."""
-    parser = ArgumentParser(
-        prog="drill-gym calibrate",
-        description=(
-            "Fit a lumped bit-side torsional plant to a measured log (CSV or Parquet, SI\n"
-            "columns time_s, top_speed_rad_s, bit_speed_rad_s, bit_torque_nm, optional wob_n):\n"
-            "the measured top-drive speed drives the model; every friction family is fitted\n"
-            "and the one of lowest BIC kept. Writes plant.json, report.md and figures."
-        ),
-    )
-    parser.add_argument("log", nargs="?", help="the measured log (.csv, or .parquet with pyarrow)")
-    parser.add_argument("--window", type=window_type, metavar="A:B",
-                        help="fitted window, start:end in s (required)")  # fmt: skip
-    parser.add_argument("--out", type=Path, metavar="DIR",
-                        help="output directory, made if missing (required)")  # fmt: skip
-    parser.add_argument("--family", choices=("auto", *FAMILIES), default="auto",
-                        help="friction family; auto fits all and keeps the lowest BIC")  # fmt: skip
-    parser.add_argument("--no-wob", action="store_true",
-                        help="friction in N m, not proportional to the log's wob_n")  # fmt: skip
-    parser.add_argument("--fix", type=fix_type, action="append", metavar="NAME=VALUE",
-                        help="hold a parameter at a value (SI unit; repeatable)")  # fmt: skip
-    return parser
+    return spec_parser("drill-gym calibrate", CALIBRATE_DESCRIPTION, CalibrateSpec)
 
 
 def _required(parser: ArgumentParser, args: argparse.Namespace, names: Sequence[str]) -> None:
@@ -345,7 +384,7 @@ def _required(parser: ArgumentParser, args: argparse.Namespace, names: Sequence[
     (checked after the parse, so that an unknown option is reported first)."""
     missing = [n for n in names if getattr(args, n) is None]
     if missing:
-        shown = [n.upper() if n in ("log", "plant") else f"--{n}" for n in missing]
+        shown = [n.upper() if n in ("log", "plant", "old", "new") else f"--{n}" for n in missing]
         parser.error(f"the following arguments are required: {', '.join(shown)}")
 
 
@@ -354,20 +393,22 @@ def calibrate_main(argv: Sequence[str]) -> int:
     parser = _parser()
     args = parser.parse_args(list(argv))
     _required(parser, args, ("log", "window", "out"))
-    out: Path = args.out
+    spec = spec_from_args(CalibrateSpec, args)
+    assert spec.log is not None and spec.window is not None and spec.out is not None
+    out = spec.out
     prepare_out(out, CALIBRATE_FILES, ("plant.json", PLANT_FORMAT.rsplit("/", 1)[0] + "/"))
-    log = read_log(args.log)
-    families = FAMILIES if args.family == "auto" else (args.family,)
-    result = calibrate(log, args.window, families, not args.no_wob, dict(args.fix or []))
-    window = log.window(*args.window)
+    log = read_log(spec.log)
+    families = FAMILIES if spec.family == "auto" else (spec.family,)
+    result = calibrate(log, spec.window, families, not spec.no_wob, dict(spec.fix or ()))
+    window = log.window(*spec.window)
     speed, torque = simulate_plant(result.plant, window, result.plant.initial_twist_rad)
     result.plant.save(out / "plant.json")
-    title = f"{result.plant.family} fit on {args.window[0]:g}-{args.window[1]:g} s"
+    title = f"{result.plant.family} fit on {spec.window[0]:g}-{spec.window[1]:g} s"
     _save(_fit_figure(window, speed, torque, title), out / "fit.png")
     _save(_loop_figure(window, speed, torque, f"torque-speed loop, {title}"), out / "loop.png")
     _save(_uncertainty_figure(result), out / "uncertainty.png")
     command = "drill-gym calibrate " + " ".join(argv)
-    (out / "report.md").write_text(_report(result, log, args.window, command))
+    (out / "report.md").write_text(_report(result, log, spec.window, command))
     print(f"family {result.plant.family}; wrote {', '.join(CALIBRATE_FILES)} in {out}")
     for name, p in result.plant.parameters.items():
         shown = f"{p.value:.6g} {p.unit}" if p.identified else f"not identified ({p.note})"
@@ -425,26 +466,41 @@ def top_drive_rows(
     return rows
 
 
+@dataclasses.dataclass(frozen=True)
+class ReplaySpec:
+    """Settings of ``drill-gym replay``; its arguments are generated from these fields."""
+
+    plant: str | None = dataclasses.field(
+        default=None, metadata=option(positional=True, metavar="PLANT")
+    )
+    """plant.json written by drill-gym calibrate"""
+    log: str | None = dataclasses.field(
+        default=None, metadata=option(positional=True, metavar="LOG", help=LOG_HELP)
+    )
+    """the measured log (required)"""
+    window: Window | None = dataclasses.field(
+        default=None, metadata=option(parse=window_type, metavar="C:D")
+    )
+    """replayed window, start:end in s (required)"""
+    out: Path | None = dataclasses.field(
+        default=None, metadata=option(metavar="DIR", help=OUT_HELP)
+    )
+    """output directory (required)"""
+    free_running: bool = False
+    """run the plant's identified top drive under its speed loop instead of the measured top
+    speed (the plant self-excites)"""
+
+
+REPLAY_DESCRIPTION: Final = (
+    "Drive a calibrated plant (plant.json of drill-gym calibrate) with a log's measured\n"
+    "top-drive speed on a window; write the simulated bit speed and torque on bit beside\n"
+    "the measured ones (replay.csv) and the stick-slip features (features.csv)."
+)
+
+
 def replay_parser() -> ArgumentParser:
     """The parser of ``drill-gym replay``."""
-    parser = ArgumentParser(
-        prog="drill-gym replay",
-        description=(
-            "Drive a calibrated plant (plant.json of drill-gym calibrate) with a log's measured\n"
-            "top-drive speed on a window; write the simulated bit speed and torque on bit beside\n"
-            "the measured ones (replay.csv) and the stick-slip features (features.csv)."
-        ),
-    )
-    parser.add_argument("plant", nargs="?", help="plant.json written by drill-gym calibrate")
-    parser.add_argument("log", nargs="?", help="the measured log (.csv, or .parquet with pyarrow)")
-    parser.add_argument("--window", type=window_type, metavar="C:D",
-                        help="replayed window, start:end in s (required)")  # fmt: skip
-    parser.add_argument("--out", type=Path, metavar="DIR",
-                        help="output directory, made if missing (required)")  # fmt: skip
-    parser.add_argument("--free-running", action="store_true",
-                        help="run the plant's identified top drive under its speed loop instead "
-                        "of the measured top speed (the plant self-excites)")  # fmt: skip
-    return parser
+    return spec_parser("drill-gym replay", REPLAY_DESCRIPTION, ReplaySpec)
 
 
 def replay_main(argv: Sequence[str]) -> int:
@@ -452,13 +508,16 @@ def replay_main(argv: Sequence[str]) -> int:
     parser = replay_parser()
     args = parser.parse_args(list(argv))
     _required(parser, args, ("plant", "log", "window", "out"))
-    out: Path = args.out
+    spec = spec_from_args(ReplaySpec, args)
+    assert spec.plant is not None and spec.log is not None
+    assert spec.window is not None and spec.out is not None
+    out = spec.out
     prepare_out(out, REPLAY_FILES, ("replay.csv", "time_s,bit_speed_rad_s,bit_torque_nm"))
-    plant = load_plant(args.plant)
-    log = read_log(args.log)
-    window = log.window(*args.window)
+    plant = load_plant(spec.plant)
+    log = read_log(spec.log)
+    window = log.window(*spec.window)
     columns = {"time_s": window.time_s}
-    if args.free_running:
+    if spec.free_running:
         top_speed, speed, torque, surface = simulate_free(plant, window)
         columns |= {"bit_speed_rad_s": speed, "bit_torque_nm": torque,
                     "top_speed_rad_s": top_speed, "surface_torque_nm": surface}  # fmt: skip
@@ -478,15 +537,15 @@ def replay_main(argv: Sequence[str]) -> int:
         f"Command: `drill-gym replay {' '.join(argv)}`",
         "",
         f"Plant: family {plant.family}, fitted on {plant.window_s[0]:g}-{plant.window_s[1]:g} s of "
-        f"{plant.log}. Window: {args.window[0]:g}-{args.window[1]:g} s.",
+        f"{plant.log}. Window: {spec.window[0]:g}-{spec.window[1]:g} s.",
         "",
         "Free running: the plant's identified top drive under its PI speed loop (initial state "
         "from the window's first samples), not the measured top speed."
-        if args.free_running
+        if spec.free_running
         else "Driven by the measured top-drive speed.",
         "",
     ]
-    defects = [d for d in find_defects(log) if d.overlaps(*args.window)]
+    defects = [d for d in find_defects(log) if d.overlaps(*spec.window)]
     if defects:
         lines += ["Defects inside the window:", ""]
         lines += [
@@ -496,7 +555,7 @@ def replay_main(argv: Sequence[str]) -> int:
         lines.append("")
     if window.has("bit_speed_rad_s") and window.has("bit_torque_nm"):
         rows, *_ = replay_rows(window, speed, torque)
-        if args.free_running:
+        if spec.free_running:
             rows += top_drive_rows(window, columns["top_speed_rad_s"], columns["surface_torque_nm"])
         with (out / "features.csv").open("w") as f:
             f.write("feature,measured,simulated,error\n")
@@ -519,8 +578,8 @@ def replay_main(argv: Sequence[str]) -> int:
                 f"{_format(r['error'], 3)} ({kind}) |"
             )
         lines += ["", "![replay](replay.png)", ""]
-        mode = "free-running " if args.free_running else ""
-        title = f"{mode}replay of {args.window[0]:g}-{args.window[1]:g} s"
+        mode = "free-running " if spec.free_running else ""
+        title = f"{mode}replay of {spec.window[0]:g}-{spec.window[1]:g} s"
         _save(_fit_figure(window, speed, torque, title), out / "replay.png")
     else:
         lines.append("The log lacks bit_speed_rad_s or bit_torque_nm: no features compared.")

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Final
@@ -10,8 +11,9 @@ from typing import Final
 from agents.convert import convert_model
 from agents.policy import PICKLE_RISK
 from experiments.arguments import ArgumentParser
+from experiments.spec_cli import option, spec_from_args, spec_parser
 
-__all__ = ["DESCRIPTION", "main"]
+__all__ = ["DESCRIPTION", "ConvertSpec", "main"]
 
 DESCRIPTION: Final = """\
 Convert a model of an earlier format to the current one (config.json, policy.safetensors,
@@ -32,19 +34,30 @@ examples:
 """
 
 
+@dataclasses.dataclass(frozen=True)
+class ConvertSpec:
+    """Settings of ``drill-gym convert``; its arguments are generated from these fields."""
+
+    old: str | None = dataclasses.field(
+        default=None, metadata=option(positional=True, metavar="OLD")
+    )
+    """the old model folder, or a Stable-Baselines3 .zip file"""
+    new: str | None = dataclasses.field(
+        default=None, metadata=option(positional=True, metavar="NEW")
+    )
+    """the new model folder (may be OLD's folder)"""
+    trust_pickle: bool = dataclasses.field(
+        default=False,
+        metadata=option(
+            help=f"read the .zip file OLD names, a pickle: {PICKLE_RISK}; pass it only for a "
+            "file you made yourself or got from a source you trust"
+        ),
+    )
+    """read the .zip file OLD names, a pickle (:data:`agents.policy.PICKLE_RISK`)"""
+
+
 def _parser() -> ArgumentParser:
-    parser = ArgumentParser(prog="drill-gym convert", description=DESCRIPTION)
-    parser.add_argument(
-        "old", metavar="OLD", help="the old model folder, or a Stable-Baselines3 .zip file"
-    )
-    parser.add_argument("new", metavar="NEW", help="the new model folder (may be OLD's folder)")
-    parser.add_argument(
-        "--trust-pickle",
-        action="store_true",
-        help=f"read the .zip file OLD names, a pickle: {PICKLE_RISK}; pass it only for a file "
-        "you made yourself or got from a source you trust",
-    )
-    return parser
+    return spec_parser("drill-gym convert", DESCRIPTION, ConvertSpec)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -57,19 +70,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
 
     parser = _parser()
-    args = parser.parse_args(list(argv) if argv is not None else None)
-    if args.old.endswith(".zip") and not Path(args.old).is_dir() and not args.trust_pickle:
+    spec = spec_from_args(ConvertSpec, parser.parse_args(list(argv) if argv is not None else None))
+    if spec.old is None or spec.new is None:
+        missing = [name for name, value in (("OLD", spec.old), ("NEW", spec.new)) if value is None]
+        parser.error(f"the following arguments are required: {', '.join(missing)}")
+    if spec.old.endswith(".zip") and not Path(spec.old).is_dir() and not spec.trust_pickle:
         parser.fail(
-            "--trust-pickle", f"is required to read OLD = {args.old!r}: a pickle, and {PICKLE_RISK}"
+            "--trust-pickle", f"is required to read OLD = {spec.old!r}: a pickle, and {PICKLE_RISK}"
         )
-    if not Path(args.old).exists():
+    if not Path(spec.old).exists():
         parser.error(
-            f"OLD = {args.old!r} does not exist: expected a model folder or a Stable-Baselines3 "
+            f"OLD = {spec.old!r} does not exist: expected a model folder or a Stable-Baselines3 "
             ".zip file"
         )
 
-    policy = convert_model(args.old, args.new, trust_pickle=args.trust_pickle)
-    print(f"converted {policy.name} from {args.old} to {args.new}")
+    policy = convert_model(spec.old, spec.new, trust_pickle=spec.trust_pickle)
+    print(f"converted {policy.name} from {spec.old} to {spec.new}")
     return 0
 
 

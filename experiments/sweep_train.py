@@ -9,7 +9,9 @@ base controller) is reported to Tune: ``iae_ratio``, ``rmsd_ratio``, ``severity_
 ``score`` and ``timesteps``. Tune's scheduler stops trials early on the validation IAE ratio
 (``--scheduler asha``, the default: asynchronous successive halving over the validations,
 reduction factor 2; ``median``: the median stopping rule; ``none``), never before a trial's
-``--grace-period`` validations (default 2).
+``--grace-period`` validations (default 2). A run without validations (``validate_every``
+0, as in the field agent's recipe) reports once, at its end: the validation of its final
+model on the same scenarios (:func:`final_validation`).
 
 The trials:
 
@@ -36,12 +38,20 @@ best``, the default; ``all`` scores every trial's model, ``none`` none). ``OUT/s
 Trials run one CPU each, ``--workers`` at a time on a local Ray cluster (or on the cluster of
 ``--address``; then ``OUT`` must be on a file system every node shares, since each trial
 writes its run folder where it runs).
+
+An interrupted sweep (a killed command, a lost node) is finished by the same command with
+``--resume``: Tune's experiment in ``OUT/tune`` is restored (``OUT/sweep.json`` must hold the
+same spec), its finished trials are kept, and every other trial continues its run folder
+from the last checkpoint (a run whose final model is written only reports it again).
+Tune keeps its state as pickle files (``OUT/tune/tuner.pkl``), which restoring unpickles:
+resume only a sweep you ran yourself.
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
+import json
 import math
 import shutil
 import time
@@ -50,11 +60,15 @@ from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final
 
+import gymnasium as gym
+
 from agents import train as training
-from agents.config import TrainConfig, field_docs, plain_text
+from agents.checkpoints import find_last_checkpoint
+from agents.config import TrainConfig
 from agents.policy import is_model_folder, load_policy
-from agents.train import planned_timesteps, train
+from agents.train import planned_timesteps, train, validation_scenarios, validation_score
 from baselines.registry import REFERENCE_CONTROLLER
+from drill_env.evaluation import ZeroAction, episode_metrics, rollout
 from experiments.arguments import SEED_HIGH, ArgumentParser, names_type, output_folder
 from experiments.evaluate import (
     FIELD_HELD_OUT,
@@ -65,7 +79,7 @@ from experiments.evaluate import (
 )
 from experiments.field import ENV_IDS, FIELD_ENV, PAPER_ENV, is_field, run_label
 from experiments.paths import output_path
-from experiments.spec_cli import option, option_name, spec_from_args, spec_options
+from experiments.spec_cli import option, spec_from_args, spec_parser
 from experiments.sweep import ADDRESS_VARIABLE, Backend, ray_session
 from experiments.tables import Column, markdown_table, write_csv, write_json
 
@@ -73,8 +87,8 @@ __all__ = [
     "METRIC",
     "SWEEP_DEFAULTS",
     "SweepSpec",
-    "SweepTrainOptions",
     "SweepTrainSpec",
+    "final_validation",
     "main",
     "parse_grid",
     "parse_sample",
@@ -107,6 +121,10 @@ HELDOUT_KEYS: Final = (
     "heldout_goal_met",
 )
 """Columns of the held-out scores (ratios to the base controller; empty: not scored)."""
+SPEC_FILE: Final = "sweep.json"
+"""The spec of a sweep, in its output folder: what ``--resume`` checks the options against."""
+TUNE_FOLDER: Final = "tune"
+"""Tune's experiment folder in the output folder (what ``--resume`` restores)."""
 SAMPLE_KINDS: Final = ("uniform", "loguniform", "int", "choice")
 """Distributions of ``--sample``."""
 FIXED_FIELDS: Final = (
@@ -340,9 +358,39 @@ def _report_validations() -> Iterator[None]:
         training._Validation.run = original  # type: ignore[method-assign]
 
 
+def final_validation(config: TrainConfig, model: Path) -> dict[str, float]:
+    """The validation of a run's final model, for a run without validations
+    (``validate_every`` 0): the ratios to the base controller on the run's validation
+    scenarios (:func:`agents.train.validation_scenarios`, :func:`agents.train.validation_score`)
+    and the decisions the run took."""
+    policy = load_policy(model)
+    kwargs, seeds = validation_scenarios(config)
+    base = kwargs["base_controller"] or REFERENCE_CONTROLLER[config.env_id]
+    env = gym.make(config.env_id, max_episode_steps=-1, **kwargs)
+    base_env = gym.make(config.env_id, max_episode_steps=-1, **{**kwargs, "base_controller": base})
+    try:
+        metrics = [episode_metrics(rollout(env, policy, s)) for s in seeds]
+        reference = [episode_metrics(rollout(base_env, ZeroAction(), s)) for s in seeds]
+    finally:
+        env.close()
+        base_env.close()
+    iae, rmsd, severity, score = validation_score(metrics, reference)
+    steps = policy.metadata.get("run_timesteps", policy.metadata.get("timesteps", 0))
+    return {
+        "timesteps": int(steps),
+        METRIC: iae,
+        "rmsd_ratio": rmsd,
+        "severity_ratio": severity,
+        "score": score,
+    }
+
+
 def train_trial(config: dict[str, Any]) -> None:
     """One trial (run in a Tune worker): a training run with the trial's settings in its own
-    run folder ``config["runs_dir"]/TRIAL__seedS``, its validations reported to Tune."""
+    run folder ``config["runs_dir"]/TRIAL__seedS``, its validations reported to Tune (a run
+    without validations reports the validation of its final model once, at the end). A run
+    folder that holds checkpoints (a sweep resumed with ``--resume``) continues from the last
+    one; one that holds its final model reports it again without training."""
     from ray import tune
 
     settings = dict(config["settings"])
@@ -356,8 +404,48 @@ def train_trial(config: dict[str, Any]) -> None:
         config.get("env_id", PAPER_ENV),
         **{**settings, **chosen, "seed": seed, "run_dir": str(run_dir)},
     )
-    with _report_validations():
+    model = train_config.resolved_save_dir()
+    finished = is_model_folder(model) and _same_run(run_dir, train_config)
+    if not finished and find_last_checkpoint(run_dir) is not None:
+        train_config = dataclasses.replace(train_config, resume=True)
+    if train_config.validate_every:
+        if finished:  # every validation of the finished run, as it reported them
+            for report in _validations(run_dir / "validation.csv"):
+                tune.report(report)
+            return
+        with _report_validations():
+            train(train_config, progress=False)
+        return
+    if not finished:
         train(train_config, progress=False)
+    tune.report(final_validation(train_config, model))
+
+
+def _same_run(run_dir: Path, config: TrainConfig) -> bool:
+    """Whether ``run_dir/config.json`` holds the settings of ``config`` (``resume`` aside)."""
+    try:
+        stored = json.loads((run_dir / "config.json").read_text())
+    except (OSError, ValueError):
+        return False
+    current = json.loads(dataclasses.replace(config, resume=False).to_json())
+    return isinstance(stored, dict) and {**stored, "resume": False} == current
+
+
+def _validations(csv_file: Path) -> list[dict[str, Any]]:
+    """The validations of a run as its ``validation.csv`` records them (Tune's reports)."""
+    reports = []
+    for line in csv_file.read_text().splitlines()[1:]:
+        steps, iae, rmsd, severity, score = line.split(",")
+        reports.append(
+            {
+                "timesteps": int(steps),
+                METRIC: float(iae),
+                "rmsd_ratio": float(rmsd),
+                "severity_ratio": float(severity),
+                "score": float(score),
+            }
+        )
+    return reports
 
 
 def _scheduler(spec: SweepSpec) -> Any:
@@ -379,14 +467,57 @@ def _scheduler(spec: SweepSpec) -> Any:
     )
 
 
+def _spec_record(spec: SweepSpec) -> dict[str, Any]:
+    """The spec of a sweep as ``OUT/sweep.json`` records it (what ``--resume`` compares)."""
+    return json.loads(json.dumps(dataclasses.asdict(spec), default=list))
+
+
+def _check_resume(out: Path, recorded: Mapping[str, Any], resume: bool) -> None:
+    """Refuse ``--resume`` without a resumable sweep of the same spec in ``out``, and a new
+    sweep in a folder that already holds one."""
+    from ray import tune
+
+    spec_file = out / SPEC_FILE
+    if not resume:
+        if spec_file.exists() or (out / TUNE_FOLDER).exists():
+            raise ValueError(
+                f"--out {str(out)!r} already holds a sweep: pass --resume to finish it, or "
+                "choose another --out"
+            )
+        return
+    if not spec_file.is_file() or not tune.Tuner.can_restore(str(out / TUNE_FOLDER)):
+        raise ValueError(
+            f"--resume: no sweep to resume in {str(out)!r} (expected {SPEC_FILE} and "
+            f"{TUNE_FOLDER}/ written by drill-gym sweep-train): check --out, or leave out --resume"
+        )
+    try:
+        before = json.loads(spec_file.read_text())
+    except (OSError, ValueError):
+        before = None
+    if before != recorded:
+        changed = (
+            sorted(k for k in recorded if before.get(k) != recorded[k])
+            if isinstance(before, dict)
+            else ["the spec file"]
+        )
+        raise ValueError(
+            f"--resume: the sweep in {str(out)!r} was started with other settings "
+            f"({', '.join(changed) or 'the spec file'} differ): give the same options as before"
+        )
+
+
 def _trial_row(result: Any, spec: SweepSpec, runs_dir: Path) -> dict[str, Any]:
-    """One row of the summary table from a Tune result."""
+    """One row of the summary table from a Tune result (the validations as the run's
+    ``validation.csv`` records them, which a resumed trial continues; without one, as reported
+    to Tune)."""
     config = result.config
     seed = int(config.get("seed", spec.seeds[0]))
     history = result.metrics_dataframe
     records = [] if history is None else history.to_dict("records")
     trial = str(result.metrics.get("trial_id", "")) if result.metrics else ""
     folder = next(runs_dir.glob(f"{trial}__seed{seed}"), None) if trial else None
+    if folder is not None and (folder / "validation.csv").is_file():
+        records = _validations(folder / "validation.csv")
     row: dict[str, Any] = {"trial": trial, "seed": seed}
     for name in (*spec.grid, *spec.samples):
         row[name] = config.get(name)
@@ -457,17 +588,31 @@ def run_training_sweep(
     heldout: str = "best",
     heldout_scenarios: Sequence[str] | None = None,
     progress: bool = True,
+    resume: bool = False,
 ) -> dict[str, Any]:
     """Run the trials on Ray Tune, then write the summary table and export the best model.
 
+    Args:
+        resume: Continue the interrupted sweep in ``out`` (Tune's experiment ``out/tune``,
+            the same spec): its finished trials are kept, the others continue from their
+            last checkpoint.
+
     Returns:
         The summary (as ``OUT/summary.json``): the trial rows, the best trial, the files.
+
+    Raises:
+        ValueError: ``resume`` without a sweep in ``out`` or with another spec; a sweep
+            already in ``out`` without ``resume``.
     """
     from ray import tune
 
     out = out.resolve()
     runs_dir = out / "runs"
+    spec_file = out / SPEC_FILE
+    recorded = _spec_record(spec)
+    _check_resume(out, recorded, resume)
     runs_dir.mkdir(parents=True, exist_ok=True)
+    spec_file.write_text(json.dumps(recorded, indent=2) + "\n")
     started = time.perf_counter()
     search = None
     if spec.sampler == "optuna":
@@ -478,25 +623,14 @@ def run_training_sweep(
     if spec.sampler == "optuna":
         settings["seed"] = spec.seeds[0]
     with ray_session(backend):
-        tuner = tune.Tuner(
-            tune.with_resources(train_trial, {"cpu": 1}),
-            param_space={
-                **_space(spec),
-                "settings": settings,
-                "runs_dir": str(runs_dir),
-                "env_id": spec.env_id,
-            },
-            tune_config=tune.TuneConfig(
-                metric=METRIC,
-                mode="min",
-                scheduler=_scheduler(spec),
-                search_alg=search,
-                num_samples=spec.num_samples,
-                max_concurrent_trials=backend.workers,
-            ),
-            run_config=tune.RunConfig(
-                name="tune", storage_path=str(out), verbose=1 if progress else 0
-            ),
+        tuner = (
+            tune.Tuner.restore(
+                str(out / TUNE_FOLDER),
+                tune.with_resources(train_trial, {"cpu": 1}),
+                resume_errored=True,
+            )
+            if resume
+            else _new_tuner(spec, settings, runs_dir, search, backend, out, progress)
         )
         grid = tuner.fit()
         rows = [_trial_row(grid[i], spec, runs_dir) for i in range(len(grid))]
@@ -532,6 +666,40 @@ def run_training_sweep(
     return summary
 
 
+def _new_tuner(
+    spec: SweepSpec,
+    settings: Mapping[str, Any],
+    runs_dir: Path,
+    search: Any,
+    backend: Backend,
+    out: Path,
+    progress: bool,
+) -> Any:
+    """Tune's tuner of a new sweep (experiment ``out/tune``)."""
+    from ray import tune
+
+    return tune.Tuner(
+        tune.with_resources(train_trial, {"cpu": 1}),
+        param_space={
+            **_space(spec),
+            "settings": settings,
+            "runs_dir": str(runs_dir),
+            "env_id": spec.env_id,
+        },
+        tune_config=tune.TuneConfig(
+            metric=METRIC,
+            mode="min",
+            scheduler=_scheduler(spec),
+            search_alg=search,
+            num_samples=spec.num_samples,
+            max_concurrent_trials=backend.workers,
+        ),
+        run_config=tune.RunConfig(
+            name=TUNE_FOLDER, storage_path=str(out), verbose=1 if progress else 0
+        ),
+    )
+
+
 def _write_markdown(rows: Sequence[Mapping[str, Any]], spec: SweepSpec, path: Path) -> Path:
     columns = [Column("trial", "trial", align="left"), Column("seed", "seed")]
     columns += [Column(n, n, "{}") for n in (*spec.grid, *spec.samples)]
@@ -556,9 +724,9 @@ def _heldout_ids() -> list[str]:
 
 
 @dataclasses.dataclass(frozen=True)
-class SweepTrainOptions:
-    """The options of ``drill-gym sweep-train`` generated from their fields (each field is the
-    option of the same name)."""
+class SweepTrainSpec:
+    """Settings of ``drill-gym sweep-train``; its options are generated from these fields
+    (each field is the option of the same name)."""
 
     seeds: tuple[int, ...] = dataclasses.field(
         default=(1,), metadata=option(low=0, high=SEED_HIGH, metavar="S")
@@ -577,7 +745,7 @@ class SweepTrainOptions:
     )
     """early stopping of weak trials"""
     grace_period: int = dataclasses.field(default=2, metadata=option(low=1, high=10_000))
-    """validations every trial reports before the scheduler may stop it"""
+    """validations before a trial may be stopped"""
     settings: tuple[str, ...] = dataclasses.field(
         default=(),
         metadata=option(
@@ -605,7 +773,7 @@ class SweepTrainOptions:
     )
     """only these held-out scenarios"""
     workers: int = dataclasses.field(default=2, metadata=option(low=1, high=4096))
-    """trials at a time (CPUs of the local Ray cluster)"""
+    """trials at a time, a CPU each"""
     address: str | None = dataclasses.field(
         default=None,
         metadata=option(metavar="ADDR", default_text=f"${ADDRESS_VARIABLE}, else a local one"),
@@ -617,16 +785,16 @@ class SweepTrainOptions:
     """output folder"""
     no_progress: bool = False
     """no Tune progress output"""
-
-
-@dataclasses.dataclass(frozen=True)
-class SweepTrainSpec(SweepTrainOptions):
-    """Settings of ``drill-gym sweep-train``: the options, and the repeatable ``--grid`` and
-    ``--sample`` (:func:`_parser` adds those two)."""
-
-    grid: tuple[str, ...] = ()
+    resume: bool = False
+    """finish the interrupted sweep in --out, same options (unpickles Tune's state: only a
+    sweep you ran)"""
+    grid: tuple[str, ...] | None = dataclasses.field(
+        default=None, metadata=option(repeat=True, metavar="NAME=V1,V2")
+    )
     """a training setting's values: every combination a trial"""
-    sample: tuple[str, ...] = ()
+    sample: tuple[str, ...] | None = dataclasses.field(
+        default=None, metadata=option(repeat=True, metavar="NAME=KIND:LOW:HIGH")
+    )
     """a training setting drawn per trial, KIND uniform, loguniform or int (or choice:A,B)"""
 
     def __post_init__(self) -> None:
@@ -639,8 +807,8 @@ class SweepTrainSpec(SweepTrainOptions):
             ValueError: a setting that does not parse or does not fit (naming its option).
         """
         try:
-            grid = dict(parse_grid(g) for g in self.grid)
-            samples = dict(parse_sample(s) for s in self.sample)
+            grid = dict(parse_grid(g) for g in self.grid or ())
+            samples = dict(parse_sample(s) for s in self.sample or ())
             fields = _fields()
             explicit: dict[str, Any] = {}
             for text in self.settings:
@@ -685,18 +853,7 @@ example:
 
 
 def _parser() -> ArgumentParser:
-    parser = ArgumentParser(prog="drill-gym sweep-train", description=DESCRIPTION)
-    spec_options(parser, SweepTrainOptions)
-    docs = field_docs(SweepTrainSpec)
-    for name, metavar in (("grid", "NAME=V1,V2"), ("sample", "NAME=KIND:LOW:HIGH")):
-        parser.add_argument(
-            option_name(name),
-            action="append",
-            default=[],
-            metavar=metavar,
-            help=plain_text(docs[name]) + " (repeatable) (default: none)",
-        )
-    return parser
+    return spec_parser("drill-gym sweep-train", DESCRIPTION, SweepTrainSpec)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -708,6 +865,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def run_study(options: SweepTrainSpec) -> int:
     """Run the training sweep ``options`` asks for and print its table; returns the exit code."""
     spec = options.sweep_spec()
+    _check_resume(options.out.resolve(), _spec_record(spec), options.resume)
     backend = Backend(workers=options.workers, use_ray=True, address=options.address)
     print(
         f"sweep-train: {spec.trials()} trials ({len(spec.seeds)} seeds"
@@ -724,6 +882,7 @@ def run_study(options: SweepTrainSpec) -> int:
         heldout=options.heldout,
         heldout_scenarios=list(options.heldout_scenarios) or None,
         progress=not options.no_progress,
+        resume=options.resume,
     )
     print((options.out / "trials.md").read_text())
     best = summary["best"]

@@ -395,3 +395,37 @@ def test_synthetic_logs_are_seeded() -> None:
     for name in a.columns:
         assert np.array_equal(a.column(name), b.column(name))
     assert not np.array_equal(a.column("bit_speed_rad_s"), c.column("bit_speed_rad_s"))
+
+
+def test_the_arguments_are_the_specs_fields(capsys: pytest.CaptureFixture[str]) -> None:
+    """``calibrate`` and ``replay`` parse into their frozen Specs (the window a
+    :class:`~experiments.calibrate.Window`, ``--fix`` repeatable); an unknown option is
+    reported before a missing required argument."""
+    from experiments import calibrate as cli
+    from experiments.spec_cli import spec_from_args
+
+    argv = ["rig.csv", "--window", "2:6", "--out", "o", "--fix", "stiffness=1.5"]
+    argv += ["--fix", "damping=0", "--no-wob", "--family", "karnopp"]
+    spec = spec_from_args(cli.CalibrateSpec, cli._parser().parse_args(argv))
+    assert spec == cli.CalibrateSpec(
+        log="rig.csv",
+        window=cli.Window(2.0, 6.0),
+        out=Path("o"),
+        family="karnopp",
+        no_wob=True,
+        fix=(("stiffness", 1.5), ("damping", 0.0)),
+    )
+    argv = ["p.json", "rig.csv", "--window", "1:2", "--out", "o", "--free-running"]
+    replay = spec_from_args(cli.ReplaySpec, cli.replay_parser().parse_args(argv))
+    assert (replay.plant, replay.log, replay.window, replay.free_running) == (
+        "p.json", "rig.csv", (1.0, 2.0), True,
+    )  # fmt: skip
+    for main, argv, message in (
+        (cli.calibrate_main, ["--bogus"], "unrecognized arguments: --bogus"),
+        (cli.calibrate_main, ["rig.csv"], "required: --window, --out"),
+        (cli.replay_main, ["p.json", "--out", "o"], "required: LOG, --window"),
+    ):
+        with pytest.raises(SystemExit) as exit_info:
+            main(argv)
+        assert exit_info.value.code == 2
+        assert message in capsys.readouterr().err

@@ -81,6 +81,8 @@ USER_ERRORS = [
     (["convert", "OLD.zip", "NEW"], "argument --trust-pickle: is required to read OLD = 'OLD.zip'"),
     (["convert", "/nonexistent", "NEW"], "OLD = '/nonexistent' does not exist"),
     (["convert", "/nonexistent.zip", "NEW", "--trust-pickle"], "OLD = '/nonexistent.zip' does not"),
+    (["convert"], "the following arguments are required: OLD, NEW"),
+    (["convert", "OLD"], "the following arguments are required: NEW"),
     *[([name, "--bogus"], "unrecognized arguments: --bogus") for name in SUBCOMMANDS if name != "convert"],
     (["convert", "OLD", "NEW", "--bogus"], "unrecognized arguments: --bogus"),
 ]  # fmt: skip

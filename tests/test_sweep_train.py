@@ -6,7 +6,12 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import re
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -21,6 +26,12 @@ TINY = [
     "--heldout-scenarios", "h01", "--no-progress",
 ]  # fmt: skip
 """Two rollouts of 100 decisions per trial, three validations, one held-out scenario."""
+NO_VALIDATION = [
+    "--set", "total_timesteps=200", "num_envs=2", "n_steps=50", "batch_size=50",
+    "validate_every=0", "validation_episodes=1", "episode_s=10", "checkpoint_every=100",
+    "--no-progress",
+]  # fmt: skip
+"""As :data:`TINY` without validations during training (the field agent's recipe)."""
 
 
 @pytest.mark.parametrize(
@@ -58,7 +69,11 @@ def test_the_options_are_the_spec_and_grid_and_sample_repeat() -> None:
     argv = ["--seeds", "3", "3", "4", "--grid", "gamma=0.9,0.99", "--grid", "n_steps=64,128"]
     argv += ["--sample", "ent_coef=uniform:0:0.01", "--sample", "vf_coef=choice:0.5,1"]
     spec = spec_from_args(sweep_train.SweepTrainSpec, sweep_train._parser().parse_args(argv))
-    assert spec.grid == ("gamma=0.9,0.99", "n_steps=64,128") and len(spec.sample) == 2
+    assert (
+        spec.grid == ("gamma=0.9,0.99", "n_steps=64,128")
+        and spec.sample is not None
+        and len(spec.sample) == 2
+    )
     sweep = spec.sweep_spec()
     assert sweep.seeds == (3, 4) and dict(sweep.grid) == {
         "gamma": [0.9, 0.99],
@@ -127,3 +142,120 @@ def test_optuna_sampler_with_the_median_rule(tmp_path: Path) -> None:
         rows = list(csv.DictReader(f))
     assert len(rows) == 2 and all(1e-4 <= float(r["learning_rate"]) <= 1e-3 for r in rows)
     assert not any(r["heldout_iae_ratio"] for r in rows)
+
+
+def test_a_sweep_without_validations_reports_its_final_model(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``validate_every`` 0 with the default scheduler (ASHA), Tune's metric check on: each
+    trial reports the validation of its final model once, at its end."""
+    pytest.importorskip("ray")
+    pytest.importorskip("stable_baselines3")
+    monkeypatch.delenv("TUNE_DISABLE_STRICT_METRIC_CHECKING", raising=False)
+    out = tmp_path / "sweep"
+    argv = ["sweep-train", "--seeds", "1", "2", "--heldout", "none", *NO_VALIDATION]
+    assert cli_main([*argv, "--out", str(out)]) == 0
+    assert "2 trials (2 seeds), 1 validations each, scheduler asha" in capsys.readouterr().out
+    with (out / "trials.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert sorted(r["seed"] for r in rows) == ["1", "2"]
+    for row in rows:
+        assert row["validations"] == "1" and row["timesteps"] == "200", row
+        assert float(row["best_iae_ratio"]) == float(row["last_iae_ratio"]) > 0
+        assert row["stopped_early"] == "False" and not row["error"]
+        assert not (Path(row["run_dir"]) / "validation.csv").exists()
+    best = min(rows, key=lambda r: float(r["best_iae_ratio"]))
+    assert json.loads((out / "summary.json").read_text())["best"]["trial"] == best["trial"]
+
+
+def test_the_final_validation_is_the_training_validation(tmp_path: Path) -> None:
+    """:func:`final_validation` of a model scores it as the training's own validation does
+    (its ``validation.csv`` line of the final model, written with five decimals)."""
+    pytest.importorskip("stable_baselines3")
+    from agents.config import TrainConfig
+    from agents.train import train
+
+    config = TrainConfig(
+        total_timesteps=100, num_envs=2, n_steps=50, batch_size=50, validate_every=100,
+        validation_episodes=1, episode_s=10.0, checkpoint_every=0, tensorboard=False,
+        run_dir=str(tmp_path / "run"),
+    )  # fmt: skip
+    model = train(config, progress=False)
+    steps, iae, rmsd, severity, score = (
+        (tmp_path / "run" / "validation.csv").read_text().splitlines()[-1].split(",")
+    )
+    result = sweep_train.final_validation(config, model)
+    assert result["timesteps"] == int(steps) == 100
+    assert result["iae_ratio"] == pytest.approx(float(iae), abs=1e-5)
+    assert result["rmsd_ratio"] == pytest.approx(float(rmsd), abs=1e-5)
+    assert result["severity_ratio"] == pytest.approx(float(severity), abs=1e-5)
+    assert result["score"] == pytest.approx(float(score), abs=1e-5)
+
+
+def test_resume_needs_the_same_sweep_in_out(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--resume`` without a sweep in --out, with other options than the sweep's, and a new
+    sweep in a folder that holds one: one line each, before anything starts."""
+    pytest.importorskip("ray")
+    out = tmp_path / "out"
+    assert cli_main(["sweep-train", "--resume", "--out", str(out)]) == 2
+    assert "--resume: no sweep to resume in" in capsys.readouterr().err
+    assert not out.exists()
+    spec = sweep_train.SweepTrainSpec(seeds=(1, 2)).sweep_spec()
+    (out / "tune").mkdir(parents=True)
+    (out / "tune" / "tuner.pkl").write_bytes(b"")  # never read: the spec differs
+    (out / "sweep.json").write_text(json.dumps(sweep_train._spec_record(spec)))
+    assert cli_main(["sweep-train", "--seeds", "1", "--resume", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "started with other settings (seeds differ)" in err, err
+    assert cli_main(["sweep-train", "--seeds", "1", "2", "--out", str(out)]) == 2
+    assert "already holds a sweep: pass --resume" in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == ["sweep.json", "tune"]
+
+
+@pytest.mark.slow
+def test_a_killed_sweep_resumes_only_its_missing_trials(tmp_path: Path) -> None:
+    """Kill a two-trial sweep (one trial at a time) while its second trial trains, then run
+    the same command with --resume: the same two trials, the first kept as it was, the
+    second finished from its run folder (its checkpoints or its final model)."""
+    pytest.importorskip("ray")
+    pytest.importorskip("stable_baselines3")
+    out = tmp_path / "sweep"
+    argv = [sys.executable, "-m", "experiments.cli", "sweep-train", "--seeds", "1", "2"]
+    argv += ["--workers", "1", "--heldout", "none", *NO_VALIDATION, "--out", str(out)]
+    argv[argv.index("total_timesteps=200")] = "total_timesteps=2000"
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    env.pop("TUNE_DISABLE_STRICT_METRIC_CHECKING", None)
+    sweep = subprocess.Popen(
+        argv, env=env, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+    )
+    deadline = time.monotonic() + 600
+    try:
+        while time.monotonic() < deadline and sweep.poll() is None:
+            runs = sorted((out / "runs").glob("*__seed*"))
+            finished = [r for r in runs if (r / "model").is_dir()]
+            training = [r for r in runs if r not in finished and list(r.glob("checkpoints/*"))]
+            if finished and training:
+                break
+            time.sleep(0.1)
+    finally:
+        if sweep.poll() is None:
+            os.killpg(sweep.pid, signal.SIGKILL)
+        sweep.wait()
+    assert finished and training, "the sweep ended before it could be interrupted"
+    assert not (out / "trials.csv").exists()
+    first = finished[0] / "model" / "policy.safetensors"
+    kept = (first.stat().st_mtime_ns, (finished[0] / "progress.csv").read_text())
+    time.sleep(2.0)  # the interrupted trial's worker notices that its cluster is gone
+    interrupted = not (training[0] / "model").is_dir()
+    done = subprocess.run([*argv, "--resume"], env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-2000:]
+    with (out / "trials.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert sorted(Path(r["run_dir"]).name for r in rows) == sorted(r.name for r in runs)
+    assert all(r["timesteps"] == "2000" and r["validations"] == "1" for r in rows), rows
+    assert (first.stat().st_mtime_ns, (finished[0] / "progress.csv").read_text()) == kept
+    assert (training[0] / "model" / "policy.safetensors").is_file()
+    if interrupted:  # it continued from its last checkpoint
+        assert list(training[0].glob("progress-resumed-at-*.csv"))
