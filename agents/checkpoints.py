@@ -47,6 +47,7 @@ from agents.model_format import (
     write_safetensors,
 )
 from agents.policy import export_policy
+from drill_env.files import write_text
 
 __all__ = [
     "CHECKPOINT_DIR",
@@ -189,7 +190,7 @@ def save_checkpoint(
         "n_updates": int(model._n_updates),
         "optimizer_state": with_adam,
     }
-    (tmp / TRAINING_FILE).write_text(json.dumps(record, indent=2) + "\n")
+    write_text(tmp / TRAINING_FILE, json.dumps(record, indent=2) + "\n")
     if folder.exists():
         shutil.rmtree(folder)
     os.replace(tmp, folder)

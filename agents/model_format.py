@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -48,6 +47,7 @@ from agents.inference import (
 from agents.legacy_format import LEGACY_NORM_FILE, LEGACY_WEIGHTS_FILE, PREVIOUS_FORMAT, read_npz
 from drill_env import COUPLED_ENV_ID, ENV_ID, FIELD_ENV_ID
 from drill_env.coupled_env import CoupledEnvConfig
+from drill_env.files import write_bytes, write_text
 from drill_env.layout import OBSERVATION_MODES
 from drill_env.options import EnvConfig, FieldEnvConfig
 
@@ -596,16 +596,14 @@ def _check_layout(
 
 def write_safetensors(path: Path, arrays: Mapping[str, npt.ArrayLike]) -> None:
     """Write float arrays (float32 and float64 kept, other dtypes as float64) to ``path`` as
-    safetensors (via a temporary file, then renamed)."""
+    safetensors (whole or not at all, never through a link: :func:`drill_env.files.replacing`)."""
     clean: dict[str, npt.NDArray[Any]] = {}
     for name, value in arrays.items():
         array = np.asarray(value)
         if array.dtype not in (np.float32, np.float64):
             array = array.astype(np.float64)
         clean[name] = np.array(array, dtype=array.dtype.newbyteorder("<"), order="C")
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(safetensors.numpy.save(clean))
-    os.replace(tmp, path)
+    write_bytes(path, safetensors.numpy.save(clean))
 
 
 def check_obs_norm(norm: ObsNorm, where: str) -> None:
@@ -684,7 +682,5 @@ def write_model_files(
     folder.mkdir(parents=True, exist_ok=True)
     write_safetensors(folder / WEIGHTS_FILE, weights)
     write_safetensors(folder / NORM_FILE, obs_norm.arrays())
-    tmp = folder / (CONFIG_FILE + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, folder / CONFIG_FILE)
+    write_text(folder / CONFIG_FILE, text)
     return folder

@@ -37,6 +37,7 @@ from typing import Final, TextIO
 import numpy as np
 import numpy.typing as npt
 
+from drill_env.files import replacing
 from drill_env.validation import shown
 
 __all__ = [
@@ -387,7 +388,8 @@ def write_log_csv(log: MeasuredLog, path: str | os.PathLike[str]) -> Path:
     p = Path(path)
     names = ["time_s", *log.columns]
     table = np.column_stack([log.column(n) for n in names])
-    np.savetxt(p, table, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+    with replacing(p, "w") as f:
+        np.savetxt(f, table, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
     return p
 
 

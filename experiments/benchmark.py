@@ -72,6 +72,7 @@ from agents.policy import is_model_folder, load_policy
 from drill_env.control import controller_names
 from drill_env.distributed import DISTRIBUTED_PRESETS
 from drill_env.evaluation import Policy, ZeroAction, episode_metrics
+from drill_env.files import write_text
 from drill_env.metrics import METRIC_KEYS
 from drill_env.scenarios import WobProfile
 from experiments.arguments import SEED_HIGH, ArgumentParser, one_line, output_folder
@@ -1362,7 +1363,7 @@ def run_benchmark(spec: BenchmarkSpec, command: str = "drill-gym benchmark") -> 
     text = scorecard_markdown(
         suites, scores, entries, spec.resamples, spec.seed, command, wall, rows
     )
-    (out / "scorecard.md").write_text(text + "\n", encoding="utf-8")
+    write_text(out / "scorecard.md", text + "\n")
     written = [
         out / "scorecard.md",
         write_csv(json_clean(scores), out / "scorecard.csv", csv_columns(SCORE_KEYS, scores)),

@@ -27,6 +27,7 @@ import numpy.typing as npt
 
 from drill_env.bit_model import FAMILIES
 from drill_env.calibrated_plant import MODEL_PARAMETERS, PLANT_FORMAT, load_plant
+from drill_env.files import replacing, write_text
 from drill_env.measured_log import MeasuredLog, find_defects, read_log
 from experiments.arguments import ArgumentParser
 from experiments.calibration_fit import (
@@ -87,10 +88,10 @@ def _head(path: Path) -> str:
 
 
 def prepare_out(out: Path, names: Sequence[str], signature: tuple[str, str]) -> None:
-    """Make ``out``, refusing an existing non-directory; files of ``names`` already there are
-    replaced only when they are a previous run's: regular files, and the run's main file
-    ``signature[0]`` holds ``signature[1]`` in its first 300 characters (otherwise they are
-    someone else's)."""
+    """Check ``out`` (made later, by the first write), refusing an existing non-directory;
+    files of ``names`` already there are replaced only when they are a previous run's: regular
+    files, and the run's main file ``signature[0]`` holds ``signature[1]`` in its first 300
+    characters (otherwise they are someone else's)."""
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {str(out)!r} exists and is not a directory")
     present = [out / n for n in names if (out / n).exists() or (out / n).is_symlink()]
@@ -103,7 +104,7 @@ def prepare_out(out: Path, names: Sequence[str], signature: tuple[str, str]) -> 
             f"--out: {str(present[0])!r} exists and is not from a previous run of this command "
             "(not overwritten): choose another directory"
         )
-    out.mkdir(parents=True, exist_ok=True)
+    # The folder is made by the first write, once every input has been read and checked.
 
 
 def _format(value: float | None, digits: int = 4) -> str:
@@ -189,7 +190,8 @@ def _uncertainty_figure(result: FitResult) -> Any:
 def _save(fig: Any, path: Path) -> None:
     import matplotlib.pyplot as plt
 
-    fig.savefig(path, dpi=110)
+    with replacing(path, "wb") as f:
+        fig.savefig(f, dpi=110, format="png")
     plt.close(fig)
 
 
@@ -367,7 +369,7 @@ def calibrate_main(argv: Sequence[str]) -> int:
     _save(_loop_figure(window, speed, torque, f"torque-speed loop, {title}"), out / "loop.png")
     _save(_uncertainty_figure(result), out / "uncertainty.png")
     command = "drill-gym calibrate " + " ".join(argv)
-    (out / "report.md").write_text(_report(result, log, args.window, command))
+    write_text(out / "report.md", _report(result, log, args.window, command))
     print(f"family {result.plant.family}; wrote {', '.join(CALIBRATE_FILES)} in {out}")
     for name, p in result.plant.parameters.items():
         shown = f"{p.value:.6g} {p.unit}" if p.identified else f"not identified ({p.note})"
@@ -470,8 +472,8 @@ def replay_main(argv: Sequence[str]) -> int:
         if window.has(name):
             columns[f"measured_{name}"] = window.column(name)
     table = np.column_stack(list(columns.values()))
-    np.savetxt(out / "replay.csv", table, delimiter=",", header=",".join(columns), comments="",
-               fmt="%.10g")  # fmt: skip
+    with replacing(out / "replay.csv") as f:
+        np.savetxt(f, table, delimiter=",", header=",".join(columns), comments="", fmt="%.10g")
     lines = [
         "# Replay",
         "",
@@ -498,7 +500,7 @@ def replay_main(argv: Sequence[str]) -> int:
         rows, *_ = replay_rows(window, speed, torque)
         if args.free_running:
             rows += top_drive_rows(window, columns["top_speed_rad_s"], columns["surface_torque_nm"])
-        with (out / "features.csv").open("w") as f:
+        with replacing(out / "features.csv") as f:
             f.write("feature,measured,simulated,error\n")
             for r in rows:
                 f.write(
@@ -524,7 +526,7 @@ def replay_main(argv: Sequence[str]) -> int:
         _save(_fit_figure(window, speed, torque, title), out / "replay.png")
     else:
         lines.append("The log lacks bit_speed_rad_s or bit_torque_nm: no features compared.")
-    (out / "replay.md").write_text("\n".join(lines) + "\n")
+    write_text(out / "replay.md", "\n".join(lines) + "\n")
     print(f"wrote replay.csv and replay.md in {out}")
     for line in lines:
         if line.startswith("| ") and not line.startswith("| feature"):

@@ -50,6 +50,7 @@ from agents.policy import is_model_folder
 from baselines.registry import family_members
 from drill_env.control import controller_names, make_controller
 from drill_env.evaluation import Trace, ZeroAction, episode_metrics
+from drill_env.files import write_text
 from drill_env.metrics import METRIC_KEYS
 from drill_env.parameters import PLANT_DT_S, resolve_parameters
 from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, WobProfile
@@ -592,7 +593,7 @@ def ranked_summary(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
 
 
 def _write_text(text: str, path: Path) -> Path:
-    path.write_text(text)
+    write_text(path, text)
     return path
 
 

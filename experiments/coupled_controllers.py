@@ -398,8 +398,7 @@ def run_study(spec: CoupledControllersSpec) -> int:
     """Run what ``spec`` asks for, print the tables, write the files; returns the exit code."""
     if spec.agent is not None and not spec.agent.exists():
         raise ValueError(f"--agent: {str(spec.agent)!r} does not exist")
-    out = spec.out
-    out.mkdir(parents=True, exist_ok=True)
+    out = spec.out  # made by the first write, once the agent has loaded
     if spec.agent is not None:
         try:
             agent_rows = evaluate_agent(spec.agent, spec.agent_episodes)

@@ -44,6 +44,7 @@ from matplotlib.text import Text
 
 from baselines.registry import BUILT_IN
 from drill_env.evaluation import Trace
+from drill_env.files import replacing
 from drill_env.metrics import METRIC_LABELS as CORE_METRIC_LABELS
 from drill_env.metrics import STICK_SLIP_SEVERITY
 from drill_env.validation import printable
@@ -332,11 +333,12 @@ def _plain_texts(fig: Figure) -> None:
 
 
 def save_figure(fig: Figure, path: str | Path) -> Path:
-    """Write ``fig`` as PNG to ``path`` (its folder is created); returns the path."""
+    """Write ``fig`` as PNG to ``path`` (its folder is created; written whole or not at all,
+    never through a symbolic link: :func:`drill_env.files.replacing`); returns the path."""
     out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
     _plain_texts(fig)
-    fig.savefig(out, dpi=DPI)
+    with replacing(out, "wb") as f:
+        fig.savefig(f, dpi=DPI, format="png")
     return out
 
 

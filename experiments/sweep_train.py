@@ -55,6 +55,7 @@ from agents.config import TrainConfig, field_docs, plain_text
 from agents.policy import is_model_folder, load_policy
 from agents.train import planned_timesteps, train
 from baselines.registry import REFERENCE_CONTROLLER
+from drill_env.files import write_text
 from experiments.arguments import SEED_HIGH, ArgumentParser, names_type, output_folder
 from experiments.evaluate import (
     FIELD_HELD_OUT,
@@ -546,7 +547,7 @@ def _write_markdown(rows: Sequence[Mapping[str, Any]], spec: SweepSpec, path: Pa
         Column("heldout_rmsd_ratio", "held-out RMSD ratio", "{:.3f}"),
     ]
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(markdown_table(rows, columns) + "\n")
+    write_text(path, markdown_table(rows, columns) + "\n")
     return path
 
 

@@ -69,6 +69,7 @@ from baselines.tuned import (
 )
 from drill_env.control import make_controller
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout
+from drill_env.files import check_writable_target
 from experiments.arguments import ArgumentParser, check_output_folder, names_type, output_folder
 from experiments.results_db import Exactly, Fields, Flag, Number, Schema, Values
 from experiments.spec_cli import option, spec_from_args, spec_parser
@@ -858,8 +859,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 def run_tune(spec: TuneSpec, runner: RunnerSpec, command: str) -> int:
     """Search, print and write what ``spec`` asks for on ``runner``; ``command`` is the
     command line recorded in the tuned gains file. Returns the exit code."""
-    if spec.write and spec.gains_file.is_file():
-        load_tuned_gains(spec.gains_file)  # a malformed file fails now, not after the search
+    if spec.write:  # a link, a folder or a malformed file fails now, not after the search
+        check_writable_target(spec.gains_file)
+        if spec.gains_file.is_file():
+            load_tuned_gains(spec.gains_file)
     out = spec.folder
     backend = runner.backend()
     result = run_tuning(
