@@ -50,6 +50,7 @@ from drill_env.coupled_env import CoupledEnvConfig
 from drill_env.files import write_bytes, write_text
 from drill_env.layout import OBSERVATION_MODES
 from drill_env.options import EnvConfig, FieldEnvConfig
+from drill_env.validation import shown
 
 __all__ = [
     "ACTIVATIONS",
@@ -202,7 +203,7 @@ def _record_value(value: Any, depth: int = 0, path: str = "") -> Any:
     if isinstance(value, bool) or value is None:
         return value
     if isinstance(value, float) and not math.isfinite(value):  # 1e400 (NaN: the JSON reader)
-        raise ValueError(f"{path} = {value!r}: allowed a finite number")
+        raise ValueError(f"{path} = {shown(value)}: allowed a finite number")
     if isinstance(value, int) and abs(value) > MAX_JSON_INT:
         raise ValueError(f"{path} = {_show(value)}: allowed an integer in [-2**53, 2**53]")
     if isinstance(value, str) and len(value) > MAX_STRING:
@@ -612,10 +613,12 @@ def check_obs_norm(norm: ObsNorm, where: str) -> None:
         raise ValueError(f"{where!r}: array var has negative entries: allowed >= 0")
     if not 0 < norm.clip_obs <= MAX_BOUND:
         raise ValueError(
-            f"{where!r}: clip_obs = {norm.clip_obs!r} is out of range: allowed (0, 1e9]"
+            f"{where!r}: clip_obs = {shown(norm.clip_obs)} is out of range: allowed (0, 1e9]"
         )
     if not 0 <= norm.epsilon <= 1.0:
-        raise ValueError(f"{where!r}: epsilon = {norm.epsilon!r} is out of range: allowed [0, 1]")
+        raise ValueError(
+            f"{where!r}: epsilon = {shown(norm.epsilon)} is out of range: allowed [0, 1]"
+        )
     if np.any(norm.var + norm.epsilon <= 0):
         raise ValueError(f"{where!r}: var + epsilon must be > 0 in every entry")
 

@@ -387,7 +387,7 @@ def _check_settings(config: TrainConfig) -> None:
     names = controller_names()
     if config.base_controller.lower() != "none" and config.base_controller not in names:
         raise ValueError(
-            f"--base-controller = {config.base_controller!r} is not registered: allowed "
+            f"--base-controller = {shown(config.base_controller)} is not registered: allowed "
             f"{', '.join(names)} or none"
         )
     if config.progress_bar:
@@ -748,7 +748,9 @@ class _Validation:
         if score_file.is_file():
             score = read_json(score_file).get("score")
             if isinstance(score, bool) or not isinstance(score, (int, float)):
-                raise ValueError(f"{str(score_file)!r}: field score = {score!r}: expected a number")
+                raise ValueError(
+                    f"{str(score_file)!r}: field score = {shown(score)}: expected a number"
+                )
             self.best = float(score)
         self.next_at = 0
         if not self.csv.exists():

@@ -152,7 +152,7 @@ class CalibratedPlant:
             if p.unit != parameter_unit(name, self.uses_wob):
                 raise ValueError(
                     f"parameters.{name}.unit = {shown(p.unit)}: expected "
-                    f"{parameter_unit(name, self.uses_wob)!r}"
+                    f"{shown(parameter_unit(name, self.uses_wob))}"
                 )
         a_a = self.parameters["static_friction"].value
         a_0 = self.parameters["sliding_friction"].value

@@ -21,7 +21,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any, Literal, overload
 
-from drill_env.validation import printable
+from drill_env.validation import printable, shown
 
 __all__ = ["check_writable_target", "replacing", "write_bytes", "write_text"]
 
@@ -88,7 +88,7 @@ def replacing(
 @contextlib.contextmanager
 def _replacing(path: Path, mode: str, newline: str | None) -> Iterator[IO[Any]]:
     if mode not in ("w", "wb"):
-        raise ValueError(f"mode = {mode!r} is not a write mode: allowed 'w' or 'wb'")
+        raise ValueError(f"mode = {shown(mode)} is not a write mode: allowed 'w' or 'wb'")
     check_writable_target(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name[:100]}.", suffix=".tmp", dir=path.parent)

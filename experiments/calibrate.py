@@ -29,6 +29,7 @@ from drill_env.bit_model import FAMILIES
 from drill_env.calibrated_plant import MODEL_PARAMETERS, PLANT_FORMAT, load_plant
 from drill_env.files import replacing, write_text
 from drill_env.measured_log import MeasuredLog, find_defects, read_log
+from drill_env.validation import shown as shown_value
 from experiments.arguments import ArgumentParser
 from experiments.calibration_fit import (
     FEATURE_KEYS,
@@ -53,13 +54,15 @@ def window_type(text: str) -> tuple[float, float]:
     """Parse ``A:B`` (seconds, ``A < B``) for ``--window``."""
     parts = text.split(":")
     if len(parts) != 2:
-        raise argparse.ArgumentTypeError(f"{text!r} is not A:B (start:end in s)")
+        raise argparse.ArgumentTypeError(f"{shown_value(text)} is not A:B (start:end in s)")
     try:
         a, b = float(parts[0]), float(parts[1])
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not A:B with numbers (s)") from None
+        raise argparse.ArgumentTypeError(
+            f"{shown_value(text)} is not A:B with numbers (s)"
+        ) from None
     if not (math.isfinite(a) and math.isfinite(b) and a < b):
-        raise argparse.ArgumentTypeError(f"{text!r}: allowed finite A < B (s)")
+        raise argparse.ArgumentTypeError(f"{shown_value(text)}: allowed finite A < B (s)")
     return a, b
 
 
@@ -68,14 +71,16 @@ def fix_type(text: str) -> tuple[str, float]:
     name, _, value = text.partition("=")
     if name not in MODEL_PARAMETERS:
         raise argparse.ArgumentTypeError(
-            f"unknown parameter {name!r}: allowed {', '.join(MODEL_PARAMETERS)}"
+            f"unknown parameter {shown_value(name)}: allowed {', '.join(MODEL_PARAMETERS)}"
         )
     try:
         number = float(value)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not NAME=VALUE with a number") from None
+        raise argparse.ArgumentTypeError(
+            f"{shown_value(text)} is not NAME=VALUE with a number"
+        ) from None
     if not (math.isfinite(number) and number >= 0):
-        raise argparse.ArgumentTypeError(f"{text!r}: allowed a finite value >= 0")
+        raise argparse.ArgumentTypeError(f"{shown_value(text)}: allowed a finite value >= 0")
     return name, number
 
 

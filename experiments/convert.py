@@ -9,6 +9,7 @@ from typing import Final
 
 from agents.convert import convert_model
 from agents.policy import PICKLE_RISK
+from drill_env.validation import shown
 from experiments.arguments import ArgumentParser
 
 __all__ = ["DESCRIPTION", "main"]
@@ -60,11 +61,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(list(argv) if argv is not None else None)
     if args.old.endswith(".zip") and not Path(args.old).is_dir() and not args.trust_pickle:
         parser.fail(
-            "--trust-pickle", f"is required to read OLD = {args.old!r}: a pickle, and {PICKLE_RISK}"
+            "--trust-pickle",
+            f"is required to read OLD = {shown(args.old)}: a pickle, and {PICKLE_RISK}",
         )
     if not Path(args.old).exists():
         parser.error(
-            f"OLD = {args.old!r} does not exist: expected a model folder or a Stable-Baselines3 "
+            f"OLD = {shown(args.old)} does not exist: expected a model folder or a Stable-Baselines3 "
             ".zip file"
         )
 
