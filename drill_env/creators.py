@@ -7,37 +7,31 @@ inside Gymnasium (``AttributeError: ... 'endswith'``) before any check of ours. 
 have no ``metadata``, so Gymnasium passes ``render_mode`` on untouched and the env's constructor
 refuses a bad one first, with the one-line bounded message of
 :func:`drill_env.render.check_render_mode`. Each returns the env class's instance itself (no
-wrapper), made with exactly the keywords given.
+wrapper), made with exactly the keywords given. Gymnasium imports this module only when it
+makes an env, so ``import drill_env`` stays light.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-if TYPE_CHECKING:
-    from drill_env.coupled_env import DrillStringCoupledEnv
-    from drill_env.env import DrillStringEnv, DrillStringFieldEnv
+from drill_env.coupled_env import DrillStringCoupledEnv
+from drill_env.env import DrillStringEnv, DrillStringFieldEnv
 
 __all__ = ["make_coupled_env", "make_drill_string_env", "make_field_env"]
 
 
 def make_drill_string_env(**kwargs: Any) -> DrillStringEnv:
     """``DrillString-v0``: :class:`drill_env.env.DrillStringEnv` ``(**kwargs)``."""
-    from drill_env.env import DrillStringEnv
-
     return DrillStringEnv(**kwargs)
 
 
 def make_field_env(**kwargs: Any) -> DrillStringFieldEnv:
     """``DrillStringField-v0``: :class:`drill_env.env.DrillStringFieldEnv` ``(**kwargs)``."""
-    from drill_env.env import DrillStringFieldEnv
-
     return DrillStringFieldEnv(**kwargs)
 
 
 def make_coupled_env(**kwargs: Any) -> DrillStringCoupledEnv:
     """``DrillStringCoupled-v0``: :class:`drill_env.coupled_env.DrillStringCoupledEnv`
     ``(**kwargs)``."""
-    from drill_env.coupled_env import DrillStringCoupledEnv
-
     return DrillStringCoupledEnv(**kwargs)
