@@ -754,7 +754,14 @@ def _writers(tmp_path: Path) -> dict[str, Any]:
         write_safetensors(path, {"w": np.ones(3)})
         return path
 
+    def log(path: Path) -> Path:
+        from drill_env.measured_log import MeasuredLog, write_log_csv
+
+        t = np.arange(3, dtype=np.float64) * 1e-3
+        return write_log_csv(MeasuredLog(t, {"top_speed_rad_s": np.ones(3)}), path)
+
     return {
+        "log": log,
         "json": lambda p: write_json({"a": 1}, p),
         "csv": lambda p: write_csv([{"a": 1}], p, ["a"]),
         "text": lambda p: write_text(p, "report\n"),
@@ -763,7 +770,7 @@ def _writers(tmp_path: Path) -> dict[str, Any]:
     }
 
 
-WRITERS = ["json", "csv", "text", "figure", "safetensors"]
+WRITERS = ["json", "csv", "text", "figure", "safetensors", "log"]
 
 
 @pytest.mark.parametrize("kind", WRITERS)
