@@ -47,6 +47,8 @@ from agents.model_format import (
     write_safetensors,
 )
 from agents.policy import export_policy
+from drill_env.files import write_text
+from drill_env.validation import shown
 
 __all__ = [
     "CHECKPOINT_DIR",
@@ -189,7 +191,7 @@ def save_checkpoint(
         "n_updates": int(model._n_updates),
         "optimizer_state": with_adam,
     }
-    (tmp / TRAINING_FILE).write_text(json.dumps(record, indent=2) + "\n")
+    write_text(tmp / TRAINING_FILE, json.dumps(record, indent=2) + "\n")
     if folder.exists():
         shutil.rmtree(folder)
     os.replace(tmp, folder)
@@ -230,7 +232,7 @@ def load_checkpoint(model: Any, venv: Any, folder: Path) -> int:
     if match and int(match.group(1)) != record.num_timesteps:
         raise ValueError(
             f"{str(folder / TRAINING_FILE)!r}: field num_timesteps = {record.num_timesteps} "
-            f"does not match the folder name {folder.name!r}"
+            f"does not match the folder name {shown(folder.name)}"
         )
     legacy = record.format == PREVIOUS_FORMAT
     read = read_npz if legacy else read_safetensors
@@ -261,7 +263,7 @@ def load_checkpoint(model: Any, venv: Any, folder: Path) -> int:
             raise ValueError(f"{where!r}: array {key} has negative entries: allowed >= 0")
     for key in ("obs_count", "ret_count"):
         if not stats[key] > 0:
-            raise ValueError(f"{where!r}: array {key} = {float(stats[key])!r}: allowed > 0")
+            raise ValueError(f"{where!r}: array {key} = {shown(float(stats[key]))}: allowed > 0")
     with th.no_grad():
         model.policy.load_state_dict(
             {k: th.as_tensor(arrays[f"policy/{k}"], dtype=v.dtype) for k, v in state.items()}

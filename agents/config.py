@@ -285,7 +285,7 @@ class TrainConfig:
         """
         if env_id not in ENV_DEFAULTS:
             raise ValueError(
-                f"{_option('env_id')} = {env_id!r} is not valid: allowed {', '.join(ENV_IDS)}"
+                f"{_option('env_id')} = {shown(env_id)} is not valid: allowed {', '.join(ENV_IDS)}"
             )
         return cls._checked({**ENV_DEFAULTS[env_id], **values, "env_id": env_id})
 
@@ -324,7 +324,7 @@ class TrainConfig:
         _check_int("sde_sample_freq", self.sde_sample_freq, -1)
         if self.verbose not in (0, 1, 2) or isinstance(self.verbose, bool):
             raise ValueError(
-                f"{_option('verbose')} = {self.verbose!r} is not valid: allowed 0, 1, 2"
+                f"{_option('verbose')} = {shown(self.verbose)} is not valid: allowed 0, 1, 2"
             )
         _check_number("gamma", self.gamma, 0.0, 1.0, open_low=True)
         _check_number("gae_lambda", self.gae_lambda, 0.0, 1.0)
@@ -350,28 +350,28 @@ class TrainConfig:
         _check_int("frame_stack", self.frame_stack, 1, MAX_FRAME_STACK)
         if self.env_id not in ENV_IDS:
             raise ValueError(
-                f"{_option('env_id')} = {self.env_id!r} is not valid: allowed {', '.join(ENV_IDS)}"
+                f"{_option('env_id')} = {shown(self.env_id)} is not valid: allowed {', '.join(ENV_IDS)}"
             )
         if self.env_id == PAPER_ENV_ID and self.observation:
             raise ValueError(
-                f"{_option('observation')} = {self.observation!r} is not valid with "
+                f"{_option('observation')} = {shown(self.observation)} is not valid with "
                 f"{_option('env_id')} {PAPER_ENV_ID}: allowed empty (the observation is set "
                 f"on {FIELD_ENV_ID} only)"
             )
         if self.training_ranges not in TRAINING_RANGE_NAMES:
             raise ValueError(
-                f"{_option('training_ranges')} = {self.training_ranges!r} is not valid: allowed "
+                f"{_option('training_ranges')} = {shown(self.training_ranges)} is not valid: allowed "
                 f"{', '.join(TRAINING_RANGE_NAMES)}"
             )
         if self.env_id == PAPER_ENV_ID and self.training_ranges != "env":
             raise ValueError(
-                f"{_option('training_ranges')} = {self.training_ranges!r} is not valid with "
+                f"{_option('training_ranges')} = {shown(self.training_ranges)} is not valid with "
                 f"{_option('env_id')} {PAPER_ENV_ID}: allowed env (the ranges are set on "
                 f"{FIELD_ENV_ID} only)"
             )
         if self.observation not in ("", "state", "surface"):
             raise ValueError(
-                f"{_option('observation')} = {self.observation!r} is not valid: allowed "
+                f"{_option('observation')} = {shown(self.observation)} is not valid: allowed "
                 "surface, state or empty (the env's default)"
             )
         if not self.net_arch or any(
@@ -379,17 +379,19 @@ class TrainConfig:
             for n in self.net_arch
         ):
             raise ValueError(
-                f"{_option('net_arch')} = {self.net_arch!r} is out of range: allowed 1 to 8 "
+                f"{_option('net_arch')} = {shown(self.net_arch)} is out of range: allowed 1 to 8 "
                 "layer sizes, each an integer in [1, 1024]"
             )
         if len(self.net_arch) > 8:
-            raise ValueError(f"{_option('net_arch')} = {self.net_arch!r}: allowed at most 8 layers")
+            raise ValueError(
+                f"{_option('net_arch')} = {shown(self.net_arch)}: allowed at most 8 layers"
+            )
         if (
             not self.exp_name
             or not self.exp_name.replace("-", "_").replace(".", "_").isidentifier()
         ):
             raise ValueError(
-                f"{_option('exp_name')} = {self.exp_name!r} is not valid: allowed letters, "
+                f"{_option('exp_name')} = {shown(self.exp_name)} is not valid: allowed letters, "
                 "digits, '_', '-' and '.'"
             )
         if self.resume and self.overwrite:
@@ -425,7 +427,7 @@ def _trusted_files(value: Any) -> tuple[str, ...]:
     option = _option("trust_pickle")
     if isinstance(value, bool):
         raise ValueError(
-            f"{option} = {value!r} is not valid: name the pickled checkpoint files you trust "
+            f"{option} = {shown(value)} is not valid: name the pickled checkpoint files you trust "
             f"({option} FILE [FILE]); a switch would cover files you did not name"
         )
     if isinstance(value, (str, bytes, os.PathLike)) or not isinstance(value, (list, tuple)):

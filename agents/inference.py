@@ -16,6 +16,8 @@ from typing import Any, Final, Literal, get_args
 import numpy as np
 import numpy.typing as npt
 
+from drill_env.validation import shown
+
 __all__ = [
     "ACTIVATIONS",
     "NOISE_TYPES",
@@ -69,10 +71,10 @@ class PolicySpec:
     def __post_init__(self) -> None:
         sizes = (self.observation_size, *self.hidden_sizes, self.action_size, self.frame_stack)
         if not all(isinstance(n, int) and not isinstance(n, bool) and n >= 1 for n in sizes):
-            raise ValueError(f"PolicySpec: sizes must be integers >= 1, got {self!r}")
+            raise ValueError(f"PolicySpec: sizes must be integers >= 1, got {shown(self)}")
         if self.activation not in ACTIVATIONS or self.noise not in NOISE_TYPES:
             raise ValueError(
-                f"PolicySpec: activation {self.activation!r} or noise {self.noise!r} unknown: "
+                f"PolicySpec: activation {shown(self.activation)} or noise {shown(self.noise)} unknown: "
                 f"allowed {list(ACTIVATIONS)} and {list(NOISE_TYPES)}"
             )
         bounds = (self.action_low, self.action_high)

@@ -21,6 +21,8 @@ from typing import IO, Final
 import numpy as np
 import numpy.typing as npt
 
+from drill_env.validation import shown
+
 __all__ = ["LEGACY_NORM_FILE", "LEGACY_WEIGHTS_FILE", "PREVIOUS_FORMAT", "read_npz"]
 
 PREVIOUS_FORMAT: Final = 2
@@ -120,7 +122,7 @@ def _check_directory(
         name = info.filename[:-4] if info.filename.endswith(".npy") else ""
         if name not in expected or name in names:
             raise ValueError(
-                f"{where!r}: unexpected entry {info.filename!r}: expected one each of "
+                f"{where!r}: unexpected entry {shown(info.filename)}: expected one each of "
                 f"{', '.join(k + '.npy' for k in expected)}"
             )
         names.append(name)
@@ -129,7 +131,7 @@ def _check_directory(
             zipfile.ZIP_DEFLATED,
         ):
             raise ValueError(
-                f"{where!r}: entry {info.filename!r} is encrypted or uses an unsupported "
+                f"{where!r}: entry {shown(info.filename)} is encrypted or uses an unsupported "
                 "compression: allowed stored or deflated"
             )
         with archive.open(info) as entry:

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -48,8 +47,10 @@ from agents.inference import (
 from agents.legacy_format import LEGACY_NORM_FILE, LEGACY_WEIGHTS_FILE, PREVIOUS_FORMAT, read_npz
 from drill_env import COUPLED_ENV_ID, ENV_ID, FIELD_ENV_ID
 from drill_env.coupled_env import CoupledEnvConfig
+from drill_env.files import write_bytes, write_text
 from drill_env.layout import OBSERVATION_MODES
 from drill_env.options import EnvConfig, FieldEnvConfig
+from drill_env.validation import shown
 
 __all__ = [
     "ACTIVATIONS",
@@ -202,7 +203,7 @@ def _record_value(value: Any, depth: int = 0, path: str = "") -> Any:
     if isinstance(value, bool) or value is None:
         return value
     if isinstance(value, float) and not math.isfinite(value):  # 1e400 (NaN: the JSON reader)
-        raise ValueError(f"{path} = {value!r}: allowed a finite number")
+        raise ValueError(f"{path} = {shown(value)}: allowed a finite number")
     if isinstance(value, int) and abs(value) > MAX_JSON_INT:
         raise ValueError(f"{path} = {_show(value)}: allowed an integer in [-2**53, 2**53]")
     if isinstance(value, str) and len(value) > MAX_STRING:
@@ -596,16 +597,14 @@ def _check_layout(
 
 def write_safetensors(path: Path, arrays: Mapping[str, npt.ArrayLike]) -> None:
     """Write float arrays (float32 and float64 kept, other dtypes as float64) to ``path`` as
-    safetensors (via a temporary file, then renamed)."""
+    safetensors (whole or not at all, never through a link: :func:`drill_env.files.replacing`)."""
     clean: dict[str, npt.NDArray[Any]] = {}
     for name, value in arrays.items():
         array = np.asarray(value)
         if array.dtype not in (np.float32, np.float64):
             array = array.astype(np.float64)
         clean[name] = np.array(array, dtype=array.dtype.newbyteorder("<"), order="C")
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(safetensors.numpy.save(clean))
-    os.replace(tmp, path)
+    write_bytes(path, safetensors.numpy.save(clean))
 
 
 def check_obs_norm(norm: ObsNorm, where: str) -> None:
@@ -614,10 +613,12 @@ def check_obs_norm(norm: ObsNorm, where: str) -> None:
         raise ValueError(f"{where!r}: array var has negative entries: allowed >= 0")
     if not 0 < norm.clip_obs <= MAX_BOUND:
         raise ValueError(
-            f"{where!r}: clip_obs = {norm.clip_obs!r} is out of range: allowed (0, 1e9]"
+            f"{where!r}: clip_obs = {shown(norm.clip_obs)} is out of range: allowed (0, 1e9]"
         )
     if not 0 <= norm.epsilon <= 1.0:
-        raise ValueError(f"{where!r}: epsilon = {norm.epsilon!r} is out of range: allowed [0, 1]")
+        raise ValueError(
+            f"{where!r}: epsilon = {shown(norm.epsilon)} is out of range: allowed [0, 1]"
+        )
     if np.any(norm.var + norm.epsilon <= 0):
         raise ValueError(f"{where!r}: var + epsilon must be > 0 in every entry")
 
@@ -684,7 +685,5 @@ def write_model_files(
     folder.mkdir(parents=True, exist_ok=True)
     write_safetensors(folder / WEIGHTS_FILE, weights)
     write_safetensors(folder / NORM_FILE, obs_norm.arrays())
-    tmp = folder / (CONFIG_FILE + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, folder / CONFIG_FILE)
+    write_text(folder / CONFIG_FILE, text)
     return folder

@@ -51,6 +51,7 @@ from agents.model_format import (
 from baselines import controller_names
 from drill_env import COUPLED_ENV_ID
 from drill_env.layout import observation_size
+from drill_env.validation import shown as shown_value
 
 if TYPE_CHECKING:  # pragma: no cover
     from stable_baselines3 import PPO
@@ -248,8 +249,8 @@ class ResidualPolicy:
     def __repr__(self) -> str:
         if self.env_id != DEFAULT_ENV_ID:
             return (
-                f"ResidualPolicy(name={self.name!r}, env_id={self.env_id!r}, "
-                f"env_kwargs={self.env_kwargs!r})"
+                f"ResidualPolicy(name={shown_value(self.name)}, env_id={shown_value(self.env_id)}, "
+                f"env_kwargs={shown_value(self.env_kwargs)})"
             )
         return f"ResidualPolicy(name={self.name!r}, env_kwargs={self.env_kwargs!r})"
 
@@ -287,7 +288,7 @@ def policy_from_sb3(
     size = int(model.observation_space.shape[0])  # type: ignore[index]
     if frame_stack < 1 or size % frame_stack:
         raise ValueError(
-            f"frame_stack = {frame_stack!r}: the model takes {size} inputs, not a whole number "
+            f"frame_stack = {shown_value(frame_stack)}: the model takes {size} inputs, not a whole number "
             "of stacked observations"
         )
     where = f"cannot convert {type(policy).__name__} of {type(model).__name__}"
@@ -325,7 +326,9 @@ def policy_from_sb3(
             activations.add("tanh" if isinstance(module, th.nn.Tanh) else "relu")
             expect_linear = True
         else:
-            raise ValueError(f"{where}: layer {module!r} is not supported in the policy network")
+            raise ValueError(
+                f"{where}: layer {shown_value(module)} is not supported in the policy network"
+            )
     if not expect_linear or len(activations) > 1 or not isinstance(action_net, th.nn.Linear):
         raise ValueError(f"{where}: expected Linear layers each followed by one activation")
     weights["action.weight"] = array(action_net.weight)
@@ -423,20 +426,20 @@ def _check_environment(config: ModelConfig, where: str, path: Path, base_control
     if found is not None and found not in controller_names():
         raise ValueError(
             f"{where!r}: field env_kwargs.base_controller: the model was trained on base "
-            f"controller {found!r}, which is not registered; expected one of "
+            f"controller {shown_value(found)}, which is not registered; expected one of "
             f"{controller_names()} or None"
         )
     if base_controller is not ... and found != base_controller:
         raise ValueError(
             f"{str(path)!r}: wrong base controller: expected a model trained on "
-            f"{base_controller!r}, found one trained on {found!r}"
+            f"{shown_value(base_controller)}, found one trained on {shown_value(found)}"
         )
     if config.env_id == DEFAULT_ENV_ID:
         expected = observation_size(found is not None)
-        env = f"DrillString-v0 with base_controller={found!r}"
+        env = f"DrillString-v0 with base_controller={shown_value(found)}"
     else:
         expected = _observation_size(config.env_id, config.env_kwargs)
-        shown = ", ".join(f"{k}={v!r}" for k, v in config.env_kwargs.items())
+        shown = ", ".join(f"{k}={shown_value(v)}" for k, v in config.env_kwargs.items())
         env = f"{config.env_id} with {shown}"
     if config.spec.observation_size != expected:
         raise ValueError(
@@ -574,13 +577,13 @@ def _load_sb3(zip_file: Path, base_controller: Any) -> ResidualPolicy:
     )
     if env_id != DEFAULT_ENV_ID:
         raise ValueError(
-            f"{str(config_file)!r}: field env_kwargs.env_id = {env_id!r}: a Stable-Baselines3 "
+            f"{str(config_file)!r}: field env_kwargs.env_id = {shown_value(env_id)}: a Stable-Baselines3 "
             f"model.zip is always for {DEFAULT_ENV_ID}"
         )
     name = record.get("name", folder.name)
     if not isinstance(name, str) or not name or not name.isprintable() or len(name) > 100:
         raise ValueError(
-            f"{str(config_file)!r}: field name = {name!r}: expected a printable string of 1 to "
+            f"{str(config_file)!r}: field name = {shown_value(name)}: expected a printable string of 1 to "
             "100 characters"
         )
     found = env_kwargs["base_controller"]
@@ -606,7 +609,7 @@ def _load_sb3(zip_file: Path, base_controller: Any) -> ResidualPolicy:
     if model.observation_space.shape != (size,):
         raise ValueError(
             f"{str(zip_file)!r}: wrong observation size: expected {size} "
-            f"(DrillString-v0 with base_controller={found!r}), found a model taking "
+            f"(DrillString-v0 with base_controller={shown_value(found)}), found a model taking "
             f"{model.observation_space.shape}"
         )
     metadata = {k: v for k, v in record.items() if k in RECORD_FIELDS}

@@ -59,6 +59,7 @@ from baselines import controller_names
 from baselines.registry import REFERENCE_CONTROLLER
 from drill_env import RewardWeights
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout
+from drill_env.files import write_text
 from drill_env.limits import DEFAULT_TORQUE_LIMITS
 from drill_env.options import FIELD_MAX_TORQUE_NM, FieldEnvConfig
 from drill_env.scenarios import RPM, FieldRandomization
@@ -386,7 +387,7 @@ def _check_settings(config: TrainConfig) -> None:
     names = controller_names()
     if config.base_controller.lower() != "none" and config.base_controller not in names:
         raise ValueError(
-            f"--base-controller = {config.base_controller!r} is not registered: allowed "
+            f"--base-controller = {shown(config.base_controller)} is not registered: allowed "
             f"{', '.join(names)} or none"
         )
     if config.progress_bar:
@@ -584,7 +585,7 @@ def train(config: TrainConfig, progress: bool = True) -> Path:
         load_checkpoint(model, venv, last.path)
         model.set_random_seed(config.seed + start_steps)
     venv.seed(config.seed + start_steps)
-    (run_dir / "config.json").write_text(config.to_json() + "\n")  # once the agent is built
+    write_text(run_dir / "config.json", config.to_json() + "\n")  # once the agent is built
 
     # ---- logging: CSV always, TensorBoard and stdout on request
     suffix = "" if start_steps == 0 else f"-resumed-at-{start_steps}"
@@ -747,7 +748,9 @@ class _Validation:
         if score_file.is_file():
             score = read_json(score_file).get("score")
             if isinstance(score, bool) or not isinstance(score, (int, float)):
-                raise ValueError(f"{str(score_file)!r}: field score = {score!r}: expected a number")
+                raise ValueError(
+                    f"{str(score_file)!r}: field score = {shown(score)}: expected a number"
+                )
             self.best = float(score)
         self.next_at = 0
         if not self.csv.exists():
@@ -756,7 +759,7 @@ class _Validation:
                 if self.coupled
                 else "timesteps,iae_ratio,rmsd_ratio,severity_ratio,score\n"
             )
-            self.csv.write_text(header)
+            write_text(self.csv, header)
 
     def run(self, model: Any, venv: Any) -> float:
         from stable_baselines3.common.logger import TensorBoardOutputFormat
@@ -785,8 +788,8 @@ class _Validation:
                 _record(self.config, {"validation_score": score, "timesteps": steps})
             )
             policy.save(self.best_dir)
-            (self.best_dir / "score.json").write_text(
-                json.dumps({"score": score, "timesteps": steps})
+            write_text(
+                self.best_dir / "score.json", json.dumps({"score": score, "timesteps": steps})
             )
         if not self.progress:
             return score
@@ -818,8 +821,8 @@ class _Validation:
                 _record(self.config, {"validation_score": score, "timesteps": steps})
             )
             policy.save(self.best_dir)
-            (self.best_dir / "score.json").write_text(
-                json.dumps({"score": score, "timesteps": steps})
+            write_text(
+                self.best_dir / "score.json", json.dumps({"score": score, "timesteps": steps})
             )
         if self.progress:
             print(

@@ -29,6 +29,8 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
+from drill_env.validation import shown
+
 __all__ = ["GymnasiumVecEnv"]
 
 
@@ -105,7 +107,7 @@ class GymnasiumVecEnv(VecEnv):
 
     def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
         raise AttributeError(
-            f"cannot set {attr_name!r} on single strings of a native vector env; "
+            f"cannot set {shown(attr_name)} on single strings of a native vector env; "
             "set it on the vector env itself"
         )
 
@@ -113,7 +115,7 @@ class GymnasiumVecEnv(VecEnv):
         self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **kwargs: Any
     ) -> list[Any]:
         raise AttributeError(
-            f"cannot call {method_name!r} on single strings of a native vector env; "
+            f"cannot call {shown(method_name)} on single strings of a native vector env; "
             "call it on the vector env itself"
         )
 

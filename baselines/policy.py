@@ -18,6 +18,7 @@ from drill_env.layout import (
     unscale_measurement,
 )
 from drill_env.limits import DEFAULT_TORQUE_LIMITS
+from drill_env.validation import shown
 
 __all__ = ["ControllerPolicy"]
 
@@ -54,7 +55,7 @@ class ControllerPolicy:
         max_torque_nm: float = DEFAULT_TORQUE_LIMITS.max_nm,
     ) -> None:
         if not control_dt_s > 0:
-            raise ValueError(f"control_dt_s = {control_dt_s!r} is out of range: allowed > 0")
+            raise ValueError(f"control_dt_s = {shown(control_dt_s)} is out of range: allowed > 0")
         if not min_torque_nm < max_torque_nm:
             raise ValueError("min_torque_nm must be below max_torque_nm")
         self.controller = controller

@@ -37,6 +37,7 @@ from baselines.speed_loop import DriveLimits, SpeedLoopController, SpeedLoopTuni
 from baselines.string_modes import string_view
 from drill_env.distributed import DistributedStringParameters
 from drill_env.parameters import DrillStringParameters
+from drill_env.validation import shown
 
 __all__ = ["SoftSpeed", "SoftSpeedGains"]
 
@@ -67,10 +68,12 @@ class SoftSpeedGains(Gains):
         if not isinstance(self.inertia_compensation, bool):
             raise TypeError(
                 "SoftSpeedGains.inertia_compensation must be True or False, got "
-                f"{self.inertia_compensation!r}"
+                f"{shown(self.inertia_compensation)}"
             )
         if not isinstance(self.limits, DriveLimits):
-            raise TypeError(f"SoftSpeedGains.limits must be a DriveLimits, got {self.limits!r}")
+            raise TypeError(
+                f"SoftSpeedGains.limits must be a DriveLimits, got {shown(self.limits)}"
+            )
 
 
 class SoftSpeed(SpeedLoopController):

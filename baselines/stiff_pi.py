@@ -28,6 +28,7 @@ from baselines.speed_loop import DriveLimits, SpeedLoopController, SpeedLoopTuni
 from baselines.string_modes import string_view
 from drill_env.distributed import DistributedStringParameters
 from drill_env.parameters import DrillStringParameters
+from drill_env.validation import shown
 
 __all__ = ["StiffPI", "StiffPIGains"]
 
@@ -53,7 +54,7 @@ class StiffPIGains(Gains):
         self._check("bandwidth_factor", "(0, 10000]", 0 < self.bandwidth_factor <= 10_000)
         self._check("damping_ratio", "(0, 100]", 0 < self.damping_ratio <= 100)
         if not isinstance(self.limits, DriveLimits):
-            raise TypeError(f"StiffPIGains.limits must be a DriveLimits, got {self.limits!r}")
+            raise TypeError(f"StiffPIGains.limits must be a DriveLimits, got {shown(self.limits)}")
 
 
 class StiffPI(SpeedLoopController):

@@ -38,6 +38,7 @@ from drill_env.distributed import DistributedStringParameters
 from drill_env.modes import lumped_equivalent, stick_slip_frequency_rad_s
 from drill_env.modes import pipe_impedance as distributed_pipe_impedance
 from drill_env.parameters import DrillStringParameters, resolve_parameters
+from drill_env.validation import shown
 
 __all__ = [
     "BIT_ENDS",
@@ -111,9 +112,9 @@ def string_modes(
     """
     p = resolve_parameters(params)
     if top not in TOP_ENDS:
-        raise ValueError(f"top = {top!r} is not valid: allowed {list(TOP_ENDS)}")
+        raise ValueError(f"top = {shown(top)} is not valid: allowed {list(TOP_ENDS)}")
     if bit not in BIT_ENDS:
-        raise ValueError(f"bit = {bit!r} is not valid: allowed {list(BIT_ENDS)}")
+        raise ValueError(f"bit = {shown(bit)} is not valid: allowed {list(BIT_ENDS)}")
     names = ["top_drive", "pipes", "collars", "bit"]
     inertias = [p.J_dt, p.J_pi, p.J_co, p.J_bi]
     springs = [p.k_pi, p.k_co, p.k_bi]  # spring j joins inertia j and j + 1

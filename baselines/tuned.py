@@ -212,7 +212,9 @@ def parse_tuned_gains(data: Any, source: str = "tuned gains") -> dict[str, dict[
             at = f"{where}.{kind}"
             _object(entry, at, _ENTRY_KEYS, ("env", "gains"))
             if entry["env"] != KIND_ENVS[kind]:
-                raise _fail(f"{at}.env", f"= {shown(entry['env'])}: expected {KIND_ENVS[kind]!r}")
+                raise _fail(
+                    f"{at}.env", f"= {shown(entry['env'])}: expected {shown(KIND_ENVS[kind])}"
+                )
             command = entry.get("command", "")
             if not isinstance(command, str):
                 raise _fail(f"{at}.command", f"= {shown(command)}: expected a string")
@@ -255,19 +257,23 @@ def load_tuned_gains(path: Path | str | None = None) -> dict[str, dict[str, Tune
     file = Path(TUNED_GAINS_FILE if path is None else path)
     name = printable(str(file), 200)
     if not file.is_file():
-        raise FileNotFoundError(f"no tuned gains file at {name!r}")
+        raise FileNotFoundError(f"no tuned gains file at {shown(name)}")
     with file.open("rb") as stream:
         raw = stream.read(_MAX_BYTES + 1)
     if len(raw) > _MAX_BYTES:
-        raise ValueError(f"{name!r} is larger than {_MAX_BYTES:,} bytes: not a tuned gains file")
+        raise ValueError(
+            f"{shown(name)} is larger than {_MAX_BYTES:,} bytes: not a tuned gains file"
+        )
     try:
         data = json.loads(
             raw.decode("utf-8"), object_pairs_hook=_no_duplicates, parse_constant=_no_constant
         )
     except RecursionError:
-        raise ValueError(f"{name!r} is not a tuned gains file: JSON nested too deeply") from None
+        raise ValueError(
+            f"{shown(name)} is not a tuned gains file: JSON nested too deeply"
+        ) from None
     except (ValueError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{name!r} is not valid JSON: {printable(exc, 200)}") from None
+        raise ValueError(f"{shown(name)} is not valid JSON: {printable(exc, 200)}") from None
     return parse_tuned_gains(data, printable(file.name, 200))
 
 
@@ -321,7 +327,7 @@ class _TunedSpeedLoop(SpeedLoopController):
         if gains is not None:
             raise TypeError(
                 f"{self.name} reads its factors from {TUNED_GAINS_FILE.name}: give single "
-                f"factors as keywords, or use {self.base_name} with gains={gains!r}"
+                f"factors as keywords, or use {self.base_name} with gains={shown(gains)}"
             )
         valid = [f.name for f in dataclasses.fields(self.gains_type)]
         check_unknown(overrides, valid, "gain", self.name)

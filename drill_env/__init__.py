@@ -71,11 +71,16 @@ from drill_env.ids import COUPLED_ENV_ID, ENV_ID, FIELD_ENV_ID  # noqa: E402
 # number of decisions that takes as ``env.spec.max_episode_steps``. No wrappers either: the envs
 # refuse a step before reset() themselves, and pass Gymnasium's env checker in the tests (each
 # wrapper layer costs every decision a Python call).
-for _id, _name in ((ENV_ID, "DrillString"), (FIELD_ENV_ID, "DrillStringField")):
+# The entry points are functions (drill_env.creators), so that the env's constructor, not
+# Gymnasium, checks render_mode first.
+for _id, _name, _creator in (
+    (ENV_ID, "DrillString", "make_drill_string_env"),
+    (FIELD_ENV_ID, "DrillStringField", "make_field_env"),
+):
     if _id not in registry:
         register(
             id=_id,
-            entry_point=f"drill_env.env:{_name}Env",
+            entry_point=f"drill_env.creators:{_creator}",
             vector_entry_point=f"drill_env.vector:{_name}VectorEnv",
             order_enforce=False,
             disable_env_checker=True,
@@ -84,6 +89,6 @@ for _id, _name in ((ENV_ID, "DrillString"), (FIELD_ENV_ID, "DrillStringField")):
 if COUPLED_ENV_ID not in registry:
     register(
         id=COUPLED_ENV_ID,
-        entry_point="drill_env.coupled_env:DrillStringCoupledEnv",
+        entry_point="drill_env.creators:make_coupled_env",
         vector_entry_point="drill_env.coupled_env:DrillStringCoupledVectorEnv",
     )

@@ -678,7 +678,7 @@ class StringBatch:
         if not math.isfinite(torque):
             if not self.end_reasons[i]:
                 name = printable(type(self.controllers[i]).__name__)
-                self.end_reasons[i] = f"base_controller {name} returned {torque!r} N m"
+                self.end_reasons[i] = f"base_controller {name} returned {shown(torque)} N m"
             return math.nan
         return torque
 

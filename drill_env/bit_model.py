@@ -34,6 +34,8 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
+from drill_env.validation import shown
+
 __all__ = [
     "FAMILIES",
     "FAMILY_CODES",
@@ -212,7 +214,7 @@ def simulate_bit(
     top = np.ascontiguousarray(top_speed_rad_s, dtype=np.float64)
     params = np.ascontiguousarray(p, dtype=np.float64)
     if family not in FAMILY_CODES:
-        raise ValueError(f"family = {family!r} is not known: allowed {', '.join(FAMILIES)}")
+        raise ValueError(f"family = {shown(family)} is not known: allowed {', '.join(FAMILIES)}")
     n_sub = substeps or substeps_for(params, float(np.median(np.diff(t))))
     use_wob = wob_n is not None
     wob = np.ascontiguousarray(wob_n if use_wob else np.zeros(1), dtype=np.float64)
@@ -343,9 +345,9 @@ def simulate_free_running(
     params = np.ascontiguousarray(p, dtype=np.float64)
     top = np.ascontiguousarray(top_drive, dtype=np.float64)
     if family not in FAMILY_CODES:
-        raise ValueError(f"family = {family!r} is not known: allowed {', '.join(FAMILIES)}")
+        raise ValueError(f"family = {shown(family)} is not known: allowed {', '.join(FAMILIES)}")
     if top.shape != (4,) or not np.all(np.isfinite(top)) or top[0] <= 0:
-        raise ValueError(f"top_drive = {top!r}: allowed 4 finite numbers, inertia > 0")
+        raise ValueError(f"top_drive = {shown(top)}: allowed 4 finite numbers, inertia > 0")
     dt = float(np.median(np.diff(t)))
     n_sub = substeps or substeps_for(params, dt)
     if top[1] > 0:

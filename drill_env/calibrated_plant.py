@@ -40,6 +40,7 @@ from drill_env.bit_model import (
     P_TAU,
     P_XI,
 )
+from drill_env.files import write_text
 from drill_env.parameters import PLANT_DT_S, DrillStringParameters
 from drill_env.validation import printable, shown
 
@@ -151,7 +152,7 @@ class CalibratedPlant:
             if p.unit != parameter_unit(name, self.uses_wob):
                 raise ValueError(
                     f"parameters.{name}.unit = {shown(p.unit)}: expected "
-                    f"{parameter_unit(name, self.uses_wob)!r}"
+                    f"{shown(parameter_unit(name, self.uses_wob))}"
                 )
         a_a = self.parameters["static_friction"].value
         a_0 = self.parameters["sliding_friction"].value
@@ -204,8 +205,7 @@ class CalibratedPlant:
     def save(self, path: str | os.PathLike[str]) -> Path:
         """Write the plant file (JSON; NaN written as null)."""
         p = Path(path)
-        p.write_text(json.dumps(_clean(self.to_json()), indent=1) + "\n")
-        return p
+        return write_text(p, json.dumps(_clean(self.to_json()), indent=1) + "\n")
 
 
 def _clean(value: Any) -> Any:

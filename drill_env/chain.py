@@ -62,6 +62,7 @@ from drill_env.distributed import (
 )
 from drill_env.friction import STUCK
 from drill_env.parameters import PLANT_DT_S, DrillStringParameters
+from drill_env.validation import check_int, check_real, shown
 
 __all__ = [
     "CHAIN_HEADER",
@@ -137,9 +138,9 @@ def chain_parameter_vector(parameters: PlantLike, length: int | None = None) -> 
     chain = chain_from_parameters(parameters)
     n = chain.n_nodes
     used = chain_parameter_length(n)
-    size = used if length is None else int(length)
+    size = used if length is None else check_int("length", length, 0)
     if size < used:
-        raise ValueError(f"length = {length!r} is out of range: allowed >= {used} for n = {n}")
+        raise ValueError(f"length = {shown(length)} is out of range: allowed >= {used} for n = {n}")
     p = np.zeros(size)
     p[CP_N] = n
     p[CP_MU_A], p[CP_MU_0], p[CP_R] = chain.mu_a, chain.mu_0, chain.bit_radius_m
@@ -166,9 +167,7 @@ def stack_chain_parameters(strings: list[PlantLike] | tuple[PlantLike, ...]) -> 
 
 def chain_work(n_max: int) -> FloatArray:
     """Scratch array for :func:`chain_step` on chains of up to ``n_max`` nodes."""
-    if n_max < 2:
-        raise ValueError(f"n_max = {n_max!r} is out of range: allowed >= 2")
-    return np.zeros((CHAIN_WORK_ROWS, int(n_max)))
+    return np.zeros((CHAIN_WORK_ROWS, check_int("n_max", n_max, 2)))
 
 
 # ------------------------------------------------------------------------------ compiled core
@@ -614,12 +613,16 @@ def _integrate(x0, mode0, p, t_a, t_0, u, h, n_steps, every, out_x, out_mode, wo
 
 # --------------------------------------------------------------------------- numpy helpers
 def _wob(wob_n: float) -> float:
-    is_number = isinstance(wob_n, (int, float, np.floating, np.integer))
-    if isinstance(wob_n, bool) or not (is_number and math.isfinite(wob_n)):
-        raise ValueError(f"wob_n = {wob_n!r} is out of range: allowed a finite number > 0")
-    if not wob_n > 0:
-        raise ValueError(f"wob_n = {wob_n!r} is out of range: allowed > 0")
-    return float(wob_n)
+    return _positive("wob_n", wob_n)
+
+
+def _positive(name: str, value: object) -> float:
+    """``value`` as a float if it is a finite real number > 0; else the validation family's
+    error naming ``name``, the value shown bounded and escaped."""
+    v = check_real(name, value, "a finite number > 0")
+    if not (math.isfinite(v) and v > 0):
+        raise ValueError(f"{name} = {shown(value)} is out of range: allowed > 0")
+    return v
 
 
 def _state(x: npt.ArrayLike | None, size: int, name: str) -> FloatArray:
@@ -690,18 +693,18 @@ def chain_integrate_constant_torque(
     """
     chain = chain_from_parameters(resolve_plant(parameters))
     wob = _wob(wob_n)
-    if not (math.isfinite(step_s) and step_s > 0):
-        raise ValueError(f"step_s = {step_s!r} is out of range: allowed > 0")
-    if not (math.isfinite(duration_s) and duration_s > 0):
-        raise ValueError(f"duration_s = {duration_s!r} is out of range: allowed > 0")
+    step_s = _positive("step_s", step_s)
+    duration_s = _positive("duration_s", duration_s)
+    torque_nm = check_real("torque_nm", torque_nm)
     if not math.isfinite(torque_nm):
-        raise ValueError(f"torque_nm = {torque_nm!r} is out of range: allowed a finite number")
+        raise ValueError(f"torque_nm = {shown(torque_nm)} is out of range: allowed a finite number")
     x0 = _state(initial_state, chain.state_size, "initial_state")
     mode0 = STUCK if x0[-1] == 0.0 else (1 if x0[-1] > 0 else -1)
     if isinstance(record_every, bool) or not isinstance(record_every, (int, np.integer)):
-        raise TypeError(f"record_every must be an integer, got {record_every!r}")
+        raise TypeError(f"record_every must be an integer, got {shown(record_every)}")
     if record_every < 1:
-        raise ValueError(f"record_every = {record_every!r} is out of range: allowed >= 1")
+        raise ValueError(f"record_every = {shown(record_every)} is out of range: allowed >= 1")
+    record_every = check_int("record_every", record_every, 1, np.iinfo(np.int64).max)
     n_steps = round(duration_s / step_s)
     rows = n_steps // int(record_every) + 1
     out_x = np.empty((rows, chain.state_size))
@@ -746,9 +749,7 @@ def steady_drilling_state(
     """
     chain = chain_from_parameters(resolve_plant(parameters))
     wob = _wob(wob_n)
-    v = float(bit_speed_rad_s)
-    if not (math.isfinite(v) and v > 0):
-        raise ValueError(f"bit_speed_rad_s = {bit_speed_rad_s!r} is out of range: allowed > 0")
+    v = _positive("bit_speed_rad_s", bit_speed_rad_s)
     t_a, t_0 = chain.static_torque_nm(wob), chain.sliding_torque_nm(wob)
     t_bit = t_0 + (t_a - t_0) * math.exp(-chain.xi * v)
     d = chain.node_damping_nm_s_rad

@@ -142,7 +142,7 @@ class Measurement(np.ndarray):
         """
         if name not in MEASUREMENT_NAMES:
             raise KeyError(
-                f"{name!r} is not a signal of the measurement: allowed "
+                f"{shown(name)} is not a signal of the measurement: allowed "
                 f"{', '.join(MEASUREMENT_NAMES)}"
             )
         if name in self._missing:
@@ -162,7 +162,7 @@ class Measurement(np.ndarray):
         if name in MEASUREMENT_NAMES:
             return self.signal(name)
         raise AttributeError(
-            f"Measurement has no attribute {name!r}; its signals are {', '.join(MEASUREMENT_NAMES)}"
+            f"Measurement has no attribute {shown(name)}; its signals are {', '.join(MEASUREMENT_NAMES)}"
         )
 
 
@@ -294,7 +294,7 @@ class CompiledLaw(NamedTuple):
         if fn is None or tuple(fn.argtypes) != _CTYPES_ARGS or fn.restype is not ctypes.c_double:
             raise TypeError(
                 "CompiledLaw.function must be a numba cfunc with signature "
-                f"{LAW_SIGNATURE}, got {self.function!r}"
+                f"{LAW_SIGNATURE}, got {shown(self.function)}"
             )
         params = np.ascontiguousarray(self.params, dtype=np.float64)
         state = np.ascontiguousarray(self.initial_state, dtype=np.float64)
@@ -304,7 +304,7 @@ class CompiledLaw(NamedTuple):
         for name, slot in (("error_slot", self.error_slot), ("gain_slot", self.gain_slot)):
             if not -1 <= slot < state.size:
                 raise ValueError(
-                    f"CompiledLaw.{name} = {slot!r} is out of range: allowed -1 (none) to "
+                    f"CompiledLaw.{name} = {shown(slot)} is out of range: allowed -1 (none) to "
                     f"{state.size - 1}"
                 )
         info = tuple((str(key), int(slot)) for key, slot in self.info_slots)
@@ -315,14 +315,14 @@ class CompiledLaw(NamedTuple):
         for index, _ in estimates:
             if not 0 <= index < N_STATE:
                 raise ValueError(
-                    f"CompiledLaw.estimate_slots: state index {index!r} is out of range: "
+                    f"CompiledLaw.estimate_slots: state index {shown(index)} is out of range: "
                     f"allowed 0 to {N_STATE - 1}"
                 )
         for name, pairs in (("info_slots", info), ("estimate_slots", estimates)):
             for _, slot in pairs:
                 if not 0 <= slot < state.size:
                     raise ValueError(
-                        f"CompiledLaw.{name}: slot {slot!r} is out of range: allowed 0 to "
+                        f"CompiledLaw.{name}: slot {shown(slot)} is out of range: allowed 0 to "
                         f"{state.size - 1}"
                     )
         return self._replace(

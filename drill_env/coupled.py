@@ -44,6 +44,7 @@ from drill_env.validation import (
     check_interval,
     check_range,
     require,
+    shown,
 )
 
 __all__ = [
@@ -1466,14 +1467,14 @@ def critical_speed_rad_s(
     low, high = speed_range_rad_s
     if not intervals:
         raise ValueError(
-            f"steady drilling at applied_force_n = {applied_force_n!r} is unstable at every "
+            f"steady drilling at applied_force_n = {shown(applied_force_n)} is unstable at every "
             f"top-drive speed in [{low:g}, {high:g}] rad/s: no critical speed (with "
             f"torsional_damping_nms_rad = {p.torsional_damping_nms_rad:g}; pure RGD, 0, is "
             "unstable everywhere)"
         )
     if intervals[0][0] <= low:
         raise ValueError(
-            f"steady drilling at applied_force_n = {applied_force_n!r} is already stable at "
+            f"steady drilling at applied_force_n = {shown(applied_force_n)} is already stable at "
             f"the lowest speed {low:g} rad/s of speed_range_rad_s: lower it"
         )
     return intervals[0][0]

@@ -221,7 +221,7 @@ class AxialChain:
         ):  # fmt: skip
             array = np.array(getattr(self, name), dtype=np.float64)
             if array.shape != (size,) or not np.all(np.isfinite(array)):
-                raise ValueError(f"{name} must be finite with shape ({size},), got {array!r}")
+                raise ValueError(f"{name} must be finite with shape ({size},), got {shown(array)}")
             array.setflags(write=False)
             object.__setattr__(self, name, array)
         require("min node_mass_kg", float(self.node_mass_kg.min()), "> 0",

@@ -812,8 +812,8 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
     metadata: dict[str, Any] = {"render_modes": list(render.RENDER_MODES), "render_fps": 20}
 
     def __init__(self, render_mode: str | None = None, **keywords: Any) -> None:
+        render.check_render_mode(render_mode)  # first: a bad value is refused before any work
         check_unknown(keywords, [f.name for f in dataclasses.fields(CoupledEnvConfig)])
-        render.check_render_mode(render_mode)
         self.render_mode = render_mode
         with input_type_errors():
             self.config = CoupledEnvConfig(**keywords)

@@ -314,6 +314,7 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
     """The keywords this env takes."""
 
     def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
+        render.check_render_mode(render_mode)  # first: a bad value is refused before any work
         self._spec: EnvSpec | None = None
         self.config = self.config_type.from_kwargs(kwargs)
         self._batch = StringBatch(self.config, 1)
@@ -336,7 +337,6 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         self._report_row = b.report[0]
         self._obs_row = b.obs[0]
         # Rendering (drill_env.render): nothing is kept or drawn unless a render_mode is set.
-        render.check_render_mode(render_mode)
         self.render_mode = render_mode
         self.metadata = {
             **type(self).metadata,

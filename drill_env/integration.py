@@ -26,6 +26,7 @@ from drill_env.dynamics import derivative
 from drill_env.friction import STUCK, string_torque_on_bit
 from drill_env.layout import P_C_BI, P_C_BIT, P_DW, P_K_BI
 from drill_env.parameters import PLANT_DT_S, DrillStringParameters, plant_parameter_vector
+from drill_env.validation import shown
 
 __all__ = ["integrate_constant_torque", "plant_step", "rk4"]
 
@@ -190,7 +191,7 @@ def integrate_constant_torque(
         and the slip mode at each of those instants, shape (n + 1,).
     """
     if not wob_n > 0:
-        raise ValueError(f"wob_n = {wob_n!r} is out of range: allowed > 0")
+        raise ValueError(f"wob_n = {shown(wob_n)} is out of range: allowed > 0")
     n_steps = round(duration_s / step_s)
     x0 = np.zeros(7) if initial_state is None else np.asarray(initial_state, dtype=np.float64)
     mode0 = STUCK if x0[6] == 0.0 else (1 if x0[6] > 0 else -1)

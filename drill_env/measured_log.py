@@ -37,6 +37,7 @@ from typing import Final, TextIO
 import numpy as np
 import numpy.typing as npt
 
+from drill_env.files import replacing
 from drill_env.validation import shown
 
 __all__ = [
@@ -232,7 +233,7 @@ def _check_rows(
         bad = np.flatnonzero(~np.isfinite(values))
         if bad.size:
             raise ValueError(
-                f"column {name!r}, row {bad[0] + 1}: {float(values[bad[0]])!r} is not finite "
+                f"column {shown(name)}, row {bad[0] + 1}: {shown(float(values[bad[0]]))} is not finite "
                 f"({bad.size} such row(s))"
             )
     steps = np.diff(time_s)
@@ -240,8 +241,8 @@ def _check_rows(
     if bad.size:
         i = int(bad[0]) + 1
         raise ValueError(
-            f"column 'time_s', row {i + 1}: {float(time_s[i])!r} s is not after row {i}'s "
-            f"{float(time_s[i - 1])!r} s: time must be strictly increasing"
+            f"column 'time_s', row {i + 1}: {shown(float(time_s[i]))} s is not after row {i}'s "
+            f"{shown(float(time_s[i - 1]))} s: time must be strictly increasing"
         )
 
 
@@ -316,7 +317,7 @@ def _read_csv(path: Path) -> tuple[npt.NDArray[np.float64], dict[str, npt.NDArra
                         values.append(float(text))
                     except ValueError:
                         raise ValueError(
-                            f"column {name!r}, row {row_number}: {shown(text.strip())} is not a "
+                            f"column {shown(name)}, row {row_number}: {shown(text.strip())} is not a "
                             "number"
                         ) from None
                 rows += 1
@@ -354,14 +355,16 @@ def _read_parquet(
         kind = column.type
         if not (pa.types.is_floating(kind) or pa.types.is_integer(kind)):
             # bools, times and dates, text: not a number in the column's SI unit
-            raise ValueError(f"column {name!r} is not numeric ({kind}): expected float or integer")
+            raise ValueError(
+                f"column {shown(name)} is not numeric ({kind}): expected float or integer"
+            )
         if column.null_count:
             first = int(np.flatnonzero(np.asarray(column.is_null()))[0]) + 1
-            raise ValueError(f"column {name!r}, row {first}: empty value is not a number")
+            raise ValueError(f"column {shown(name)}, row {first}: empty value is not a number")
         try:
             data[name] = np.asarray(column.to_numpy(), dtype=np.float64)
         except (TypeError, ValueError):
-            raise ValueError(f"column {name!r} is not numeric ({column.type})") from None
+            raise ValueError(f"column {shown(name)} is not numeric ({column.type})") from None
     return data.pop("time_s"), data
 
 
@@ -387,7 +390,8 @@ def write_log_csv(log: MeasuredLog, path: str | os.PathLike[str]) -> Path:
     p = Path(path)
     names = ["time_s", *log.columns]
     table = np.column_stack([log.column(n) for n in names])
-    np.savetxt(p, table, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
+    with replacing(p, "w") as f:
+        np.savetxt(f, table, delimiter=",", header=",".join(names), comments="", fmt="%.17g")
     return p
 
 

@@ -12,6 +12,8 @@ from typing import Any, Final
 import numpy as np
 import numpy.typing as npt
 
+from drill_env.validation import shown
+
 __all__ = [
     "METRIC_KEYS",
     "METRIC_LABELS",
@@ -139,7 +141,7 @@ def episode_metrics_from_samples(
             f"{w.shape}, {ref.shape}, {u.shape}, {stuck.shape}"
         )
     if not dt_s > 0:
-        raise ValueError(f"dt_s = {dt_s!r} is out of range: allowed > 0")
+        raise ValueError(f"dt_s = {shown(dt_s)} is out of range: allowed > 0")
     e = ref - w
     duration = n * dt_s
     final_ref = ref[-1]

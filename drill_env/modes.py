@@ -210,7 +210,7 @@ def check_step_bound(parameters: PlantLike, step_s: float) -> None:
         plant = resolve_plant(parameters)
         length = getattr(plant, "element_length_m", shortest)
         raise ValueError(
-            f"element_length_m = {length!r} is out of range for the plant step of {step_s} s: "
+            f"element_length_m = {shown(length)} is out of range for the plant step of {step_s} s: "
             f"its shortest element ({shortest:.3g} m) makes the highest mode {highest:.4g} "
             f"rad/s, allowed h * omega <= {MAX_STEP_FREQUENCY} (use longer elements)"
         )

@@ -183,13 +183,13 @@ class EnvConfig:
         check_range("control_dt_s", self.control_dt_s, PLANT_DT_S, 10.0)
         if abs(self.control_dt_s / PLANT_DT_S - self.substeps) > 1e-6:
             raise ValueError(
-                f"control_dt_s = {self.control_dt_s!r} is out of range: allowed a multiple of "
+                f"control_dt_s = {shown(self.control_dt_s)} is out of range: allowed a multiple of "
                 f"plant_dt = {PLANT_DT_S} s"
             )
         check_range("episode_s", self.episode_s, self.control_dt_s, MAX_EPISODE_S)
         if abs(self.episode_s / self.control_dt_s - self.max_steps) > 1e-6:
             raise ValueError(
-                f"episode_s = {self.episode_s!r} is out of range: allowed a multiple of "
+                f"episode_s = {shown(self.episode_s)} is out of range: allowed a multiple of "
                 f"control_dt_s = {self.control_dt_s}"
             )
         bc = self.base_controller
@@ -203,8 +203,8 @@ class EnvConfig:
         check_range("max_torque_nm", self.max_torque_nm, -MAX_TORQUE_ABS_NM, MAX_TORQUE_ABS_NM)
         if not self.min_torque_nm < self.max_torque_nm:
             raise ValueError(
-                f"min_torque_nm = {self.min_torque_nm!r} must be below "
-                f"max_torque_nm = {self.max_torque_nm!r}"
+                f"min_torque_nm = {shown(self.min_torque_nm)} must be below "
+                f"max_torque_nm = {shown(self.max_torque_nm)}"
             )
         if not isinstance(self.randomization, randomization_type):
             raise TypeError(
@@ -413,7 +413,7 @@ def _check_steps(name: str, value: object, low: float, high: float) -> float:
     v = check_range(name, value, low, high)
     if abs(v / PLANT_DT_S - round(v / PLANT_DT_S)) > 1e-6:
         raise ValueError(
-            f"{name} = {value!r} is out of range: allowed a multiple of plant_dt = {PLANT_DT_S} s"
+            f"{name} = {shown(value)} is out of range: allowed a multiple of plant_dt = {PLANT_DT_S} s"
         )
     return v
 

@@ -25,6 +25,7 @@ import numpy as np
 import drill_env
 from drill_env.control import CompiledController, controller_names, make_controller
 from drill_env.layout import N_STATE
+from drill_env.validation import shown
 
 __all__ = ["main", "precompile"]
 
@@ -67,7 +68,7 @@ def _jobs(controllers: bool) -> Iterator[tuple[str, Callable[[], None]]]:
         try:
             controller = make_controller(name)
         except Exception as error:  # a broken third-party entry point must not stop the rest
-            print(f"precompile: skipped controller {name!r}: {error}", file=sys.stderr)
+            print(f"precompile: skipped controller {shown(name)}: {error}", file=sys.stderr)
             continue
         if isinstance(controller, CompiledController):
             yield (

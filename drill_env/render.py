@@ -104,7 +104,7 @@ def human_mode_problem() -> str | None:
     if backend in _NON_INTERACTIVE:
         return (
             f"render_mode='human' needs an interactive matplotlib back-end, but MPLBACKEND = "
-            f"{backend!r} is non-interactive; unset it, or use render_mode='rgb_array' (frames as "
+            f"{shown(backend)} is non-interactive; unset it, or use render_mode='rgb_array' (frames as "
             "arrays, e.g. for gymnasium.wrappers.RecordVideo)"
         )
     headless_platform = not (sys.platform.startswith(("win", "darwin", "cygwin")))
@@ -127,9 +127,9 @@ def history_capacity(window_s: float, sample_dt_s: float) -> int:
     """Samples a :class:`History` needs to span ``window_s`` seconds at one sample per
     ``sample_dt_s`` seconds (plus the two ends)."""
     if not (math.isfinite(sample_dt_s) and sample_dt_s > 0):
-        raise ValueError(f"sample_dt_s = {sample_dt_s!r} is out of range: allowed > 0")
+        raise ValueError(f"sample_dt_s = {shown(sample_dt_s)} is out of range: allowed > 0")
     if not (math.isfinite(window_s) and window_s > 0):
-        raise ValueError(f"window_s = {window_s!r} is out of range: allowed > 0")
+        raise ValueError(f"window_s = {shown(window_s)} is out of range: allowed > 0")
     return math.ceil(window_s / sample_dt_s - 1e-9) + 2
 
 
@@ -198,9 +198,11 @@ class History:
 
     def __init__(self, n_nodes: int, capacity: int) -> None:
         if isinstance(n_nodes, bool) or not isinstance(n_nodes, int) or n_nodes < 2:
-            raise ValueError(f"n_nodes = {n_nodes!r} is out of range: allowed an integer >= 2")
+            raise ValueError(f"n_nodes = {shown(n_nodes)} is out of range: allowed an integer >= 2")
         if isinstance(capacity, bool) or not isinstance(capacity, int) or capacity < 2:
-            raise ValueError(f"capacity = {capacity!r} is out of range: allowed an integer >= 2")
+            raise ValueError(
+                f"capacity = {shown(capacity)} is out of range: allowed an integer >= 2"
+            )
         self.n_nodes = n_nodes
         self.capacity = capacity
         self.n_state = 2 * n_nodes - 1
@@ -336,12 +338,14 @@ class StringRenderer:
         labels: Sequence[str] | None = None,
     ) -> None:
         if isinstance(n_nodes, bool) or not isinstance(n_nodes, int) or n_nodes < 2:
-            raise ValueError(f"n_nodes = {n_nodes!r} is out of range: allowed an integer >= 2")
+            raise ValueError(f"n_nodes = {shown(n_nodes)} is out of range: allowed an integer >= 2")
         for name, value in (("width_px", width_px), ("height_px", height_px)):
             if isinstance(value, bool) or not isinstance(value, int) or not 64 <= value <= 8192:
-                raise ValueError(f"{name} = {value!r} is out of range: allowed 64..8192 pixels")
+                raise ValueError(
+                    f"{name} = {shown(value)} is out of range: allowed 64..8192 pixels"
+                )
         if not (math.isfinite(window_s) and window_s > 0):
-            raise ValueError(f"window_s = {window_s!r} is out of range: allowed > 0")
+            raise ValueError(f"window_s = {shown(window_s)} is out of range: allowed > 0")
         if labels is None:
             if n_nodes == len(FOUR_DOF_LABELS):
                 labels = FOUR_DOF_LABELS
@@ -635,7 +639,7 @@ class HumanWindow:
         if problem is not None:
             raise RuntimeError(problem)
         if not (math.isfinite(fps) and fps > 0):
-            raise ValueError(f"fps = {fps!r} is out of range: allowed > 0")
+            raise ValueError(f"fps = {shown(fps)} is out of range: allowed > 0")
         self.fps = float(fps)
         self.title = title
         self._module = _interactive_backend()

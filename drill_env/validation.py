@@ -190,7 +190,7 @@ def check_bool(name: str, value: object) -> bool:
 
 
 def require(name: str, value: object, allowed: str, ok: bool) -> None:
-    """``ValueError`` ``"{name} = {value!r} is out of range: allowed {allowed}"`` unless ``ok``."""
+    """``ValueError`` ``"{name} = {shown(value)} is out of range: allowed {allowed}"`` unless ``ok``."""
     if not ok:
         raise ValueError(f"{name} = {shown(value)} is out of range: allowed {allowed}")
 

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, Final, NoReturn
 
 from drill_env.validation import printable, shown
+from drill_env.validation import shown as shown_value
 from experiments.preflight import USAGE_ERROR, error_line_format
 
 __all__ = [
@@ -258,7 +259,7 @@ def run_command(prog: str, main: Callable[[], int], debug: bool) -> int:
             else "the rl extra has torch and stable-baselines3: pip install -e '.[rl]'"
         )
         print(
-            f"{prog}: error: needs the package {exc.name!r}, which is not installed ({extra})",
+            f"{prog}: error: needs the package {shown_value(exc.name)}, which is not installed ({extra})",
             file=sys.stderr,
         )
         return USAGE_ERROR

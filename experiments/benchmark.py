@@ -80,8 +80,10 @@ from agents.policy import is_model_folder, load_policy
 from drill_env.control import controller_names
 from drill_env.distributed import DISTRIBUTED_PRESETS
 from drill_env.evaluation import Policy, ZeroAction, episode_metrics
+from drill_env.files import write_text
 from drill_env.metrics import METRIC_KEYS
 from drill_env.scenarios import WobProfile
+from drill_env.validation import shown
 from experiments.arguments import SEED_HIGH, ArgumentParser, one_line, output_folder
 from experiments.controllers import (
     CONTROLLERS_OPTION_HELP,
@@ -307,7 +309,7 @@ class _Reader:
         self.data, self.where = data, where
 
     def fail(self, key: str, allowed: str) -> ValueError:
-        return ValueError(f"{self.where}: field {key} = {self.data[key]!r}: allowed {allowed}")
+        return ValueError(f"{self.where}: field {key} = {shown(self.data[key])}: allowed {allowed}")
 
     def text(self, key: str, pattern: re.Pattern[str] | None = None) -> str:
         value = self.data[key]
@@ -515,13 +517,13 @@ def load_suite(suite: str | Path) -> Suite:
     if text.endswith(".json") or "/" in text:
         path = Path(text)
         if not path.is_file():
-            raise ValueError(f"suite {text!r}: no such file")
+            raise ValueError(f"suite {shown(text)}: no such file")
     else:
         label = text if text in shipped_suites() else _latest(text)
         if label is None:
             names = sorted({s.rsplit("-v", 1)[0] for s in shipped_suites()})
             raise ValueError(
-                f"unknown suite {text!r}: allowed {', '.join(names + shipped_suites())}, or a "
+                f"unknown suite {shown(text)}: allowed {', '.join(names + shipped_suites())}, or a "
                 "suite file (.json)"
             )
         path = SUITE_DIR / f"{label}.json"
@@ -705,7 +707,7 @@ def make_entry(text: str) -> Entry:
             names = sorted({agent.name for _, agent in entry.training_seeds} or {entry.name})
             if len(names) > 1:
                 raise ValueError(
-                    f"{text!r}: its models are named {', '.join(names)}: give the method a "
+                    f"{shown(text)}: its models are named {', '.join(names)}: give the method a "
                     "name as NAME=FOLDER"
                 )
             entry = replace(entry, name=names[0])
@@ -715,7 +717,7 @@ def make_entry(text: str) -> Entry:
     except ValueError as err:
         if ":" in text:
             raise
-        raise ValueError(f"{err}; or a model folder (no such folder {text!r})") from None
+        raise ValueError(f"{err}; or a model folder (no such folder {shown(text)})") from None
 
 
 def merge_entries(entries: Sequence[Entry]) -> list[Entry]:
@@ -1104,7 +1106,9 @@ def score_suite(
         }
     )
     if reference not in labels:
-        raise ValueError(f"suite {suite.label}: its reference controller {reference!r} was not run")
+        raise ValueError(
+            f"suite {suite.label}: its reference controller {shown(reference)} was not run"
+        )
     prone_ids = {s.id for s in suite.scenarios if s.prone}
     stats: dict[tuple[str, str], tuple[float, float, float]] = {}
     counts: dict[tuple[str, str], dict[str, int]] = {}
@@ -1528,7 +1532,7 @@ def run_benchmark(
     text = scorecard_markdown(
         suites, scores, entries, spec.resamples, spec.seed, command, wall, rows
     )
-    (out / "scorecard.md").write_text(text + "\n", encoding="utf-8")
+    write_text(out / "scorecard.md", text + "\n")
     written = [
         out / "scorecard.md",
         write_csv(json_clean(scores), out / "scorecard.csv", csv_columns(SCORE_KEYS, scores)),

@@ -28,7 +28,9 @@ import numpy.typing as npt
 
 from drill_env.bit_model import FAMILIES
 from drill_env.calibrated_plant import MODEL_PARAMETERS, PLANT_FORMAT, load_plant
+from drill_env.files import replacing, write_text
 from drill_env.measured_log import MeasuredLog, find_defects, read_log
+from drill_env.validation import shown as shown_value
 from experiments.arguments import ArgumentParser
 from experiments.calibration_fit import (
     FEATURE_KEYS,
@@ -71,13 +73,15 @@ def window_type(text: str) -> Window:
     """Parse ``A:B`` (seconds, ``A < B``) for ``--window``."""
     parts = text.split(":")
     if len(parts) != 2:
-        raise argparse.ArgumentTypeError(f"{text!r} is not A:B (start:end in s)")
+        raise argparse.ArgumentTypeError(f"{shown_value(text)} is not A:B (start:end in s)")
     try:
         a, b = float(parts[0]), float(parts[1])
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not A:B with numbers (s)") from None
+        raise argparse.ArgumentTypeError(
+            f"{shown_value(text)} is not A:B with numbers (s)"
+        ) from None
     if not (math.isfinite(a) and math.isfinite(b) and a < b):
-        raise argparse.ArgumentTypeError(f"{text!r}: allowed finite A < B (s)")
+        raise argparse.ArgumentTypeError(f"{shown_value(text)}: allowed finite A < B (s)")
     return Window(a, b)
 
 
@@ -86,14 +90,16 @@ def fix_type(text: str) -> tuple[str, float]:
     name, _, value = text.partition("=")
     if name not in MODEL_PARAMETERS:
         raise argparse.ArgumentTypeError(
-            f"unknown parameter {name!r}: allowed {', '.join(MODEL_PARAMETERS)}"
+            f"unknown parameter {shown_value(name)}: allowed {', '.join(MODEL_PARAMETERS)}"
         )
     try:
         number = float(value)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not NAME=VALUE with a number") from None
+        raise argparse.ArgumentTypeError(
+            f"{shown_value(text)} is not NAME=VALUE with a number"
+        ) from None
     if not (math.isfinite(number) and number >= 0):
-        raise argparse.ArgumentTypeError(f"{text!r}: allowed a finite value >= 0")
+        raise argparse.ArgumentTypeError(f"{shown_value(text)}: allowed a finite value >= 0")
     return name, number
 
 
@@ -106,10 +112,10 @@ def _head(path: Path) -> str:
 
 
 def prepare_out(out: Path, names: Sequence[str], signature: tuple[str, str]) -> None:
-    """Make ``out``, refusing an existing non-directory; files of ``names`` already there are
-    replaced only when they are a previous run's: regular files, and the run's main file
-    ``signature[0]`` holds ``signature[1]`` in its first 300 characters (otherwise they are
-    someone else's)."""
+    """Check ``out`` (made later, by the first write), refusing an existing non-directory;
+    files of ``names`` already there are replaced only when they are a previous run's: regular
+    files, and the run's main file ``signature[0]`` holds ``signature[1]`` in its first 300
+    characters (otherwise they are someone else's)."""
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {str(out)!r} exists and is not a directory")
     present = [out / n for n in names if (out / n).exists() or (out / n).is_symlink()]
@@ -122,7 +128,7 @@ def prepare_out(out: Path, names: Sequence[str], signature: tuple[str, str]) -> 
             f"--out: {str(present[0])!r} exists and is not from a previous run of this command "
             "(not overwritten): choose another directory"
         )
-    out.mkdir(parents=True, exist_ok=True)
+    # The folder is made by the first write, once every input has been read and checked.
 
 
 def _format(value: float | None, digits: int = 4) -> str:
@@ -208,7 +214,8 @@ def _uncertainty_figure(result: FitResult) -> Any:
 def _save(fig: Any, path: Path) -> None:
     import matplotlib.pyplot as plt
 
-    fig.savefig(path, dpi=110)
+    with replacing(path, "wb") as f:
+        fig.savefig(f, dpi=110, format="png")
     plt.close(fig)
 
 
@@ -408,7 +415,7 @@ def calibrate_main(argv: Sequence[str]) -> int:
     _save(_loop_figure(window, speed, torque, f"torque-speed loop, {title}"), out / "loop.png")
     _save(_uncertainty_figure(result), out / "uncertainty.png")
     command = "drill-gym calibrate " + " ".join(argv)
-    (out / "report.md").write_text(_report(result, log, spec.window, command))
+    write_text(out / "report.md", _report(result, log, spec.window, command))
     print(f"family {result.plant.family}; wrote {', '.join(CALIBRATE_FILES)} in {out}")
     for name, p in result.plant.parameters.items():
         shown = f"{p.value:.6g} {p.unit}" if p.identified else f"not identified ({p.note})"
@@ -529,8 +536,8 @@ def replay_main(argv: Sequence[str]) -> int:
         if window.has(name):
             columns[f"measured_{name}"] = window.column(name)
     table = np.column_stack(list(columns.values()))
-    np.savetxt(out / "replay.csv", table, delimiter=",", header=",".join(columns), comments="",
-               fmt="%.10g")  # fmt: skip
+    with replacing(out / "replay.csv") as f:
+        np.savetxt(f, table, delimiter=",", header=",".join(columns), comments="", fmt="%.10g")
     lines = [
         "# Replay",
         "",
@@ -557,7 +564,7 @@ def replay_main(argv: Sequence[str]) -> int:
         rows, *_ = replay_rows(window, speed, torque)
         if spec.free_running:
             rows += top_drive_rows(window, columns["top_speed_rad_s"], columns["surface_torque_nm"])
-        with (out / "features.csv").open("w") as f:
+        with replacing(out / "features.csv") as f:
             f.write("feature,measured,simulated,error\n")
             for r in rows:
                 f.write(
@@ -583,7 +590,7 @@ def replay_main(argv: Sequence[str]) -> int:
         _save(_fit_figure(window, speed, torque, title), out / "replay.png")
     else:
         lines.append("The log lacks bit_speed_rad_s or bit_torque_nm: no features compared.")
-    (out / "replay.md").write_text("\n".join(lines) + "\n")
+    write_text(out / "replay.md", "\n".join(lines) + "\n")
     print(f"wrote replay.csv and replay.md in {out}")
     for line in lines:
         if line.startswith("| ") and not line.startswith("| feature"):

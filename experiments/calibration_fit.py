@@ -40,6 +40,7 @@ from drill_env.calibrated_plant import (
     parameter_unit,
 )
 from drill_env.measured_log import Defect, MeasuredLog, find_defects, spike_mask
+from drill_env.validation import shown
 
 __all__ = [
     "FEATURE_KEYS",
@@ -858,13 +859,15 @@ def calibrate(
     for name in ("bit_speed_rad_s", "bit_torque_nm"):
         if not log.has(name):
             raise ValueError(
-                f"the log has no column {name!r}: calibrate fits the bit speed and the torque "
+                f"the log has no column {shown(name)}: calibrate fits the bit speed and the torque "
                 "on bit, and needs both"
             )
     user_fixed = dict(fixed or {})
     for name in user_fixed:
         if name not in MODEL_PARAMETERS:
-            raise ValueError(f"unknown parameter {name!r}: allowed {', '.join(MODEL_PARAMETERS)}")
+            raise ValueError(
+                f"unknown parameter {shown(name)}: allowed {', '.join(MODEL_PARAMETERS)}"
+            )
     window = log.window(*window_s)
     uses_wob = use_wob and window.has("wob_n")
     if uses_wob and not np.all(window.column("wob_n") > 0):

@@ -50,9 +50,11 @@ from agents.policy import is_model_folder
 from baselines.registry import family_members
 from drill_env.control import controller_names, make_controller
 from drill_env.evaluation import Trace, ZeroAction, episode_metrics
+from drill_env.files import write_text
 from drill_env.metrics import METRIC_KEYS
 from drill_env.parameters import PLANT_DT_S, resolve_parameters
 from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, WobProfile
+from drill_env.validation import shown
 from experiments.arguments import (
     SEED_HIGH,
     ArgumentParser,
@@ -276,13 +278,13 @@ def decision_period(duration_s: float) -> float:
         ValueError: if ``duration_s`` is not positive or not a multiple of the 1 ms plant step.
     """
     if not (math.isfinite(duration_s) and duration_s > 0):
-        raise ValueError(f"duration = {duration_s!r} is out of range: allowed > 0 s")
+        raise ValueError(f"duration = {shown(duration_s)} is out of range: allowed > 0 s")
     for dt in _DECISION_PERIODS_S:
         n = duration_s / dt
         if n >= 1 and abs(n - round(n)) < 1e-6:
             return dt
     raise ValueError(
-        f"duration = {duration_s!r} is out of range: allowed a multiple of {PLANT_DT_S} s"
+        f"duration = {shown(duration_s)} is out of range: allowed a multiple of {PLANT_DT_S} s"
     )
 
 
@@ -351,13 +353,13 @@ def comparison_cases(
         for c in conditions:
             if c not in UNCERTAINTY_CONDITIONS:
                 raise ValueError(
-                    f"condition = {c!r} is not an uncertainty condition of {env_id}: allowed "
+                    f"condition = {shown(c)} is not an uncertainty condition of {env_id}: allowed "
                     f"{', '.join(CONDITIONS)}"
                 )
         return [Case(c, {"condition": c}, {"uncertainty_reading": reading}) for c in conditions]
     if controller_model not in CONTROLLER_MODELS:
         raise ValueError(
-            f"controller_model = {controller_model!r} is not valid: allowed "
+            f"controller_model = {shown(controller_model)} is not valid: allowed "
             f"{', '.join(CONTROLLER_MODELS)}"
         )
     return [
@@ -591,7 +593,7 @@ def ranked_summary(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
 
 
 def _write_text(text: str, path: Path) -> Path:
-    path.write_text(text)
+    write_text(path, text)
     return path
 
 
@@ -1157,7 +1159,7 @@ class CompareStudy:
             if not values:
                 raise ValueError(f"{label} = [] is empty: the comparison needs at least one")
         if self.gains not in GAIN_PRESETS:
-            raise ValueError(f"gains = {self.gains!r}: allowed {', '.join(GAIN_PRESETS)}")
+            raise ValueError(f"gains = {shown(self.gains)}: allowed {', '.join(GAIN_PRESETS)}")
         decision_period(self.duration_s)
         check_task_size("task_runs", self.task_runs)
         if is_field(self.env_id):

@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from drill_env.control import controller_names, register_controller
+from drill_env.validation import shown
 from experiments.sweep import Backend
 
 __all__ = [
@@ -77,10 +78,10 @@ def _split(spec: str) -> tuple[str, str]:
     where, sep, attribute = spec.rpartition(":")
     if not sep or not where or not attribute:
         raise ValueError(
-            f"controller {spec!r} is not a registered name nor MODULE:CLASS or PATH.py:CLASS"
+            f"controller {shown(spec)} is not a registered name nor MODULE:CLASS or PATH.py:CLASS"
         )
     if not _NAME.fullmatch(attribute):
-        raise ValueError(f"controller {spec!r}: {attribute!r} is not a Python class name")
+        raise ValueError(f"controller {shown(spec)}: {shown(attribute)} is not a Python class name")
     return where, attribute
 
 
@@ -120,7 +121,7 @@ def _module_name_of(file: Path) -> str | None:
 def _import_file(path_text: str, spec: str) -> Any:
     path = Path(path_text).expanduser()
     if not path.is_file():
-        raise ValueError(f"controller {spec!r}: no Python file {path_text!r}")
+        raise ValueError(f"controller {shown(spec)}: no Python file {shown(path_text)}")
     resolved = path.resolve()
     dotted = _module_name_of(resolved)
     if dotted is not None:  # importable: one module, whether named by path or by module
@@ -136,7 +137,9 @@ def _import_file(path_text: str, spec: str) -> Any:
         return sys.modules[module_name]
     loader_spec = importlib.util.spec_from_file_location(module_name, resolved)
     if loader_spec is None or loader_spec.loader is None:
-        raise ValueError(f"controller {spec!r}: {path_text!r} cannot be imported as Python")
+        raise ValueError(
+            f"controller {shown(spec)}: {shown(path_text)} cannot be imported as Python"
+        )
     module = importlib.util.module_from_spec(loader_spec)
     sys.modules[module_name] = module  # so that dataclasses and pickling find it
     try:
@@ -149,13 +152,17 @@ def _import_file(path_text: str, spec: str) -> Any:
 
 def _import_module(name: str, spec: str) -> Any:
     if not _NAME.fullmatch(name):
-        raise ValueError(f"controller {spec!r}: {name!r} is not a module name (or a PATH.py)")
+        raise ValueError(
+            f"controller {shown(spec)}: {shown(name)} is not a module name (or a PATH.py)"
+        )
     _current_folder_on_path()
     try:
         return importlib.import_module(name)
     except ModuleNotFoundError as err:
         if err.name is not None and name.startswith(err.name):
-            raise ValueError(f"controller {spec!r}: no module named {err.name!r}") from None
+            raise ValueError(
+                f"controller {shown(spec)}: no module named {shown(err.name)}"
+            ) from None
         raise
 
 
@@ -165,7 +172,7 @@ def _check_controller(obj: Any, spec: str, *, made: bool = True) -> None:
     missing = [m for m in ("reset", "torque") if not callable(getattr(obj, m, None))]
     if missing:
         raise ValueError(
-            f"controller {spec!r} has no {' and no '.join(f'{m}()' for m in missing)}: a "
+            f"controller {shown(spec)} has no {' and no '.join(f'{m}()' for m in missing)}: a "
             "controller needs reset() and torque(measurement, reference_speed_rad_s, dt_s)"
         )
     if not made:
@@ -174,7 +181,7 @@ def _check_controller(obj: Any, spec: str, *, made: bool = True) -> None:
         inspect.signature(obj.torque).bind(None, 0.0, 0.0)
     except TypeError:
         raise ValueError(
-            f"controller {spec!r}: torque{inspect.signature(obj.torque)} does not take "
+            f"controller {shown(spec)}: torque{inspect.signature(obj.torque)} does not take "
             "(measurement, reference_speed_rad_s, dt_s)"
         ) from None
     except ValueError:  # no introspectable signature (a builtin): let the env call it
@@ -212,29 +219,29 @@ def load_controller(spec: str) -> str:
         raise
     except Exception as err:
         raise ValueError(
-            f"controller {spec!r}: importing {where!r} failed: {type(err).__name__}: {err}"
+            f"controller {shown(spec)}: importing {where!r} failed: {type(err).__name__}: {err}"
         ) from None
     target: Any = module
     for part in attribute.split("."):
         if not hasattr(target, part):
-            raise ValueError(f"controller {spec!r}: {where!r} has no {attribute!r}")
+            raise ValueError(f"controller {shown(spec)}: {where!r} has no {shown(attribute)}")
         target = getattr(target, part)
     if not callable(target):
-        raise ValueError(f"controller {spec!r}: {attribute!r} is not a class")
+        raise ValueError(f"controller {shown(spec)}: {shown(attribute)} is not a class")
     if inspect.isclass(target):  # before it is made
         _check_controller(target, spec, made=False)
     try:
         controller = target()
     except Exception as err:
         raise ValueError(
-            f"controller {spec!r}: {attribute}() failed: {type(err).__name__}: {err} (the "
+            f"controller {shown(spec)}: {attribute}() failed: {type(err).__name__}: {err} (the "
             "command line makes it with no arguments: give every parameter a default)"
         ) from None
     _check_controller(controller, spec)
     name = f"{_identifier(stem)}.{attribute}"
     if name in controller_names():
         raise ValueError(
-            f"controller {spec!r}: its name {name!r} is already taken by another controller"
+            f"controller {shown(spec)}: its name {shown(name)} is already taken by another controller"
         )
     register_controller(name, target)
     _LOADED[spec] = name
@@ -254,7 +261,7 @@ def resolve_controller_name(text: str) -> str:
     if ":" in text:
         return load_controller(text)
     raise ValueError(
-        f"unknown controller {text!r}: allowed {', '.join(names)}, or MODULE:CLASS or "
+        f"unknown controller {shown(text)}: allowed {', '.join(names)}, or MODULE:CLASS or "
         "PATH.py:CLASS for your own class"
     )
 

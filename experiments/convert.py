@@ -10,6 +10,7 @@ from typing import Final
 
 from agents.convert import convert_model
 from agents.policy import PICKLE_RISK
+from drill_env.validation import shown
 from experiments.arguments import ArgumentParser
 from experiments.spec_cli import option, spec_from_args, spec_parser
 
@@ -76,11 +77,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(f"the following arguments are required: {', '.join(missing)}")
     if spec.old.endswith(".zip") and not Path(spec.old).is_dir() and not spec.trust_pickle:
         parser.fail(
-            "--trust-pickle", f"is required to read OLD = {spec.old!r}: a pickle, and {PICKLE_RISK}"
+            "--trust-pickle",
+            f"is required to read OLD = {shown(spec.old)}: a pickle, and {PICKLE_RISK}",
         )
     if not Path(spec.old).exists():
         parser.error(
-            f"OLD = {spec.old!r} does not exist: expected a model folder or a Stable-Baselines3 "
+            f"OLD = {shown(spec.old)} does not exist: expected a model folder or a Stable-Baselines3 "
             ".zip file"
         )
 

@@ -46,6 +46,7 @@ from drill_env.coupled import (
     simulated_map,
     stability_map,
 )
+from drill_env.validation import shown
 from experiments.arguments import ArgumentParser
 from experiments.plots import save_figure
 from experiments.results_db import Fields, Name, Number, Schema
@@ -432,7 +433,7 @@ class CoupledSpec:
             )
         if self.parameters not in RGD_PRESETS:
             raise ValueError(
-                f"--parameters: {self.parameters!r} is not valid: allowed "
+                f"--parameters: {shown(self.parameters)} is not valid: allowed "
                 f"{', '.join(sorted(RGD_PRESETS))}"
             )
         floor_kn = RGD_PRESETS[self.parameters].contact_force_n / 1e3

@@ -640,8 +640,7 @@ def run_study(spec: CoupledControllersSpec, runner: RunnerSpec | None = None) ->
             agent = load_coupled_agent(spec.agent)
         except ValueError as err:
             raise ValueError(f"--agent: {err}") from None
-    out = spec.out
-    out.mkdir(parents=True, exist_ok=True)
+    out = spec.out  # made by the first write, once every input is checked
     if spec.no_grid and agent is None:
         return 0
     study = CoupledStudy(

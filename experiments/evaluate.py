@@ -51,7 +51,7 @@ from baselines.registry import REFERENCE_CONTROLLER, rig_loops
 from drill_env.control import controller_names
 from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
-from drill_env.validation import printable
+from drill_env.validation import printable, shown
 from experiments.arguments import ArgumentParser, check_output_folder, names_type, output_folder
 from experiments.controllers import CONTROLLERS_OPTION_HELP, controller_type, refuse_on_ray
 from experiments.field import (
@@ -882,12 +882,12 @@ class EvaluateStudy:
         for s in self.scenarios:
             if (s.field is not None) != field_env:
                 raise ValueError(
-                    f"scenario {s.id!r} is not a held-out scenario of {self.env_id}: "
+                    f"scenario {shown(s.id)} is not a held-out scenario of {self.env_id}: "
                     f"{'f01-f16' if field_env else 'h01-h20'} are"
                 )
         ids = [s.id for s in self.scenarios]
         if len(set(ids)) != len(ids):
-            raise ValueError(f"scenarios = {ids!r}: each held-out scenario at most once")
+            raise ValueError(f"scenarios = {shown(ids)}: each held-out scenario at most once")
 
     def spec(self) -> dict[str, Any]:
         """The evaluation's settings (not the task size, nor which traces are kept)."""

@@ -33,6 +33,7 @@ from drill_env.distributed import (
 from drill_env.evaluation import Policy, Trace, rollout
 from drill_env.ids import ENV_ID, FIELD_ENV_ID
 from drill_env.scenarios import RPM, FieldRandomization, Scenario, SpeedProfile, WobProfile
+from drill_env.validation import shown
 
 __all__ = [
     "COMPARE_CASES",
@@ -87,7 +88,7 @@ def is_field(env_id: str) -> bool:
         ValueError: for an id that is not in :data:`ENV_IDS`.
     """
     if env_id not in ENV_IDS:
-        raise ValueError(f"env = {env_id!r} is not a known env: allowed {', '.join(ENV_IDS)}")
+        raise ValueError(f"env = {shown(env_id)} is not a known env: allowed {', '.join(ENV_IDS)}")
     return env_id == FIELD_ENV
 
 
@@ -220,7 +221,7 @@ class FieldCase:
         nominal string, or the exact one)."""
         if controller_model not in CONTROLLER_MODELS:
             raise ValueError(
-                f"controller_model = {controller_model!r} is not valid: allowed "
+                f"controller_model = {shown(controller_model)} is not valid: allowed "
                 f"{', '.join(CONTROLLER_MODELS)}"
             )
         plant = self.string()
@@ -292,7 +293,7 @@ def compare_cases(
     for name in conditions:
         if name not in FIELD_CONDITIONS:
             raise ValueError(
-                f"condition = {name!r} is not a field condition: allowed "
+                f"condition = {shown(name)} is not a field condition: allowed "
                 f"{', '.join(FIELD_CONDITIONS)}"
             )
     return tuple(

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from typing import Any, Final
 
 from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, WobProfile
+from drill_env.validation import shown
 from experiments.field import (
     FIELD_ENV,
     HELD_OUT_CASES,
@@ -238,6 +239,6 @@ def held_out_set(env_id: str, name: str = "heldout") -> tuple[HeldOutScenario, .
     sets = SCENARIO_SETS[FIELD_ENV if is_field(env_id) else PAPER_ENV]
     if name not in sets:
         raise ValueError(
-            f"scenario set = {name!r} is not a held-out set of {env_id}: allowed {list(sets)}"
+            f"scenario set = {shown(name)} is not a held-out set of {env_id}: allowed {list(sets)}"
         )
     return sets[name]

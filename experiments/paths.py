@@ -15,6 +15,8 @@ import unicodedata
 from pathlib import Path
 from typing import Final
 
+from drill_env.validation import shown
+
 __all__ = ["MAX_NAME_CHARS", "output_file", "output_path", "safe_file_name"]
 
 MAX_NAME_CHARS: Final = 120
@@ -70,7 +72,7 @@ def output_path(out: Path | str, *parts: object, suffix: str = "") -> Path:
     if not parts:
         raise ValueError("output_path needs at least one name under the output folder")
     if suffix and not re.fullmatch(r"\.[A-Za-z0-9]{1,8}", suffix):
-        raise ValueError(f"suffix = {suffix!r} is not a file extension")
+        raise ValueError(f"suffix = {shown(suffix)} is not a file extension")
     base = Path(out)
     names = [safe_file_name(p) for p in parts]
     last = names[-1]

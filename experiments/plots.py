@@ -44,9 +44,11 @@ from matplotlib.text import Text
 
 from baselines.registry import BUILT_IN
 from drill_env.evaluation import Trace
+from drill_env.files import replacing
 from drill_env.metrics import METRIC_LABELS as CORE_METRIC_LABELS
 from drill_env.metrics import STICK_SLIP_SEVERITY
 from drill_env.validation import printable
+from drill_env.validation import shown as shown_value
 
 __all__ = [
     "DPI",
@@ -190,7 +192,7 @@ def downsample(trace: Trace, every: int) -> Trace:
         ValueError: if ``every`` is not a positive integer.
     """
     if isinstance(every, bool) or not isinstance(every, int) or every < 1:
-        raise ValueError(f"every = {every!r} is out of range: allowed an integer >= 1")
+        raise ValueError(f"every = {shown_value(every)} is out of range: allowed an integer >= 1")
     if every == 1:
         return trace
     cut = slice(None, None, every)
@@ -254,7 +256,7 @@ def envelope(trace: Trace, bin_s: float = 0.1) -> Envelope:
         ValueError: if ``bin_s`` is not positive.
     """
     if not (math.isfinite(bin_s) and bin_s > 0):
-        raise ValueError(f"bin_s = {bin_s!r} is out of range: allowed > 0 s")
+        raise ValueError(f"bin_s = {shown_value(bin_s)} is out of range: allowed > 0 s")
     every = max(1, round(bin_s / trace.plant_dt_s))
     values = np.asarray(trace.torque_nm, dtype=np.float64)
     n = values.shape[0]
@@ -332,11 +334,12 @@ def _plain_texts(fig: Figure) -> None:
 
 
 def save_figure(fig: Figure, path: str | Path) -> Path:
-    """Write ``fig`` as PNG to ``path`` (its folder is created); returns the path."""
+    """Write ``fig`` as PNG to ``path`` (its folder is created; written whole or not at all,
+    never through a symbolic link: :func:`drill_env.files.replacing`); returns the path."""
     out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
     _plain_texts(fig)
-    fig.savefig(out, dpi=DPI)
+    with replacing(out, "wb") as f:
+        fig.savefig(f, dpi=DPI, format="png")
     return out
 
 
@@ -375,7 +378,7 @@ def _drawn_texts(fig: Figure) -> list[tuple[Text, str]]:
     """Every visible, non-empty text of ``fig`` with a short description (draws ``fig``)."""
     fig.canvas.draw()
     ticks, owner = _tick_labels(fig)
-    texts = [(t, f"tick label {t.get_text()!r} ({owner[id(t)]})") for t in ticks]
+    texts = [(t, f"tick label {shown_value(t.get_text())} ({owner[id(t)]})") for t in ticks]
     every_tick_text = {
         id(text)
         for ax in fig.axes
@@ -737,7 +740,9 @@ def panels_figure(
         ValueError: for an unknown ``quantity``, no panels or a panel without traces.
     """
     if quantity not in _QUANTITIES:
-        raise ValueError(f"quantity = {quantity!r} is not valid: allowed {list(_QUANTITIES)}")
+        raise ValueError(
+            f"quantity = {shown_value(quantity)} is not valid: allowed {list(_QUANTITIES)}"
+        )
     if not panels:
         raise ValueError("panels is empty: nothing to plot")
     empty = [name for name, traces in panels.items() if not traces]

@@ -65,7 +65,7 @@ from drill_env.limits import MAX_REFERENCE_RAD_S, MAX_WOB_N
 from drill_env.metrics import WindowStatistics
 from drill_env.parameters import PLANT_DT_S, PRESETS
 from drill_env.scenarios import FieldRandomization, Randomization
-from drill_env.validation import printable
+from drill_env.validation import printable, shown
 from experiments.arguments import (
     BASE_SEED_HIGH,
     ArgumentParser,
@@ -356,14 +356,15 @@ class ProbabilityStudy:
     name: str = "probability-map"
 
     def __post_init__(self) -> None:
-        _check(self.env_id in ENVS, f"unknown env {self.env_id!r}: allowed {', '.join(ENVS)}")
+        _check(self.env_id in ENVS, f"unknown env {shown(self.env_id)}: allowed {', '.join(ENVS)}")
         valid = controller_names()
         _check(bool(self.controllers), "controllers = [] is empty: allowed one or more names")
         for name in self.controllers:
             _check(
-                name in valid, f"unknown controller {name!r}: valid names are {', '.join(valid)}"
+                name in valid,
+                f"unknown controller {shown(name)}: valid names are {', '.join(valid)}",
             )
-        _check(self.row_axis in ROW_AXES, f"rows = {self.row_axis!r}: allowed wob, depth")
+        _check(self.row_axis in ROW_AXES, f"rows = {shown(self.row_axis)}: allowed wob, depth")
         _check(
             self.row_axis == "wob" or self.field,
             f"rows = 'depth' needs the distributed string: allowed with {drill_env.FIELD_ENV_ID}",
@@ -374,28 +375,30 @@ class ProbabilityStudy:
         ):
             _check(bool(values), f"{label} = [] is empty: the grid needs at least one value")
         ok = isinstance(self.draws, int) and not isinstance(self.draws, bool) and self.draws >= 1
-        _check(ok, f"draws = {self.draws!r} is out of range: allowed an integer >= 1")
+        _check(ok, f"draws = {shown(self.draws)} is out of range: allowed an integer >= 1")
         ok = isinstance(self.task_cells, int) and self.task_cells >= 1
-        _check(ok, f"task_cells = {self.task_cells!r} is out of range: allowed an integer >= 1")
+        _check(
+            ok, f"task_cells = {shown(self.task_cells)} is out of range: allowed an integer >= 1"
+        )
         steps = self.duration_s / (100 * PLANT_DT_S)
         _check(
             math.isfinite(self.duration_s)
             and 0 < self.duration_s <= 1e4
             and abs(steps - round(steps)) < 1e-6,
-            f"duration_s = {self.duration_s!r} is out of range: allowed (0, 10000], a multiple of 0.1 s",
+            f"duration_s = {shown(self.duration_s)} is out of range: allowed (0, 10000], a multiple of 0.1 s",
         )
         _check(
             math.isfinite(self.window_s) and 0 < self.window_s <= self.duration_s,
-            f"window_s = {self.window_s!r} is out of range: allowed (0, duration_s = {self.duration_s:g}]",
+            f"window_s = {shown(self.window_s)} is out of range: allowed (0, duration_s = {self.duration_s:g}]",
         )
         _check(
             math.isfinite(self.noise_std_rad_s) and 0 <= self.noise_std_rad_s <= 10,
-            f"noise_std_rad_s = {self.noise_std_rad_s!r} is out of range: allowed [0, 10]",
+            f"noise_std_rad_s = {shown(self.noise_std_rad_s)} is out of range: allowed [0, 10]",
         )
         presets = DISTRIBUTED_PRESETS if self.field else PRESETS
         _check(
             self.parameters is None or self.parameters in presets,
-            f"parameters = {self.parameters!r} is not a preset of {self.env_id}: allowed "
+            f"parameters = {shown(self.parameters)} is not a preset of {self.env_id}: allowed "
             f"{', '.join(sorted(presets))}",
         )
         # The randomisations validate the values of every cell (one line naming the field).
@@ -667,7 +670,7 @@ class ProbabilitySpec:
         presets = DISTRIBUTED_PRESETS if field_env else PRESETS
         if self.parameters is not None and self.parameters not in presets:
             raise ValueError(
-                f"argument --parameters: {self.parameters!r} is not a preset of {self.env_id}: "
+                f"argument --parameters: {shown(self.parameters)} is not a preset of {self.env_id}: "
                 f"allowed {', '.join(sorted(presets))}"
             )
         if self.window_s > self.duration_s:

@@ -66,6 +66,7 @@ from drill_env.evaluation import ZeroAction, episode_metrics
 from drill_env.metrics import STICK_SLIP_SEVERITY
 from drill_env.options import REALISM_KEYWORDS, EnvConfig, FieldEnvConfig, realism_keywords
 from drill_env.parameters import PLANT_DT_S, PRESETS
+from drill_env.validation import shown as shown_value
 from experiments.arguments import BASE_SEED_HIGH, ArgumentParser, names_type, output_folder
 from experiments.evaluate import FIELD_HELD_OUT, HELD_OUT, HeldOutScenario
 from experiments.field import ENV_IDS, FIELD_ENV, PAPER_ENV, run_on
@@ -339,7 +340,7 @@ class Setting:
     def key(self) -> str:
         """The realism keywords that differ from the ideal level, as text (``ideal`` for
         none): settings with the same keywords share their runs."""
-        changed = [f"{k}={self.keywords[k]!r}" for k in REALISM_KEYWORDS if
+        changed = [f"{k}={shown_value(self.keywords[k])}" for k in REALISM_KEYWORDS if
                    self.keywords[k] != IDEAL[k]]  # fmt: skip
         return ",".join(changed) or "ideal"
 
@@ -361,7 +362,9 @@ def study_settings(factors: Sequence[str] = FACTOR_NAMES) -> list[Setting]:
     """
     for name in factors:
         if name not in FACTOR_NAMES:
-            raise ValueError(f"factor {name!r} is not known: allowed {', '.join(FACTOR_NAMES)}")
+            raise ValueError(
+                f"factor {shown_value(name)} is not known: allowed {', '.join(FACTOR_NAMES)}"
+            )
     settings = [Setting("ideal", 0, "ideal", "ideal", dict(IDEAL))]
     for factor in FACTORS:
         if factor.name in factors:
@@ -375,7 +378,7 @@ def _scenario(env_id: str, scenario_id: str) -> HeldOutScenario:
     for held_out in FIELD_HELD_OUT if env_id == FIELD_ENV else HELD_OUT:
         if held_out.id == scenario_id:
             return held_out
-    raise ValueError(f"scenario {scenario_id!r} is not a held-out scenario of {env_id}")
+    raise ValueError(f"scenario {shown_value(scenario_id)} is not a held-out scenario of {env_id}")
 
 
 def run_one(

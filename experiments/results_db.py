@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any, Final, Protocol
 
 from drill_env import __version__
-from drill_env.validation import printable
+from drill_env.validation import printable, shown
 from experiments.tables import json_clean
 
 __all__ = [
@@ -233,7 +233,7 @@ class Near:
     def check(self, value: Any, where: str) -> None:
         Number(nullable=False).check(value, where)
         if abs(float(value) - self.value) > self.tolerance * max(1.0, abs(self.value)):
-            raise SchemaError(f"{where} = {_shown(value)} is not this study's {self.value!r}")
+            raise SchemaError(f"{where} = {_shown(value)} is not this study's {shown(self.value)}")
 
 
 def exactly(values: Mapping[str, Any]) -> dict[str, Exactly]:
@@ -519,7 +519,7 @@ class ResultsDatabase:
                     if found != columns:
                         raise _refuse(
                             self.path,
-                            f"has table {table!r} with columns {list(found)}: a results "
+                            f"has table {shown(table)} with columns {list(found)}: a results "
                             f"database has {list(columns)}",
                         )
                     (sql,) = db.execute(
@@ -528,7 +528,7 @@ class ResultsDatabase:
                     ).fetchone()
                     if sql != statement:  # the same columns, other types or constraints
                         raise _refuse(
-                            self.path, f"has a table {table!r} other than a results database's"
+                            self.path, f"has a table {shown(table)} other than a results database's"
                         )
             db.execute("COMMIT")
         except BaseException:
@@ -555,7 +555,7 @@ class ResultsDatabase:
                 if not overwrite:
                     raise ValueError(
                         f"--results {str(self.path)!r} already holds {mine} results of these "
-                        f"settings (sweep {self.sweep!r}, version {self.version}): add --resume "
+                        f"settings (sweep {shown(self.sweep)}, version {self.version}): add --resume "
                         "to keep them and run only the missing items, or --overwrite to delete "
                         "them and run again"
                     )
@@ -595,7 +595,7 @@ class ResultsDatabase:
         for rowid, item, kind, length, text in rows:
             where = f"results database {str(self.path)!r}: row {rowid} (item {_shown(item)})"
             if not isinstance(item, str) or item not in wanted:
-                raise ValueError(f"{where}: not an item of this study {self.sweep!r}")
+                raise ValueError(f"{where}: not an item of this study {shown(self.sweep)}")
             if item in records:
                 raise ValueError(f"{where}: a second row of this item")
             if kind != "text":

@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any, Final, TypeVar
 
 from agents.config import field_docs, plain_text
+from drill_env.validation import shown
 from experiments.arguments import ArgumentParser, number_type
 
 __all__ = ["Option", "option", "option_name", "spec_from_args", "spec_options", "spec_parser"]
@@ -133,7 +134,7 @@ def _value_type(name: str, hint: Any, spec: Option) -> tuple[Callable[[str], Any
         return Path, spec.metavar or "PATH"
     if hint is str:
         return None, spec.metavar or "TEXT"
-    raise TypeError(f"field {name}: no command-line form for the type {hint!r}")
+    raise TypeError(f"field {name}: no command-line form for the type {shown(hint)}")
 
 
 def spec_options(

@@ -58,7 +58,7 @@ from drill_env.metrics import STICK_SLIP_SEVERITY, WindowStatistics
 from drill_env.options import REALISM_LEVELS, realism_keywords
 from drill_env.parameters import PLANT_DT_S, PRESETS
 from drill_env.scenarios import RPM
-from drill_env.validation import printable
+from drill_env.validation import printable, shown
 from experiments.arguments import (
     BASE_SEED_HIGH,
     ArgumentParser,
@@ -147,7 +147,7 @@ def map_realism(env_id: str, realism: str | None) -> str | None:
         return None
     if realism not in REALISM_LEVELS:
         raise ValueError(
-            f"realism = {realism!r} is not a known level: allowed {', '.join(REALISM_LEVELS)}"
+            f"realism = {shown(realism)} is not a known level: allowed {', '.join(REALISM_LEVELS)}"
         )
     return realism
 
@@ -278,18 +278,20 @@ def grid_values(name: str, low: float, high: float, count: int, upper: float) ->
         ValueError: naming ``--{name}-min``, ``--{name}-max`` or ``--{name}-n``.
     """
     if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
-        raise ValueError(f"--{name}-n = {count!r} is out of range: allowed an integer >= 1")
+        raise ValueError(f"--{name}-n = {shown(count)} is out of range: allowed an integer >= 1")
     for end, value in (("min", low), ("max", high)):
         if not (isinstance(value, (int, float)) and math.isfinite(value) and 0 < value <= upper):
-            raise ValueError(f"--{name}-{end} = {value!r} is out of range: allowed (0, {upper:g}]")
+            raise ValueError(
+                f"--{name}-{end} = {shown(value)} is out of range: allowed (0, {upper:g}]"
+            )
     if high < low:
         raise ValueError(
-            f"--{name}-min = {low!r} and --{name}-max = {high!r}: the range is inverted "
+            f"--{name}-min = {shown(low)} and --{name}-max = {shown(high)}: the range is inverted "
             "(min must be <= max)"
         )
     if high == low and count > 1:
         raise ValueError(
-            f"--{name}-min = --{name}-max = {low!r}: the range is empty; widen it or use "
+            f"--{name}-min = --{name}-max = {shown(low)}: the range is empty; widen it or use "
             f"--{name}-n 1"
         )
     return np.linspace(low, high, int(count))
@@ -382,7 +384,7 @@ def compute_map(
         names = controller_names()
         if controller not in names:
             raise ValueError(
-                f"unknown controller {controller!r}: valid names are {', '.join(names)}"
+                f"unknown controller {shown(controller)}: valid names are {', '.join(names)}"
             )
     assert isinstance(controller, str)
     field = is_field(env_id)
@@ -391,22 +393,22 @@ def compute_map(
         parameters = DEFAULTS[env_id].parameters
     if parameters not in presets:
         raise ValueError(
-            f"parameters = {parameters!r} is not a known preset of {env_id}: {sorted(presets)}"
+            f"parameters = {shown(parameters)} is not a known preset of {env_id}: {sorted(presets)}"
         )
     level = map_realism(env_id, realism)
     extra: dict[str, Any] = {} if level is None else realism_keywords(level)
     if level is not None and observation not in (None, extra["observation"]):
         raise ValueError(
-            f"observation = {observation!r} is not that of realism = {level!r} "
-            f"({extra['observation']!r}): leave it out"
+            f"observation = {shown(observation)} is not that of realism = {shown(level)} "
+            f"({shown(extra['observation'])}): leave it out"
         )
     trained_observation = policy_kwargs.pop("observation", None)
     if policy is not None and level is not None:
         trained = trained_observation or "state"
         if trained != extra["observation"]:
             raise ValueError(
-                f"realism = {level!r} observes {extra['observation']!r} signals, model "
-                f"{policy.name!r} was trained on {trained!r} ones: map it at a level that "
+                f"realism = {shown(level)} observes {shown(extra['observation'])} signals, model "
+                f"{shown(policy.name)} was trained on {shown(trained)} ones: map it at a level that "
                 "observes what it was trained on"
             )
     if field:
@@ -417,7 +419,7 @@ def compute_map(
         )
         if observation not in OBSERVATIONS:
             raise ValueError(
-                f"observation = {observation!r} is not valid: allowed {', '.join(OBSERVATIONS)}"
+                f"observation = {shown(observation)} is not valid: allowed {', '.join(OBSERVATIONS)}"
             )
         if measured_depth_m is None:
             measured_depth_m = DISTRIBUTED_PRESETS[parameters].measured_depth_m
@@ -439,28 +441,30 @@ def compute_map(
             raise ValueError(f"{label} must be a non-empty 1-D sequence, got shape {values.shape}")
         if not (np.all(np.isfinite(values)) and np.all(values > 0) and np.all(values <= upper)):
             raise ValueError(
-                f"{label} = {values.tolist()!r} is out of range: allowed (0, {upper:g}]"
+                f"{label} = {shown(values.tolist())} is out of range: allowed (0, {upper:g}]"
             )
     if not (math.isfinite(duration_s) and 0 < duration_s <= 1e4):
-        raise ValueError(f"duration_s = {duration_s!r} is out of range: allowed (0, 10000]")
+        raise ValueError(f"duration_s = {shown(duration_s)} is out of range: allowed (0, 10000]")
     total_steps = round(duration_s / PLANT_DT_S)
     if total_steps % 100 or abs(total_steps * PLANT_DT_S - duration_s) > 1e-9:
         raise ValueError(
-            f"duration_s = {duration_s!r} is out of range: allowed a multiple of 0.1 s"
+            f"duration_s = {shown(duration_s)} is out of range: allowed a multiple of 0.1 s"
         )
     if not (math.isfinite(window_s) and 0 < window_s <= duration_s):
         raise ValueError(
-            f"window_s = {window_s!r} is out of range: allowed (0, duration_s = {duration_s:g}]"
+            f"window_s = {shown(window_s)} is out of range: allowed (0, duration_s = {duration_s:g}]"
         )
     if not (math.isfinite(noise_std_rad_s) and 0 <= noise_std_rad_s <= 10):
-        raise ValueError(f"noise_std_rad_s = {noise_std_rad_s!r} is out of range: allowed [0, 10]")
+        raise ValueError(
+            f"noise_std_rad_s = {shown(noise_std_rad_s)} is out of range: allowed [0, 10]"
+        )
 
     chunk = _chunk_steps(total_steps)
     if policy is not None:  # one chunk per decision of the policy
         chunk = round(float(policy_kwargs.pop("control_dt_s", 0.1)) / PLANT_DT_S)
         if total_steps % chunk:
             raise ValueError(
-                f"duration_s = {duration_s!r} is out of range: allowed a multiple of the "
+                f"duration_s = {shown(duration_s)} is out of range: allowed a multiple of the "
                 f"policy's decision period {chunk * PLANT_DT_S:g} s"
             )
     cells = [(float(w), float(v)) for w in wobs for v in speeds]
@@ -548,7 +552,7 @@ def _policy_env_kwargs(policy: MapPolicy, env_id: str) -> dict[str, Any]:
     trained_on = getattr(policy, "env_id", None) or kwargs.get("env_id", PAPER_ENV)
     if trained_on != env_id:
         raise ValueError(
-            f"policy {policy.name!r} was trained on {trained_on}: map it with env_id {trained_on}"
+            f"policy {shown(policy.name)} was trained on {trained_on}: map it with env_id {trained_on}"
             f", not {env_id}"
         )
     return {k: v for k, v in kwargs.items() if k not in _MAP_OWN_KEYWORDS}
@@ -1009,7 +1013,7 @@ class MapStudy:
             check_controllers(self.controllers)
         names = [m.name for m in self.models]
         if len(set(names)) != len(names) or set(names) & set(self.controllers):
-            raise ValueError(f"models {names!r}: each model needs a name of its own")
+            raise ValueError(f"models {shown(names)}: each model needs a name of its own")
         for model in self.models:
             _policy_env_kwargs(model, self.env_id)
         for label, values in (
@@ -1022,18 +1026,18 @@ class MapStudy:
         steps = self.duration_s / 0.1
         if not (math.isfinite(steps) and 0 < steps <= 1e5 and abs(steps - round(steps)) < 1e-6):
             raise ValueError(
-                f"duration_s = {self.duration_s!r} is out of range: allowed (0, 10000], a "
+                f"duration_s = {shown(self.duration_s)} is out of range: allowed (0, 10000], a "
                 "multiple of 0.1 s"
             )
         if not (math.isfinite(self.window_s) and 0 < self.window_s <= self.duration_s):
             raise ValueError(
-                f"window_s = {self.window_s!r} is out of range: allowed (0, duration_s = "
+                f"window_s = {shown(self.window_s)} is out of range: allowed (0, duration_s = "
                 f"{self.duration_s:g}]"
             )
         presets = DISTRIBUTED_PRESETS if self.field else PRESETS
         if self.preset not in presets:
             raise ValueError(
-                f"parameters = {self.preset!r} is not a preset of {self.env_id}: allowed "
+                f"parameters = {shown(self.preset)} is not a preset of {self.env_id}: allowed "
                 f"{', '.join(sorted(presets))}"
             )
         if self.field:
@@ -1042,14 +1046,14 @@ class MapStudy:
                 with_measured_depth(self.preset, depth)  # a depth the string cannot have
         elif self.depths_m:
             raise ValueError(
-                f"depths_m = {list(self.depths_m)!r}: measured depths are a setting of the field "
+                f"depths_m = {shown(list(self.depths_m))}: measured depths are a setting of the field "
                 f"string ({FIELD_ENV}), not of {self.env_id}"
             )
         accepted = set(inspect.signature(compute_map).parameters) - set(_STUDY_KEYWORDS)
         for key in self.keywords:
             if key not in accepted:
                 raise ValueError(
-                    f"keywords: {key!r} is not a further keyword of compute_map: allowed "
+                    f"keywords: {shown(key)} is not a further keyword of compute_map: allowed "
                     f"{', '.join(sorted(accepted)) or 'none'}"
                 )
 

@@ -56,6 +56,7 @@ from typing import TYPE_CHECKING, Any, Final, NamedTuple, Protocol
 import numpy as np
 
 from drill_env.control import controller_names
+from drill_env.validation import shown
 from experiments.field import OBSERVATIONS
 from experiments.results_db import ResultsDatabase, Schema, SchemaError, as_json
 from experiments.spec_cli import option
@@ -194,7 +195,9 @@ class Backend:
         for name, low in (("workers", 1), ("max_retries", 0)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                raise ValueError(f"{name} = {value!r} is out of range: allowed an integer >= {low}")
+                raise ValueError(
+                    f"{name} = {shown(value)} is out of range: allowed an integer >= {low}"
+                )
         if self.address is not None and not str(self.address).strip():
             raise ValueError("address = '' is not valid: give a Ray address or leave it out")
 
@@ -277,7 +280,7 @@ def _execute(function: Callable[..., TaskResult], kwargs: Mapping[str, Any]) -> 
     """Run one task (in a worker or in this process)."""
     result = function(**kwargs)
     if not isinstance(result, TaskResult):  # pragma: no cover - a task's own bug
-        raise TypeError(f"task function {function!r} returned {type(result).__name__}")
+        raise TypeError(f"task function {shown(function)} returned {type(result).__name__}")
     return result
 
 
@@ -317,7 +320,7 @@ def run_sweep(
     spec = study.spec()
     items = list(study.items())
     if not items:
-        raise ValueError(f"sweep {study.name!r} has no items: the grid is empty")
+        raise ValueError(f"sweep {shown(study.name)} has no items: the grid is empty")
     if resume and results_path is None:
         raise ValueError("resume needs a results file (--results)")
     if overwrite and results_path is None:
@@ -340,7 +343,9 @@ def run_sweep(
         tasks = study.tasks(missing) if missing else []
         produced = [i for t in tasks for i in t.items]
         if sorted(produced) != sorted(missing):
-            raise ValueError(f"sweep {study.name!r}: its tasks do not produce the missing items")
+            raise ValueError(
+                f"sweep {shown(study.name)}: its tasks do not produce the missing items"
+            )
         outcome = SweepOutcome(
             records=dict(loaded),
             loaded=len(loaded),
@@ -361,15 +366,15 @@ def run_sweep(
 
         def finished(task: Task, result: TaskResult) -> None:
             if set(result.records) != set(task.items):
-                raise ValueError(f"task {task.key!r} returned items other than its own")
+                raise ValueError(f"task {shown(task.key)} returned items other than its own")
             encoded = {k: _encoded(result.records[k]) for k in task.items}
             for item, record in encoded.items():
                 try:
                     study.record_schema(item).check(record, "")
                 except SchemaError as err:
                     raise ValueError(
-                        f"sweep {study.name!r}: task {task.key!r} made a record of item "
-                        f"{item!r} that does not fit the study's schema: {err}"
+                        f"sweep {shown(study.name)}: task {shown(task.key)} made a record of item "
+                        f"{shown(item)} that does not fit the study's schema: {err}"
                     ) from None
             if database is not None:
                 database.add(task.key, encoded)
@@ -556,12 +561,14 @@ def check_controllers(names: Sequence[str]) -> None:
         raise ValueError(f"controllers = [] is empty: allowed one or more of {', '.join(valid)}")
     for name in names:
         if name not in valid:
-            raise ValueError(f"unknown controller {name!r}: valid names are {', '.join(valid)}")
+            raise ValueError(
+                f"unknown controller {shown(name)}: valid names are {', '.join(valid)}"
+            )
 
 
 def check_task_size(name: str, value: int) -> None:
     if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ValueError(f"{name} = {value!r} is out of range: allowed an integer >= 1")
+        raise ValueError(f"{name} = {shown(value)} is out of range: allowed an integer >= 1")
 
 
 def check_observations(modes: Sequence[str]) -> None:
@@ -572,7 +579,7 @@ def check_observations(modes: Sequence[str]) -> None:
     for mode in modes:
         if mode not in OBSERVATIONS:
             raise ValueError(
-                f"observation = {mode!r} is not valid: allowed {', '.join(OBSERVATIONS)}"
+                f"observation = {shown(mode)} is not valid: allowed {', '.join(OBSERVATIONS)}"
             )
 
 

@@ -69,6 +69,8 @@ from agents.policy import is_model_folder, load_policy
 from agents.train import planned_timesteps, train, validation_scenarios, validation_score
 from baselines.registry import REFERENCE_CONTROLLER
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout
+from drill_env.files import write_text
+from drill_env.validation import shown
 from experiments.arguments import SEED_HIGH, ArgumentParser, names_type, output_folder
 from experiments.evaluate import (
     FIELD_HELD_OUT,
@@ -172,20 +174,20 @@ def _value(name: str, text: str, kind: Any) -> Any:
         return text
     except ValueError:
         raise ValueError(
-            f"{name} = {text!r} is not a valid {getattr(kind, '__name__', kind)}"
+            f"{name} = {shown(text)} is not a valid {getattr(kind, '__name__', kind)}"
         ) from None
 
 
 def _field(text: str, option: str) -> tuple[str, str]:
     """``NAME=REST`` -> (field name, REST), the name checked (``-`` read as ``_``)."""
     if "=" not in text:
-        raise ValueError(f"{option} {text!r}: expected NAME=VALUE")
+        raise ValueError(f"{option} {shown(text)}: expected NAME=VALUE")
     name, rest = text.split("=", 1)
     name = name.strip().replace("-", "_")
     fields = _fields()
     if name not in fields:
         raise ValueError(
-            f"{option} {text!r}: unknown training setting {name!r}: allowed {', '.join(sorted(fields))}"
+            f"{option} {shown(text)}: unknown training setting {shown(name)}: allowed {', '.join(sorted(fields))}"
         )
     return name, rest
 
@@ -195,7 +197,7 @@ def parse_grid(text: str) -> tuple[str, list[Any]]:
     name, rest = _field(text, "--grid")
     parts = [p for p in rest.split(",") if p.strip()]
     if not parts:
-        raise ValueError(f"--grid {text!r}: the grid of {name} is empty: give NAME=V1,V2,...")
+        raise ValueError(f"--grid {shown(text)}: the grid of {name} is empty: give NAME=V1,V2,...")
     kind = _fields()[name]
     return name, [_value(name, p, kind) for p in parts]
 
@@ -207,22 +209,24 @@ def parse_sample(text: str) -> tuple[str, tuple[str, list[Any]]]:
     kind = kind.strip()
     if kind not in SAMPLE_KINDS:
         raise ValueError(
-            f"--sample {text!r}: unknown distribution {kind!r}: allowed {', '.join(SAMPLE_KINDS)}"
+            f"--sample {shown(text)}: unknown distribution {shown(kind)}: allowed {', '.join(SAMPLE_KINDS)}"
         )
     field_kind = _fields()[name]
     if kind == "choice":
         values = [_value(name, p, field_kind) for p in args.split(",") if p.strip()]
         if not values:
-            raise ValueError(f"--sample {text!r}: choice needs one or more values: NAME=choice:A,B")
+            raise ValueError(
+                f"--sample {shown(text)}: choice needs one or more values: NAME=choice:A,B"
+            )
         return name, (kind, values)
     ends = args.split(":")
     if len(ends) != 2:
-        raise ValueError(f"--sample {text!r}: expected NAME={kind}:LOW:HIGH")
+        raise ValueError(f"--sample {shown(text)}: expected NAME={kind}:LOW:HIGH")
     number = int if kind == "int" else float
     low, high = (_value(name, e, number) for e in ends)
     if not low < high or (kind == "loguniform" and low <= 0):
         raise ValueError(
-            f"--sample {text!r}: allowed LOW < HIGH{' and LOW > 0' if kind == 'loguniform' else ''}"
+            f"--sample {shown(text)}: allowed LOW < HIGH{' and LOW > 0' if kind == 'loguniform' else ''}"
         )
     return name, (kind, [low, high])
 
@@ -714,7 +718,7 @@ def _write_markdown(rows: Sequence[Mapping[str, Any]], spec: SweepSpec, path: Pa
         Column("heldout_rmsd_ratio", "held-out RMSD ratio", "{:.3f}"),
     ]
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(markdown_table(rows, columns) + "\n")
+    write_text(path, markdown_table(rows, columns) + "\n")
     return path
 
 

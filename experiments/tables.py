@@ -16,6 +16,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final, NamedTuple
 
+from drill_env.files import replacing, write_text
 from drill_env.validation import printable
 
 __all__ = ["MAX_CELL_CHARS", "Column", "json_clean", "markdown_table", "write_csv", "write_json"]
@@ -65,9 +66,11 @@ def markdown_table(
 
 
 def write_csv(rows: Sequence[Mapping[str, Any]], path: Path, keys: Sequence[str]) -> Path:
-    """``rows`` as CSV with the columns ``keys`` (an empty cell for ``None``); returns ``path``."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="") as f:
+    """``rows`` as CSV with the columns ``keys`` (an empty cell for ``None``); returns ``path``.
+
+    Written whole or not at all, never through a symbolic link (:func:`drill_env.files.replacing`).
+    """
+    with replacing(path, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=list(keys))
         writer.writeheader()
         for r in rows:
@@ -87,7 +90,8 @@ def json_clean(value: Any) -> Any:
 
 
 def write_json(data: Any, path: Path, indent: int = 1) -> Path:
-    """``data`` (rows or any JSON-able object) as JSON, non-finite numbers as ``null``."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(json_clean(data), indent=indent) + "\n")
-    return path
+    """``data`` (rows or any JSON-able object) as JSON, non-finite numbers as ``null``.
+
+    Written whole or not at all, never through a symbolic link (:func:`drill_env.files.replacing`).
+    """
+    return write_text(path, json.dumps(json_clean(data), indent=indent) + "\n")

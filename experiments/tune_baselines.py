@@ -69,6 +69,8 @@ from baselines.tuned import (
 )
 from drill_env.control import make_controller
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout
+from drill_env.files import check_writable_target
+from drill_env.validation import shown
 from experiments.arguments import ArgumentParser, check_output_folder, names_type, output_folder
 from experiments.results_db import Exactly, Fields, Flag, Number, Schema, Values
 from experiments.spec_cli import option, spec_from_args, spec_parser
@@ -199,7 +201,7 @@ def tuning_env_kwargs(env_id: str, config: TrainConfig | None = None) -> dict[st
     if env_id == drill_env.FIELD_ENV_ID:
         return {"randomize": True, "episode_s": float(config.episode_s)}
     if env_id != drill_env.ENV_ID:
-        raise ValueError(f"env = {env_id!r} is not valid: allowed {', '.join(ENVS)}")
+        raise ValueError(f"env = {shown(env_id)} is not valid: allowed {', '.join(ENVS)}")
     kwargs, _ = validation_scenarios(config)
     return {k: v for k, v in kwargs.items() if k != "base_controller"}
 
@@ -306,9 +308,9 @@ class CandidateStudy:
     def __post_init__(self) -> None:
         keys = [c[0] for c in self.candidates]
         if len(set(keys)) != len(keys):
-            raise ValueError(f"sweep {self.name!r}: candidate keys are not unique")
+            raise ValueError(f"sweep {shown(self.name)}: candidate keys are not unique")
         if not self.episodes:
-            raise ValueError(f"sweep {self.name!r}: episodes = [] is empty")
+            raise ValueError(f"sweep {shown(self.name)}: episodes = [] is empty")
 
     def spec(self) -> dict[str, Any]:
         """Everything the records depend on."""
@@ -460,19 +462,19 @@ class TuneSpec:
     def __post_init__(self) -> None:
         object.__setattr__(self, "loops", tuple(dict.fromkeys(self.loops)))  # each loop once
         if self.env_id not in ENVS:
-            raise ValueError(f"--env: {self.env_id!r} is not valid: allowed {', '.join(ENVS)}")
+            raise ValueError(f"--env: {shown(self.env_id)} is not valid: allowed {', '.join(ENVS)}")
         if not self.loops:
             raise ValueError(f"--loops: empty: allowed one or more of {', '.join(SEARCH_SPACES)}")
         for loop in self.loops:
             if loop not in SEARCH_SPACES:
                 raise ValueError(
-                    f"--loops: unknown loop {loop!r}: allowed {', '.join(SEARCH_SPACES)}"
+                    f"--loops: unknown loop {shown(loop)}: allowed {', '.join(SEARCH_SPACES)}"
                 )
         for name, low in (("candidates", 1), ("refine", 0), ("episodes", 1), ("top", 1)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ValueError(
-                    f"--{name}: {value!r} is out of range: allowed an integer >= {low}"
+                    f"--{name}: {shown(value)} is out of range: allowed an integer >= {low}"
                 )
         if self.top > self.candidates + self.refine:
             raise ValueError(
@@ -480,7 +482,7 @@ class TuneSpec:
                 f"{self.candidates + self.refine}"
             )
         if not (isinstance(self.zoom, (int, float)) and 0 < self.zoom <= 1):
-            raise ValueError(f"--zoom: {self.zoom!r} is out of range: allowed (0, 1]")
+            raise ValueError(f"--zoom: {shown(self.zoom)} is out of range: allowed (0, 1]")
 
     @property
     def folder(self) -> Path:
@@ -858,8 +860,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 def run_tune(spec: TuneSpec, runner: RunnerSpec, command: str) -> int:
     """Search, print and write what ``spec`` asks for on ``runner``; ``command`` is the
     command line recorded in the tuned gains file. Returns the exit code."""
-    if spec.write and spec.gains_file.is_file():
-        load_tuned_gains(spec.gains_file)  # a malformed file fails now, not after the search
+    if spec.write:  # a link, a folder or a malformed file fails now, not after the search
+        check_writable_target(spec.gains_file)
+        if spec.gains_file.is_file():
+            load_tuned_gains(spec.gains_file)
     out = spec.folder
     backend = runner.backend()
     result = run_tuning(

@@ -68,7 +68,7 @@ def test_import_registers_env() -> None:
     (the env truncates itself); a made env's spec states its own: 1000 decisions by default
     (100 s at the default 0.1 s decision period)."""
     spec = gym.spec(ENV_ID)
-    assert spec.entry_point == "drill_env.env:DrillStringEnv"
+    assert spec.entry_point == "drill_env.creators:make_drill_string_env"
     assert spec.max_episode_steps is None
     assert gym.make(ENV_ID).spec.max_episode_steps == 1000  # type: ignore[union-attr]
     made = gym.make(ENV_ID, episode_s=150.0, control_dt_s=0.1)

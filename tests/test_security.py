@@ -735,3 +735,231 @@ def test_check_seeds_returns_one_seed_per_string_or_refuses(seed: Any, count: in
         return
     assert len(seeds) == count
     assert all(s is None or (type(s) is int and s >= 0) for s in seeds)
+
+
+# ------------------------------------------------------------- writing: whole, never via a link
+def _writers(tmp_path: Path) -> dict[str, Any]:
+    """Every kind of file writer of the package, each writing one small file to ``path``."""
+    from agents.model_format import write_safetensors
+    from drill_env.files import write_text
+    from experiments.plots import save_figure
+    from experiments.tables import write_csv, write_json
+
+    def figure(path: Path) -> Path:
+        from matplotlib.figure import Figure
+
+        return save_figure(Figure(figsize=(1, 1)), path)
+
+    def safetensors(path: Path) -> Path:
+        write_safetensors(path, {"w": np.ones(3)})
+        return path
+
+    def log(path: Path) -> Path:
+        from drill_env.measured_log import MeasuredLog, write_log_csv
+
+        t = np.arange(3, dtype=np.float64) * 1e-3
+        return write_log_csv(MeasuredLog(t, {"top_speed_rad_s": np.ones(3)}), path)
+
+    return {
+        "log": log,
+        "json": lambda p: write_json({"a": 1}, p),
+        "csv": lambda p: write_csv([{"a": 1}], p, ["a"]),
+        "text": lambda p: write_text(p, "report\n"),
+        "figure": figure,
+        "safetensors": safetensors,
+    }
+
+
+WRITERS = ["json", "csv", "text", "figure", "safetensors", "log"]
+
+
+@pytest.mark.parametrize("kind", WRITERS)
+def test_a_writer_refuses_a_link_at_its_target(tmp_path: Path, kind: str) -> None:
+    notes = tmp_path / "notes.txt"
+    notes.write_text("my notes")
+    out = tmp_path / "out"
+    out.mkdir()
+    link = out / f"result.{kind}"
+    link.symlink_to(notes)
+    with pytest.raises(ValueError, match="is a symbolic link") as caught:
+        _writers(tmp_path)[kind](link)
+    assert notes.read_text() == "my notes" and link.is_symlink()
+    assert sorted(p.name for p in out.iterdir()) == [link.name]  # no temporary file left
+    assert "\n" not in str(caught.value)
+
+
+@pytest.mark.parametrize("kind", WRITERS)
+def test_a_writer_replaces_its_own_file_and_follows_no_stray_temporary(
+    tmp_path: Path, kind: str
+) -> None:
+    notes = tmp_path / "notes.txt"
+    notes.write_text("my notes")
+    target = tmp_path / "out" / f"result.{kind}"
+    target.parent.mkdir()
+    for stray in (target.with_name(target.name + ".tmp"), target.parent / f".{target.name}.tmp"):
+        stray.symlink_to(notes)  # the old writers' fixed temporary names
+    writer = _writers(tmp_path)[kind]
+    writer(target)
+    first = target.read_bytes()
+    writer(target)  # its own earlier output: replaced
+    assert target.read_bytes() == first and not target.is_symlink()
+    assert notes.read_text() == "my notes"
+    mask = os.umask(0)
+    os.umask(mask)
+    assert target.stat().st_mode & 0o777 == 0o666 & ~mask  # as open(path, "w") would give
+
+
+@pytest.mark.parametrize("kind", ["folder", "fifo"])
+def test_a_writer_refuses_a_target_that_is_not_a_regular_file(tmp_path: Path, kind: str) -> None:
+    from experiments.tables import write_json
+
+    target = tmp_path / "result.json"
+    if kind == "folder":
+        target.mkdir()
+    else:
+        os.mkfifo(target)
+    with pytest.raises(ValueError, match="exists and is not a regular file"):
+        write_json({"a": 1}, target)
+
+
+def test_a_failed_write_leaves_the_old_file_whole(tmp_path: Path) -> None:
+    """A crash while writing (here an object JSON cannot hold, or an exception inside the
+    block) leaves the previous file as it was and no temporary file beside it."""
+    from drill_env.files import replacing
+    from experiments.tables import write_json
+
+    target = tmp_path / "tuned_gains.json"
+    write_json({"old": 1.0}, target)
+    before = target.read_bytes()
+    with pytest.raises(TypeError):
+        write_json({"new": object()}, target)
+    with pytest.raises(KeyboardInterrupt), replacing(target) as f:
+        f.write('{"half": ')
+        raise KeyboardInterrupt
+    assert target.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == [target.name]
+
+
+def test_tune_write_refuses_a_linked_gains_file_before_the_search(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    gains = ROOT / "baselines" / "tuned_gains.json"
+    link = tmp_path / "gains.json"
+    link.symlink_to(gains)
+    before = gains.read_bytes()
+    start = time.perf_counter()
+    code = cli_main(["tune", "--write", "--gains-file", str(link), "--out", str(tmp_path / "o")])
+    assert code == 2 and time.perf_counter() - start < 5.0
+    assert "is a symbolic link" in capsys.readouterr().err
+    assert gains.read_bytes() == before and not (tmp_path / "o").exists()
+
+
+# ------------------------------------------------ every input is checked before --out is made
+def _bad_inputs(folder: Path) -> dict[str, list[str]]:
+    """One bad input per command that passes the parser and is refused by the command."""
+    (folder / "model").mkdir()
+    (folder / "model" / "config.json").write_text('{"name": "x"}')
+    (folder / "bad.json").write_text("not json")
+    (folder / "log.csv").write_text("time_s,x\n0,1\n")
+    (folder / "notes.txt").write_text("notes")
+    model, out = str(folder / "model"), str(folder / "out")
+    return {
+        "benchmark": [model, "--out", out],
+        "calibrate": [str(folder / "log.csv"), "--window", "0:1", "--out", out],
+        "compare": ["--controllers", f"{folder}/missing.py:X", "--no-agent", "--out", out],
+        "convert": [str(folder / "notes.txt"), out],
+        "coupled": ["--forces", "-1", "--out", out],
+        "coupled-controllers": ["--agent", model, "--no-grid", "--out", out],
+        "evaluate": [model, "--out", out],
+        "map": ["--models", model, "--out", out],
+        "probability-map": ["--results", str(folder / "notes.txt"), "--out", out],
+        "realism": ["--results", str(folder / "notes.txt"), "--out", out],
+        "replay": [
+            str(folder / "bad.json"),
+            str(folder / "log.csv"),
+            "--window",
+            "0:1",
+            "--out",
+            out,
+        ],  # fmt: skip
+        "sweep-train": ["--set", "nonsense=1", "--out", out],
+        "train": ["--total-timesteps", "0", "--out", out],
+        "tune": ["--write", "--gains-file", str(folder / "bad.json"), "--out", out],
+        "waves": ["--depth", "-5", "--out", out],
+    }
+
+
+def test_every_command_has_a_bad_input_case(tmp_path: Path) -> None:
+    assert sorted(_bad_inputs(tmp_path)) == sorted(SUBCOMMANDS)
+
+
+@pytest.mark.parametrize("command", sorted(SUBCOMMANDS))
+def test_a_refused_input_creates_no_output_folder(
+    tmp_path: Path, command: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = _bad_inputs(tmp_path)[command]
+    assert cli_main([command, *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"drill-gym {command}: error: "), err
+    assert not (tmp_path / "out").exists(), err
+
+
+# ----------------------------------------------------- raw values never reach a message unbounded
+class _Hostile:
+    def __repr__(self) -> str:
+        return "\x1b[2J" + "x" * 100_000
+
+
+@pytest.mark.parametrize(
+    "value",
+    [_Hostile(), "\x1b[2J" * 10_000, 10**400, [1.0] * 10_000, "1"],
+    ids=["object", "escapes", "huge-int", "long-list", "text"],
+)
+@pytest.mark.parametrize("argument", ["wob_n", "torque_nm", "duration_s", "step_s", "record_every"])
+def test_the_chain_helpers_show_hostile_values_bounded(argument: str, value: Any) -> None:
+    from drill_env.chain import chain_integrate_constant_torque, steady_drilling_torque_nm
+
+    args: dict[str, Any] = dict(torque_nm=1e4, wob_n=1e5, duration_s=1.0)
+    with pytest.raises((ValueError, TypeError)) as caught:
+        chain_integrate_constant_torque("field_2500m", **{**args, argument: value})
+    assert argument in str(caught.value) and _safe(str(caught.value)), str(caught.value)[:200]
+    assert len(str(caught.value)) < 300
+    if argument == "wob_n":
+        with pytest.raises((ValueError, TypeError)) as caught:
+            steady_drilling_torque_nm("field_2500m", value, 10.0)
+        assert "wob_n" in str(caught.value) and len(str(caught.value)) < 300
+
+
+def test_no_message_formats_a_raw_repr_of_a_value() -> None:
+    """Messages show values through ``shown`` (bounded, escaped); ``!r`` is left only for
+    ``str(...)`` (a string's ``repr`` is escaped, a path is bounded by the system) and
+    ``where``, a file's name the code formats itself."""
+    pattern = re.compile(r"\{([^{}!:]+?)!r\}")
+    allowed = re.compile(r"^(str\(|where\b|self\.(name|env_kwargs|gains)$|float\()")
+    found = []
+    for package in ("drill_env", "baselines", "agents", "experiments"):
+        for source in sorted((ROOT / package).rglob("*.py")):
+            for number, line in enumerate(source.read_text().splitlines(), 1):
+                for match in pattern.finditer(line):
+                    expression = match.group(1).strip()
+                    if not allowed.match(expression) and "__qualname__" not in expression:
+                        found.append(f"{source.relative_to(ROOT)}:{number}: {line.strip()}")
+    assert not found, "\n".join(found)
+
+
+# ----------------------------------------------- render_mode: our message, never Gymnasium's
+@pytest.mark.parametrize(
+    "env_id", ["DrillString-v0", "DrillStringField-v0", "DrillStringCoupled-v0"]
+)
+@pytest.mark.parametrize(
+    "mode",
+    ["x" * 1_000_000, "\x1b[2J", 5, ["human"], _Hostile()],
+    ids=["long", "escapes", "int", "list", "object"],
+)
+def test_a_bad_render_mode_is_refused_by_the_env_before_gymnasium_prints_it(
+    env_id: str, mode: Any, recwarn: pytest.WarningsRecorder
+) -> None:
+    with pytest.raises(ValueError, match=r"^render_mode = .* is not valid: allowed None") as caught:
+        gym.make(env_id, render_mode=mode)
+    assert _safe(str(caught.value)) and len(str(caught.value)) < 300
+    assert not [w for w in recwarn if "render_mode" in str(w.message)]

@@ -24,6 +24,8 @@ from typing import Any, Final
 
 from stable_baselines3.common.callbacks import BaseCallback
 
+from drill_env.validation import shown
+
 __all__ = ["HYPERPARAMS_FILE", "ZeroInitAction"]
 
 HYPERPARAMS_FILE: Final = Path(__file__).with_name("residual_ppo.yml")
@@ -55,4 +57,4 @@ def __getattr__(name: str) -> Any:
         import yaml  # the zoo's dependency
 
         return yaml.safe_load(HYPERPARAMS_FILE.read_text())
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    raise AttributeError(f"module {shown(__name__)} has no attribute {shown(name)}")
