@@ -40,11 +40,11 @@ Trials run one CPU each, ``--workers`` at a time on a local Ray cluster (or on t
 writes its run folder where it runs).
 
 An interrupted sweep (a killed command, a lost node) is finished by the same command with
-``--resume``: Tune's experiment in ``OUT/tune`` is restored (``OUT/sweep.json`` must hold the
-same spec), its finished trials are kept, and every other trial continues its run folder
-from the last checkpoint (a run whose final model is written only reports it again).
-Tune keeps its state as pickle files (``OUT/tune/tuner.pkl``), which restoring unpickles:
-resume only a sweep you ran yourself.
+``--resume --trust-pickle OUT/tune``: Tune's experiment in ``OUT/tune`` is restored
+(``OUT/sweep.json`` must hold the same spec), its finished trials are kept, and every other
+trial continues its run folder from the last checkpoint (a run whose final model is written only
+reports it again). Tune keeps its state as pickle files, which restoring unpickles: the
+command refuses unless ``--trust-pickle`` names that folder (resume only a sweep you ran).
 """
 
 from __future__ import annotations
@@ -476,12 +476,20 @@ def _spec_record(spec: SweepSpec) -> dict[str, Any]:
     return json.loads(json.dumps(dataclasses.asdict(spec), default=list))
 
 
-def _check_resume(out: Path, recorded: Mapping[str, Any], resume: bool) -> None:
-    """Refuse ``--resume`` without a resumable sweep of the same spec in ``out``, and a new
-    sweep in a folder that already holds one."""
+def _check_resume(
+    out: Path, recorded: Mapping[str, Any], resume: bool, trust_pickle: Path | None = None
+) -> None:
+    """Refuse ``--resume`` without a resumable sweep of the same spec in ``out`` or without
+    ``trust_pickle`` naming its Tune folder (whose state files are pickles), and a new sweep in
+    a folder that already holds one."""
     from ray import tune
 
     spec_file = out / SPEC_FILE
+    tune_folder = out / TUNE_FOLDER
+    if trust_pickle is not None and not resume:
+        raise ValueError(
+            "--trust-pickle names the Tune folder --resume restores: it needs --resume"
+        )
     if not resume:
         if spec_file.exists() or (out / TUNE_FOLDER).exists():
             raise ValueError(
@@ -507,6 +515,12 @@ def _check_resume(out: Path, recorded: Mapping[str, Any], resume: bool) -> None:
         raise ValueError(
             f"--resume: the sweep in {str(out)!r} was started with other settings "
             f"({', '.join(changed) or 'the spec file'} differ): give the same options as before"
+        )
+    if trust_pickle is None or Path(trust_pickle).resolve() != tune_folder.resolve():
+        raise ValueError(
+            f"--resume restores Tune's state in {str(tune_folder)!r}, pickle files that can run "
+            f"any code: pass --trust-pickle {str(tune_folder)!r} to say you trust them (a sweep "
+            "you ran yourself)"
         )
 
 
@@ -593,6 +607,7 @@ def run_training_sweep(
     heldout_scenarios: Sequence[str] | None = None,
     progress: bool = True,
     resume: bool = False,
+    trust_pickle: Path | None = None,
 ) -> dict[str, Any]:
     """Run the trials on Ray Tune, then write the summary table and export the best model.
 
@@ -600,6 +615,8 @@ def run_training_sweep(
         resume: Continue the interrupted sweep in ``out`` (Tune's experiment ``out/tune``,
             the same spec): its finished trials are kept, the others continue from their
             last checkpoint.
+        trust_pickle: With ``resume``: ``out/tune``, named to trust the pickled state of Tune
+            that restoring reads.
 
     Returns:
         The summary (as ``OUT/summary.json``): the trial rows, the best trial, the files.
@@ -614,7 +631,7 @@ def run_training_sweep(
     runs_dir = out / "runs"
     spec_file = out / SPEC_FILE
     recorded = _spec_record(spec)
-    _check_resume(out, recorded, resume)
+    _check_resume(out, recorded, resume, trust_pickle)
     runs_dir.mkdir(parents=True, exist_ok=True)
     spec_file.write_text(json.dumps(recorded, indent=2) + "\n")
     started = time.perf_counter()
@@ -758,11 +775,11 @@ class SweepTrainSpec:
             default_text=", ".join(f"{k}={v}" for k, v in SWEEP_DEFAULTS.items()),
         ),
     )
-    """fixed training settings of every trial (the rest as drill-gym train)"""
+    """fixed training settings of every trial (others as drill-gym train)"""
     env_id: str = dataclasses.field(
         default=PAPER_ENV, metadata=option(choices=ENV_IDS, flag="--env")
     )
-    """the env of every trial (its drill-gym train defaults)"""
+    """the env of every trial"""
     train_budget: bool = False
     """keep drill-gym train's budget for the env instead of the small one of --set"""
     heldout: str = dataclasses.field(
@@ -790,8 +807,9 @@ class SweepTrainSpec:
     no_progress: bool = False
     """no Tune progress output"""
     resume: bool = False
-    """finish the interrupted sweep in --out, same options (unpickles Tune's state: only a
-    sweep you ran)"""
+    """finish the interrupted sweep in --out, same options"""
+    trust_pickle: Path | None = dataclasses.field(default=None, metadata=option(metavar="OUT/tune"))
+    """with --resume: Tune's state folder, named to trust its pickles (they run any code)"""
     grid: tuple[str, ...] | None = dataclasses.field(
         default=None, metadata=option(repeat=True, metavar="NAME=V1,V2")
     )
@@ -845,10 +863,9 @@ class SweepTrainSpec:
 
 
 DESCRIPTION: Final = """\
-Multi-seed training and hyperparameter search of the residual PPO agent on Ray Tune: each
-trial is a drill-gym train run in OUT/runs/TRIAL__seedS, stopped early when weak on its
-validation IAE ratio. Writes trials.csv, trials.md, best_model/ (the best trial's model) with
-its held-out scores, and summary.json into --out. Needs the rl and scale extras.
+Multi-seed training and hyperparameter search on Ray Tune: each trial a drill-gym train run
+in OUT/runs/TRIAL__seedS, stopped early when weak on its validation IAE ratio. Writes
+trials.csv/.md, best_model/ with its held-out scores and summary.json. Needs rl and scale.
 
 example:
   drill-gym sweep-train --sampler optuna --samples 8 \\
@@ -869,7 +886,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 def run_study(options: SweepTrainSpec) -> int:
     """Run the training sweep ``options`` asks for and print its table; returns the exit code."""
     spec = options.sweep_spec()
-    _check_resume(options.out.resolve(), _spec_record(spec), options.resume)
+    _check_resume(options.out.resolve(), _spec_record(spec), options.resume, options.trust_pickle)
     backend = Backend(workers=options.workers, use_ray=True, address=options.address)
     print(
         f"sweep-train: {spec.trials()} trials ({len(spec.seeds)} seeds"
@@ -887,6 +904,7 @@ def run_study(options: SweepTrainSpec) -> int:
         heldout_scenarios=list(options.heldout_scenarios) or None,
         progress=not options.no_progress,
         resume=options.resume,
+        trust_pickle=options.trust_pickle,
     )
     print((options.out / "trials.md").read_text())
     best = summary["best"]

@@ -211,6 +211,14 @@ def test_resume_needs_the_same_sweep_in_out(
     assert err.count("\n") == 1 and "started with other settings (seeds differ)" in err, err
     assert cli_main(["sweep-train", "--seeds", "1", "2", "--out", str(out)]) == 2
     assert "already holds a sweep: pass --resume" in capsys.readouterr().err
+    # the same sweep: Tune's state is pickle, restored only when --trust-pickle names its folder
+    same = ["sweep-train", "--seeds", "1", "2", "--resume", "--out", str(out)]
+    for trust in ([], ["--trust-pickle", str(tmp_path)], ["--trust-pickle", str(out / "x")]):
+        assert cli_main([*same, *trust]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "pass --trust-pickle" in err and "any code" in err, err
+    assert cli_main(["sweep-train", "--trust-pickle", str(out / "tune"), "--out", str(out)]) == 2
+    assert "it needs --resume" in capsys.readouterr().err
     assert sorted(p.name for p in out.iterdir()) == ["sweep.json", "tune"]
 
 
@@ -249,7 +257,10 @@ def test_a_killed_sweep_resumes_only_its_missing_trials(tmp_path: Path) -> None:
     kept = (first.stat().st_mtime_ns, (finished[0] / "progress.csv").read_text())
     time.sleep(2.0)  # the interrupted trial's worker notices that its cluster is gone
     interrupted = not (training[0] / "model").is_dir()
-    done = subprocess.run([*argv, "--resume"], env=env, capture_output=True, text=True)
+    refused = subprocess.run([*argv, "--resume"], env=env, capture_output=True, text=True)
+    assert refused.returncode == 2 and "--trust-pickle" in refused.stderr  # pickles: opt in
+    trusted = [*argv, "--resume", "--trust-pickle", str(out / "tune")]
+    done = subprocess.run(trusted, env=env, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-2000:]
     with (out / "trials.csv").open() as f:
         rows = list(csv.DictReader(f))
