@@ -631,11 +631,11 @@ def training_seed(agent: ResidualPolicy, where: str) -> int:
 
 
 def seed_folders(folder: Path) -> list[Path]:
-    """The model folders of the training seeds of one method under ``folder``: its
-    subfolders that are model folders or hold one as ``model/`` (the run folders of
-    ``drill-gym train`` and ``drill-gym sweep-train``), else those of ``folder/runs``
-    (a ``drill-gym sweep-train`` output folder); by name."""
-    for parent in (folder, folder / "runs"):
+    """The model folders of the training seeds of one method under ``folder``: those of
+    ``folder/runs`` when it exists (a ``drill-gym sweep-train`` output folder, whose
+    ``best_model/`` is a copy of one of them), else the subfolders of ``folder`` that are model
+    folders or hold one as ``model/`` (run folders of ``drill-gym train``); by name."""
+    for parent in (folder / "runs", folder):
         if not parent.is_dir():
             continue
         found = []

@@ -11,6 +11,7 @@ import json
 import math
 import os
 import re
+import shutil
 import sqlite3
 import subprocess
 import sys
@@ -500,6 +501,9 @@ def test_a_folder_of_training_seeds_is_one_method(tmp_path: Path) -> None:
     _seed_models(tmp_path / "sweep" / "runs", [4, 2, 3])
     (tmp_path / "sweep" / "runs" / "run_5").mkdir()  # a run that has not finished: no model/
     (tmp_path / "sweep" / "runs" / "run_5" / "config.json").write_text("{}")
+    shutil.copytree(
+        tmp_path / "sweep" / "runs" / "run_2" / "model", tmp_path / "sweep" / "best_model"
+    )
     entry = make_entry(str(tmp_path / "sweep"))  # the sweep-train folder: its runs/
     assert entry.name == "residual_ppo" and entry.seed_count == 3
     assert [k for k, _ in entry.training_seeds] == [2, 3, 4]
