@@ -26,6 +26,7 @@ __all__ = [
     "ArgumentParser",
     "HelpFormatter",
     "check_output_folder",
+    "check_output_option",
     "error_line",
     "names_type",
     "number_type",
@@ -210,6 +211,15 @@ def check_output_folder(path: str | Path) -> Path:
     if not os.access(existing, os.W_OK | os.X_OK):
         raise ValueError(f"{str(folder)!r}: the folder {str(existing)!r} is not writable")
     return folder
+
+
+def check_output_option(path: str | Path, option: str = "--out") -> None:
+    """:func:`check_output_folder` for a Spec's check of its output folder (a default is not
+    parsed by argparse, so the Spec checks it): the message names ``option``."""
+    try:
+        check_output_folder(path)
+    except ValueError as err:
+        raise ValueError(f"argument {option}: {err}") from None
 
 
 def output_folder(text: str) -> Path:

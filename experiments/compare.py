@@ -58,7 +58,7 @@ from drill_env.validation import shown
 from experiments.arguments import (
     SEED_HIGH,
     ArgumentParser,
-    check_output_folder,
+    check_output_option,
     names_type,
     one_line,
     output_folder,
@@ -908,10 +908,7 @@ class CompareSpec:
     """no progress bar"""
 
     def __post_init__(self) -> None:
-        try:
-            check_output_folder(self.out)
-        except ValueError as err:
-            raise ValueError(f"argument --out: {err}") from None
+        check_output_option(self.out)
         try:
             decision_period(self.duration_s)
         except ValueError:

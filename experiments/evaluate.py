@@ -52,7 +52,7 @@ from drill_env.control import controller_names
 from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics
 from drill_env.metrics import METRIC_KEYS
 from drill_env.validation import printable, shown
-from experiments.arguments import ArgumentParser, check_output_folder, names_type, output_folder
+from experiments.arguments import ArgumentParser, check_output_option, names_type, output_folder
 from experiments.controllers import CONTROLLERS_OPTION_HELP, controller_type, refuse_on_ray
 from experiments.field import (
     ENV_IDS,
@@ -671,10 +671,7 @@ class EvaluateSpec:
                 f"{self.scenario_set} set of {self.env_id}: allowed {held_out[0].id} to "
                 f"{held_out[-1].id}"
             )
-        try:
-            check_output_folder(self.output)
-        except ValueError as err:
-            raise ValueError(f"argument --out: {err}") from None
+        check_output_option(self.output)
 
     @property
     def output(self) -> Path:

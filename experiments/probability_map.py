@@ -69,7 +69,7 @@ from drill_env.validation import printable, shown
 from experiments.arguments import (
     BASE_SEED_HIGH,
     ArgumentParser,
-    check_output_folder,
+    check_output_option,
     names_type,
     output_folder,
 )
@@ -652,10 +652,7 @@ class ProbabilitySpec:
     """no progress bar"""
 
     def __post_init__(self) -> None:
-        try:
-            check_output_folder(self.out)
-        except ValueError as err:
-            raise ValueError(f"argument --out: {err}") from None
+        check_output_option(self.out)
         field_env = self.env_id == drill_env.FIELD_ENV_ID
         if self.rows == "depth" and not field_env:
             raise ValueError(

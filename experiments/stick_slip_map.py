@@ -62,7 +62,7 @@ from drill_env.validation import printable, shown
 from experiments.arguments import (
     BASE_SEED_HIGH,
     ArgumentParser,
-    check_output_folder,
+    check_output_option,
     output_folder,
 )
 from experiments.controllers import CONTROLLERS_OPTION_HELP, controller_type, refuse_on_ray
@@ -704,10 +704,7 @@ class MapSpec:
     """no progress bar"""
 
     def __post_init__(self) -> None:
-        try:
-            check_output_folder(self.out)
-        except ValueError as err:
-            raise ValueError(f"argument --out: {err}") from None
+        check_output_option(self.out)
         field_env = is_field(self.env_id)
         presets = DISTRIBUTED_PRESETS if field_env else PRESETS
         if self.preset not in presets:
