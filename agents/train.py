@@ -761,9 +761,31 @@ class _Validation:
             )
             write_text(self.csv, header)
 
-    def run(self, model: Any, venv: Any) -> float:
+    def _write(self, model: Any, values: dict[str, float], line: str, steps: int) -> None:
+        """One validation's ``values`` to TensorBoard (at once, at ``steps``) and its ``line``
+        to ``validation.csv``."""
         from stable_baselines3.common.logger import TensorBoardOutputFormat
 
+        for output in model.logger.output_formats:
+            if isinstance(output, TensorBoardOutputFormat):
+                output.write(values, {k: () for k in values}, step=steps)
+        with self.csv.open("a") as f:
+            f.write(line + "\n")
+
+    def _keep_if_best(self, policy: ResidualPolicy, score: float, steps: int) -> bool:
+        """Save ``policy`` to ``best/`` with its score when ``score`` is the lowest so far;
+        returns whether it was."""
+        if not score < self.best:
+            return False
+        self.best = score
+        policy.metadata.update(
+            _record(self.config, {"validation_score": score, "timesteps": steps})
+        )
+        policy.save(self.best_dir)
+        write_text(self.best_dir / "score.json", json.dumps({"score": score, "timesteps": steps}))
+        return True
+
+    def run(self, model: Any, venv: Any) -> float:
         policy = _snapshot(model, venv, self.config)
         steps = int(model.num_timesteps)
         if self.coupled:
@@ -776,21 +798,8 @@ class _Validation:
             "validation/severity_ratio": float(sev),
             "validation/score": score,
         }
-        for output in model.logger.output_formats:  # written at once, at this step
-            if isinstance(output, TensorBoardOutputFormat):
-                output.write(values, {k: () for k in values}, step=steps)
-        with self.csv.open("a") as f:
-            f.write(f"{steps},{iae:.5f},{rmsd:.5f},{sev:.5f},{score:.5f}\n")
-        best = score < self.best
-        if best:
-            self.best = score
-            policy.metadata.update(
-                _record(self.config, {"validation_score": score, "timesteps": steps})
-            )
-            policy.save(self.best_dir)
-            write_text(
-                self.best_dir / "score.json", json.dumps({"score": score, "timesteps": steps})
-            )
+        self._write(model, values, f"{steps},{iae:.5f},{rmsd:.5f},{sev:.5f},{score:.5f}", steps)
+        best = self._keep_if_best(policy, score, steps)
         if not self.progress:
             return score
         print(
@@ -804,26 +813,13 @@ class _Validation:
     def _run_coupled(self, model: Any, policy: ResidualPolicy, steps: int) -> float:
         """Validation on ``DrillStringCoupled-v0``: the mean reward per decision against the
         base loops' on the same seeds; score ``base - agent`` (lower is better)."""
-        from stable_baselines3.common.logger import TensorBoardOutputFormat
-
         mean = coupled_mean_reward(self.env, policy, self.seeds)
         score = self.reference_return - mean
         values = {"validation/mean_reward": mean, "validation/score": score}
-        for output in model.logger.output_formats:
-            if isinstance(output, TensorBoardOutputFormat):
-                output.write(values, {k: () for k in values}, step=steps)
-        with self.csv.open("a") as f:
-            f.write(f"{steps},{mean:.5f},{self.reference_return:.5f},{score:.5f}\n")
-        best = score < self.best
-        if best:
-            self.best = score
-            policy.metadata.update(
-                _record(self.config, {"validation_score": score, "timesteps": steps})
-            )
-            policy.save(self.best_dir)
-            write_text(
-                self.best_dir / "score.json", json.dumps({"score": score, "timesteps": steps})
-            )
+        self._write(
+            model, values, f"{steps},{mean:.5f},{self.reference_return:.5f},{score:.5f}", steps
+        )
+        best = self._keep_if_best(policy, score, steps)
         if self.progress:
             print(
                 f"validation at {steps:,} decisions: mean reward {mean:.4f} (base loops "
