@@ -186,6 +186,8 @@ def spec_options(
         element, many = _element(hint)
         parse, metavar = _value_type(f.name, element, spec)
         choices = spec.choices() if callable(spec.choices) else spec.choices
+        if isinstance(default, Path) and spec.parse is not None:
+            default = str(default)  # argparse parses a text default: the default is checked too
         kwargs: dict[str, Any] = {
             "dest": f.name,
             "default": list(default) if isinstance(default, tuple) else default,

@@ -153,3 +153,24 @@ def test_positional_repeatable_and_named_choices() -> None:
     assert "POLICY" in text and "SUITE" in text and "(repeatable)" in text
     with pytest.raises(SystemExit):
         parser.parse_args(["--suites", "d"])
+
+
+def test_a_path_default_is_checked_like_a_given_value(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from experiments.arguments import output_folder
+
+    taken = tmp_path / "a_file"
+    taken.write_text("not a folder")
+
+    @dataclass(frozen=True)
+    class OutSpec:
+        out: Path = field(default=taken, metadata=option(parse=output_folder, metavar="DIR"))
+        """output folder"""
+
+    parser = spec_parser("p", "", OutSpec)
+    with pytest.raises(SystemExit) as exc:
+        parser.parse_args([])
+    assert exc.value.code == 2 and "--out" in capsys.readouterr().err
+    fine = spec_from_args(OutSpec, parser.parse_args(["--out", str(tmp_path / "new")]))
+    assert fine.out == tmp_path / "new"
