@@ -1516,7 +1516,9 @@ def run_benchmark(
     twice = sorted({n for n in taken if taken.count(n) > 1})
     if twice:
         raise ValueError(f"POLICY: two entries are named {', '.join(twice)}")
-    refuse_on_ray(_policy_error, runner.backend(), [e.name for e in entries if not e.agent])
+    refuse_on_ray(
+        _policy_error, runner.backend().distributed, [e.name for e in entries if not e.agent]
+    )
     study = BenchmarkStudy(
         tuple(suites), tuple(entries), task_runs=runner.task_size or BENCHMARK_TASK_RUNS
     )

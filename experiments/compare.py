@@ -961,7 +961,7 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
         spec = spec_from_args(CompareSpec, args)
     except ValueError as err:
         parser.error(str(err))
-    refuse_on_ray(parser.fail, runner.backend(), spec.controller_names)
+    refuse_on_ray(parser.fail, runner.backend().distributed, spec.controller_names)
     agent = load_agent(agent_loader, spec.env_id) if not spec.no_agent else None
     try:
         study = CompareStudy.from_spec(

@@ -36,7 +36,6 @@ from typing import Any, Final
 
 from drill_env.control import controller_names, register_controller
 from drill_env.validation import shown
-from experiments.sweep import Backend
 
 __all__ = [
     "CONTROLLERS_OPTION_HELP",
@@ -45,6 +44,7 @@ __all__ = [
     "load_controller",
     "refuse_on_ray",
     "resolve_controller_name",
+    "user_code_fingerprints",
     "user_controllers",
 ]
 
@@ -57,6 +57,8 @@ how to compile one is in docs/controllers.md."""
 
 _LOADED: dict[str, str] = {}
 """Spec as typed -> the name it was registered under (a spec is loaded once per process)."""
+_CODE: dict[str, str] = {}
+"""Registered name -> SHA-256 of the file that defined the class when it was loaded."""
 _NAME: Final = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*")
 
 
@@ -245,7 +247,51 @@ def load_controller(spec: str) -> str:
         )
     register_controller(name, target)
     _LOADED[spec] = name
+    _CODE[name] = _source_sha256(module)
     return name
+
+
+def _source_sha256(module: Any) -> str:
+    """SHA-256 of ``module``'s source file as it was imported (empty: it has none)."""
+    try:
+        source = inspect.getsourcefile(module)
+    except TypeError:  # a built-in or namespace module
+        return ""
+    if source is None:
+        return ""
+    try:
+        return hashlib.sha256(Path(source).read_bytes()).hexdigest()
+    except OSError:
+        return ""
+
+
+def user_code_fingerprints(settings: Any) -> dict[str, str]:
+    """The SHA-256 of the file that defines each user class named in ``settings``.
+
+    A study's settings name controllers by their registered names (a field run's label adds
+    `` (observation)``); a user's class is identified by its name and by its code, so that a
+    results database never gives the rows of an edited class to the new one.
+
+    Args:
+        settings: A study's settings, any nesting of mappings, lists and scalars.
+
+    Returns:
+        Registered name -> SHA-256 (hex) of its file when loaded, for the user classes named in
+        ``settings`` (empty when there are none).
+    """
+    found: dict[str, str] = {}
+    stack = [settings]
+    while stack:
+        value = stack.pop()
+        if isinstance(value, dict):
+            stack.extend(value.values())
+        elif isinstance(value, list | tuple):
+            stack.extend(value)
+        elif isinstance(value, str):
+            name = value.split(" (")[0]
+            if name in _CODE:
+                found[name] = _CODE[name]
+    return dict(sorted(found.items()))
 
 
 def resolve_controller_name(text: str) -> str:
@@ -277,12 +323,13 @@ def controller_type(text: str) -> str:
 controller_type.__name__ = "controller"
 
 
-def refuse_on_ray(fail: Callable[[str, str], Any], backend: Backend, names: Sequence[str]) -> None:
-    """``fail("--controllers", message)`` when a user's class is to run on Ray: it is
-    registered in this process only, and Ray's workers are other processes."""
+def refuse_on_ray(fail: Callable[[str, str], Any], distributed: bool, names: Sequence[str]) -> None:
+    """``fail("--controllers", message)`` when a user's class is to run on Ray
+    (``distributed``): it is registered in this process only, and Ray's workers are other
+    processes."""
 
     mine = user_controllers(names)
-    if mine and backend.distributed:
+    if mine and distributed:
         fail(
             "--controllers",
             f"{', '.join(mine)} is your own class, registered in this process only: run it "

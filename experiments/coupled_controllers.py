@@ -458,7 +458,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     runner = spec_from_args(RunnerSpec, args)
     spec = spec_from_args(CoupledControllersSpec, args)
-    refuse_on_ray(parser.fail, runner.backend(), [n for n in spec.torque_loops if n != "pi"])
+    refuse_on_ray(
+        parser.fail, runner.backend().distributed, [n for n in spec.torque_loops if n != "pi"]
+    )
     return run_study(spec, runner)
 
 

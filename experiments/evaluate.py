@@ -735,7 +735,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     controllers = None
     if spec.controllers:
         controllers = list(dict.fromkeys([*spec.controllers, *base_names]))
-        refuse_on_ray(parser.fail, runner.backend(), controllers)
+        refuse_on_ray(parser.fail, runner.backend().distributed, controllers)
     base_label = BASE_CONTROLLER
     bases = base_names
     if field_env:  # a run's label is its controller and observation mode

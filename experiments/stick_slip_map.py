@@ -835,7 +835,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as err:
         parser.error(str(err))
     level = map_realism(spec.env_id, spec.realism)
-    refuse_on_ray(parser.fail, runner.backend(), spec.controller_names)
+    refuse_on_ray(parser.fail, runner.backend().distributed, spec.controller_names)
     policies: list[MapPolicy] = []
     for folder in spec.models:
         try:

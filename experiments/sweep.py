@@ -57,6 +57,7 @@ import numpy as np
 
 from drill_env.control import controller_names
 from drill_env.validation import shown
+from experiments.controllers import user_code_fingerprints
 from experiments.field import OBSERVATIONS
 from experiments.results_db import ResultsDatabase, Schema, SchemaError, as_json
 from experiments.spec_cli import option
@@ -89,6 +90,7 @@ __all__ = [
     "report_outcome",
     "run_sweep",
     "spec_hash",
+    "study_settings",
 ]
 
 WORKER_ENV: Final[dict[str, str]] = {
@@ -239,6 +241,15 @@ class SweepOutcome:
     other_rows: int = 0
 
 
+def study_settings(study: Study) -> dict[str, Any]:
+    """What identifies ``study``'s results: its settings (``study.spec()``), and, when they name
+    users' own classes, the SHA-256 of each one's file
+    (:func:`experiments.controllers.user_code_fingerprints`): an edited class is a new study."""
+    spec = study.spec()
+    code = user_code_fingerprints(json_clean(dict(spec)))
+    return {**spec, "user_code": code} if code else spec
+
+
 def spec_hash(name: str, spec: Mapping[str, Any]) -> str:
     """SHA-256 of the sweep's name and its JSON spec (keys sorted)."""
     text = json.dumps({"sweep": name, "spec": json_clean(dict(spec))}, sort_keys=True)
@@ -260,7 +271,7 @@ def read_results(path: Path, study: Study) -> dict[str, dict[str, Any]]:
             its schema (the message names the file and the row).
         OSError: ``path`` does not exist or cannot be read.
     """
-    spec = study.spec()
+    spec = study_settings(study)
     database = ResultsDatabase.open(
         path, study.name, spec, spec_hash(study.name, spec), read_only=True
     )
@@ -317,7 +328,7 @@ def run_sweep(
     """
     backend = backend or Backend()
     started = time.perf_counter()
-    spec = study.spec()
+    spec = study_settings(study)
     items = list(study.items())
     if not items:
         raise ValueError(f"sweep {shown(study.name)} has no items: the grid is empty")

@@ -34,6 +34,7 @@ def _own_registry(monkeypatch: pytest.MonkeyPatch) -> None:
 
     monkeypatch.setattr(control, "_FACTORIES", dict(control._FACTORIES))
     monkeypatch.setattr(controllers, "_LOADED", {})
+    monkeypatch.setattr(controllers, "_CODE", {})
 
 
 def command(*argv: str) -> subprocess.CompletedProcess[str]:
@@ -90,6 +91,55 @@ def test_map_and_evaluate_take_a_user_controller(tmp_path: Path) -> None:
     with (tmp_path / "ev" / "heldout.csv").open() as f:
         labels = {r["controller"] for r in csv.DictReader(f)}
     assert "compiled_controller.CompiledSpeedPI" in labels
+
+
+PI_FILE = """
+class Loop:
+    kp = {kp}
+
+    def reset(self):
+        self.integral = 0.0
+
+    def torque(self, measurement, reference_speed_rad_s, dt_s):
+        error = reference_speed_rad_s - measurement.surface_top_drive_speed_rad_s
+        self.integral += error * dt_s
+        return 13000.0 + self.kp * error + 500.0 * self.integral
+"""
+
+
+def test_an_edited_user_class_is_run_again_not_read_from_the_results(tmp_path: Path) -> None:
+    """The results database keys a user's class by its name and its file's code: after an
+    edit, ``--resume`` runs the new class instead of giving it the old class's rows."""
+    loop = tmp_path / "my_loop.py"
+    database = tmp_path / "runs.sqlite"
+
+    def compare(out: str, *extra: str) -> dict[str, str]:
+        done = command(
+            "compare", "--controllers", f"{loop}:Loop", "--duration", "2",
+            "--conditions", "nominal", "--noise", "0", "--no-agent", "--no-plots",
+            "--no-progress", "--results", str(database), "--out", str(tmp_path / out), *extra,
+        )  # fmt: skip
+        assert done.returncode == 0, done.stderr
+        with (tmp_path / out / "compare.csv").open() as f:
+            return {r["controller"]: r["rmsd_nm"] for r in csv.DictReader(f)}
+
+    loop.write_text(PI_FILE.format(kp=2000.0))
+    first = compare("first")
+    again = compare("again", "--resume")  # same code: read back, the same numbers
+    loop.write_text(PI_FILE.format(kp=6000.0))
+    edited = compare("edited", "--resume")
+    assert first == again
+    assert edited["my_loop.Loop"] != first["my_loop.Loop"]
+
+
+def test_user_code_enters_the_settings_only_where_a_user_class_is_named(tmp_path: Path) -> None:
+    from experiments.controllers import user_code_fingerprints
+
+    (tmp_path / "loop_a.py").write_text(PI_FILE.format(kp=1.0))
+    name = load_controller(f"{tmp_path / 'loop_a.py'}:Loop")
+    code = user_code_fingerprints({"jobs": [[f"{name} (surface)", "x"], ["proposed"]]})
+    assert list(code) == [name] and len(code[name]) == 64
+    assert user_code_fingerprints({"jobs": [["proposed", name + "x"]], "n": 3}) == {}
 
 
 def test_help_says_how_to_name_your_own_class_and_the_guide_how_to_compile_it(
