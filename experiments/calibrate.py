@@ -34,6 +34,7 @@ from drill_env.validation import shown as shown_value
 from experiments.arguments import ArgumentParser
 from experiments.calibration_fit import (
     FEATURE_KEYS,
+    WEAKLY_PINNED,
     FitResult,
     calibrate,
     feature_errors,
@@ -286,9 +287,10 @@ def _report(
                 "-" if p.interval_95 is None
                 else f"{p.interval_95[0]:.4g} to {p.interval_95[1]:.4g}"
             )  # fmt: skip
+            status = "fitted, weakly pinned" if WEAKLY_PINNED in p.note else "fitted"
             lines.append(
                 f"| {name} | {p.value:.6g} | {p.unit} | {_format(p.relative_std, 2)} | "
-                f"{interval} | fitted |"
+                f"{interval} | {status} |"
             )
         else:
             lines.append(f"| {name} | (held at {p.value:.4g}) | {p.unit} | - | - | {p.note} |")

@@ -746,6 +746,9 @@ def student_t_975(dof: int) -> float:
     return z + (z**3 + z) / (4 * dof) + (5 * z**5 + 16 * z**3 + 3 * z) / (96 * dof**2)
 
 
+WEAKLY_PINNED: Final = "weakly pinned: the refits without some cycles move it far"
+"""Note of an identified parameter whose resampled spread exceeds :data:`MAX_RELATIVE_STD`
+(the Laplace screen passed it, the cycles of the window do not agree on it)."""
 JACKKNIFE_MIN_CYCLES: Final = 4
 """Fewest measured stick-slip cycles in the window for the cycle jackknife (with fewer the
 residual block bootstrap gives the intervals)."""
@@ -1086,11 +1089,18 @@ def _plant_of(
                 value, parameter_unit(name, uses_wob), False, None, fit.fixed[name]
             )
         elif boot is not None and name in boot.relative_std:
+            spread = boot.relative_std[name]
+            weak = (
+                f"; {WEAKLY_PINNED} (relative std {spread:.2g} above {MAX_RELATIVE_STD:.0%}): "
+                "read the interval, not the value"
+                if spread > MAX_RELATIVE_STD
+                else ""
+            )
             parameters[name] = FittedParameter(
-                value, parameter_unit(name, uses_wob), True, boot.relative_std[name],
+                value, parameter_unit(name, uses_wob), True, spread,
                 f"fitted (output error on bit speed and torque on bit); uncertainty: "
                 f"{boot.description()}; Laplace relative std "
-                f"{fit.relative_std.get(name, math.nan):.2g}",
+                f"{fit.relative_std.get(name, math.nan):.2g}{weak}",
                 boot.interval_95[name],
             )  # fmt: skip
         else:
