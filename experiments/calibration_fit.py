@@ -1467,14 +1467,9 @@ def _fit_string_model(
     surface = window.column("surface_torque_nm")
     torque_scale = float(np.mean(np.abs(surface))) or 1.0
     twist_start = float(np.median(surface[:3])) / torque_scale
-    d_start = math.log(
-        max(
-            0.01
-            * float(np.mean(np.abs(surface)))
-            / max(float(np.mean(np.abs(window.column("top_speed_rad_s")))), 1e-9),
-            1e-12,
-        )
-    )
+    # The top drive's damping to ground starts at 1 % of the mean torque at the mean speed.
+    mean_speed = max(float(np.mean(np.abs(window.column("top_speed_rad_s")))), 1e-9)
+    d_start = math.log(max(0.01 * torque_scale / mean_speed, 1e-12))
     starts = []
     if pipe:
         for share in (0.25, 0.5):
@@ -1511,11 +1506,9 @@ def _fit_string_model(
         cov = np.linalg.inv(info + ridge * np.eye(len(free))) * s2 / fraction
         std = np.sqrt(np.maximum(np.diag(cov), 0.0))
         rel = {STRING_NAMES[i]: float(std[m]) for m, i in enumerate(free) if i < 6 and i != 2}
-        worst = max(rel, key=lambda name: rel[name])
-        if rel[worst] <= MAX_RELATIVE_STD or worst not in (
-            "damping_nm_s_rad",
-            "pipe_damping_nm_s_rad",
-        ):
+        dampings = [n for n in ("damping_nm_s_rad", "pipe_damping_nm_s_rad") if n in rel]
+        worst = max(dampings, key=lambda name: rel[name], default="")
+        if not worst or rel[worst] <= MAX_RELATIVE_STD:
             break
         index = STRING_NAMES.index(worst)
         held[index] = math.log(1e-9)
@@ -1532,9 +1525,6 @@ def _fit_string_model(
         )  # fmt: skip
     for name in held_reason:
         values[name] = 0.0
-    for name in rel:
-        if name in held_reason:
-            del rel[name]
     n_eff = max(n * fraction, len(free) + 2.0)
     fit = StringModelFit(
         "pipe" if pipe else "one_inertia", values, rel, held_reason,
@@ -1551,15 +1541,16 @@ def identify_string(
 ) -> StringFit:
     """Whether the log supports a pipe inertia between the top drive and the bit side.
 
-    Two models of the string above the bit side are fitted to the measured top speed, each
-    driven by the measured surface torque and hanging down to the measured bit speed
-    (:func:`drill_env.bit_model.simulate_top_side`, the bit side's spring ``lower = (k, c)``
-    at the bottom): the top drive alone on that spring (``one_inertia``: ``J_t``, its
-    damping to ground ``d_t``), and a pipe ``J_p`` joined to the top drive by ``k_1, c_1``
-    between them (``pipe``). The pipe is chosen when its BIC (the one-inertia residual's
-    effective sample size for both) is lower and its inertia and stiffness are identified
-    (Laplace relative std at most :data:`MAX_RELATIVE_STD`); damping terms the data cannot
-    identify are held at 0 and reported.
+    Two models of the string above the bit side are fitted to the measured top speed and
+    surface torque, each under the identified PI speed ``loop = (k_p, k_i, r)`` and hanging
+    down to the measured bit speed (:func:`drill_env.bit_model.simulate_top_side`, the bit
+    side's spring ``lower = (k, c)`` at the bottom): the top drive alone on that spring
+    (``one_inertia``: ``J_t``, its damping to ground ``d_t``), and a pipe ``J_p`` joined to
+    the top drive by ``k_1, c_1`` between them (``pipe``); ``top_inertia`` (kg m^2) sets the
+    starts. The pipe is chosen when its BIC (the one-inertia residual's effective sample size
+    for both) is lower and its two inertias and its stiffness are identified (Laplace
+    relative std at most :data:`MAX_RELATIVE_STD`); damping terms the data cannot identify
+    are held at 0 and reported.
     """
     needed = ("surface_torque_nm", "bit_speed_rad_s", "top_speed_rad_s")
     if not all(window.has(name) for name in needed):
@@ -1572,7 +1563,7 @@ def identify_string(
         model.bic = n_eff * math.log(float(r @ r) / n) + model.free * math.log(n_eff)
     identified = all(
         pipe.relative_std.get(name, math.inf) <= MAX_RELATIVE_STD
-        for name in ("pipe_inertia_kg_m2", "pipe_stiffness_nm_rad")
+        for name in ("top_inertia_kg_m2", "pipe_inertia_kg_m2", "pipe_stiffness_nm_rad")
     )
     models = {"one_inertia": one, "pipe": pipe}
     if pipe.bic < one.bic and identified:
@@ -1580,7 +1571,8 @@ def identify_string(
     why = (
         "the one-inertia model has the lower BIC"
         if pipe.bic >= one.bic
-        else "the pipe's inertia or stiffness is not identifiable from the window"
+        else "the pipe's or the top drive's inertia or the pipe's stiffness is not "
+        "identifiable from the window"
     )
     return StringFit(models, "one_inertia", why)
 
