@@ -12,6 +12,10 @@ from drill_env.bit_model import simulate_bit
 from drill_env.measured_log import MeasuredLog
 from experiments.calibration_fit import (
     JACKKNIFE_MAX_GROUPS,
+    WEAKLY_PINNED,
+    Bootstrap,
+    FamilyFit,
+    _plant_of,
     calibrate,
     cycle_labels,
     stuck_segments,
@@ -129,3 +133,20 @@ def test_intervals_cover_the_known_parameters_over_seeds() -> None:
     (the nominal 95 % is not reached: docs/calibration.md section 5 says why)."""
     inside, total = _coverage((1, 3, 4, 5))
     assert inside >= 0.75 * total
+
+
+def test_a_parameter_the_cycles_do_not_agree_on_is_reported_as_weakly_pinned() -> None:
+    """A jackknife spread above the identifiability limit is stated in the parameter's note
+    (the value alone would read as if the data pinned it)."""
+    log = _log(1.0)
+    names = list(TRUTH)
+    p = np.array([TRUTH[n] for n in names] + [0.0, 0.0])
+    fit = FamilyFit("karnopp", p, 0.0, 1.0, 10, 5.0, names, {}, {}, {}, 0.0, 0)
+    spread = {n: (0.8 if n == "stribeck_rate" else 0.01) for n in names}
+    boot = Bootstrap(spread, {n: (0.5 * TRUTH[n], 2 * TRUTH[n]) for n in names}, 5, 0,
+                     "cycle_jackknife")  # fmt: skip
+    weights = np.ones(2 * log.time_s.size)
+    plant = _plant_of(fit, log, True, (0.0, 5.0), "", {"karnopp": fit}, [], weights, boot)
+    for name in names:
+        assert (WEAKLY_PINNED in plant.parameters[name].note) == (name == "stribeck_rate")
+        assert plant.parameters[name].relative_std == spread[name]
