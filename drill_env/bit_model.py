@@ -49,9 +49,11 @@ __all__ = [
     "P_K",
     "P_TAU",
     "P_XI",
+    "STRING_KEYS",
     "TOP_DRIVE_KEYS",
     "simulate_bit",
     "simulate_free_running",
+    "simulate_top_side",
     "substeps_for",
 ]
 
@@ -229,7 +231,7 @@ def simulate_bit(
 
 
 @njit(cache=True)
-def _simulate_free(time_s, wob, use_wob, family, p, top, twist0, top_speed0, speed0, integral0, substeps, out_top, out_speed, out_torque, out_surface):  # fmt: skip
+def _simulate_free(time_s, wob, use_wob, family, p, top, string, twist0, top_speed0, speed0, integral0, substeps, out_top, out_speed, out_torque, out_surface):  # fmt: skip
     n = time_s.shape[0]
     j_bit = p[0]
     k = p[1]
@@ -240,8 +242,13 @@ def _simulate_free(time_s, wob, use_wob, family, p, top, twist0, top_speed0, spe
     c_v = p[6] if family >= 1 else 0.0
     tau = p[7] if family >= 2 else 0.0
     j_top, kp, ki, reference = top[0], top[1], top[2], top[3]
+    d_top, j_pipe, k_1, c_1 = string[0], string[1], string[2], string[3]
     twist = twist0
     wt = top_speed0
+    # With a pipe (j_pipe > 0) the bit-side spring hangs from the pipe, joined to the top
+    # drive by (k_1, c_1); it starts at the top speed with the static twist of its spring.
+    wp = top_speed0
+    twist_1 = (k * twist0 + c * (top_speed0 - speed0)) / k_1 if j_pipe > 0 else 0.0
     w = speed0
     v = abs(speed0)
     integral = integral0
@@ -268,21 +275,33 @@ def _simulate_free(time_s, wob, use_wob, family, p, top, twist0, top_speed0, spe
             scale = s0 + ds * (s + 0.5)
             error = reference - wt
             u = kp * error + ki * integral
-            t_e = k * twist + c * (wt - w)
-            wt_b = wt + h * (u - t_e) / j_top
             integral += h * error
-            twist, w, v, direction, t_bit = _bit_substep(
-                j_bit, k, c, a_a * scale, a_0 * scale, xi, c_v, tau, h, wt, wt_b, twist, w, v,
-                direction,
-            )  # fmt: skip
+            if j_pipe > 0:
+                t_1 = k_1 * twist_1 + c_1 * (wt - wp)
+                t_e = k * twist + c * (wp - w)
+                wt_b = wt + h * (u - d_top * wt - t_1) / j_top
+                wp_b = wp + h * (t_1 - t_e) / j_pipe
+                twist_1 += h * 0.5 * (wt + wt_b - wp - wp_b)
+                twist, w, v, direction, t_bit = _bit_substep(
+                    j_bit, k, c, a_a * scale, a_0 * scale, xi, c_v, tau, h, wp, wp_b, twist, w,
+                    v, direction,
+                )  # fmt: skip
+                wp = wp_b
+            else:
+                t_e = k * twist + c * (wt - w)
+                wt_b = wt + h * (u - d_top * wt - t_e) / j_top
+                twist, w, v, direction, t_bit = _bit_substep(
+                    j_bit, k, c, a_a * scale, a_0 * scale, xi, c_v, tau, h, wt, wt_b, twist, w,
+                    v, direction,
+                )  # fmt: skip
             wt = wt_b
         if direction == 0:
-            t_bit = k * twist + c * wt
+            t_bit = k * twist + c * (wp if j_pipe > 0 else wt)
         out_top[i + 1] = wt
         out_speed[i + 1] = w
         out_torque[i + 1] = t_bit
         out_surface[i + 1] = kp * (reference - wt) + ki * integral
-        if not (abs(w) < 1e9 and abs(twist) < 1e9 and abs(wt) < 1e9):
+        if not (abs(w) < 1e9 and abs(twist) < 1e9 and abs(wt) < 1e9 and abs(wp) < 1e9):
             for m in range(i + 2, n):
                 out_top[m] = np.nan
                 out_speed[m] = np.nan
@@ -300,6 +319,93 @@ TOP_DRIVE_KEYS: Final = (
 )
 """The identified top drive of the free-running mode, in this order: its inertia, the
 proportional and integral gains of its PI speed loop, and the loop's speed reference."""
+STRING_KEYS: Final = (
+    "damping_nm_s_rad",
+    "pipe_inertia_kg_m2",
+    "pipe_stiffness_nm_rad",
+    "pipe_damping_nm_s_rad",
+)
+"""The optional upper string of the free-running mode, in this order (each 0 when absent):
+the top drive's viscous damping to ground, and the pipe inertia between the top drive and
+the bit-side spring with the spring and damper that join it to the top drive."""
+
+
+@njit(cache=True)
+def _simulate_top_side(time_s, bit, x, twist0, pipe_speed0, twist_1_0, top_speed0, integral0, substeps, out_top, out_surface):  # fmt: skip
+    j_top, d_top, k, c, j_pipe, k_1, c_1 = x[0], x[1], x[2], x[3], x[4], x[5], x[6]
+    kp, ki, reference = x[7], x[8], x[9]
+    wt = top_speed0
+    wp = pipe_speed0
+    twist = twist0
+    twist_1 = twist_1_0
+    integral = integral0
+    out_top[0] = wt
+    out_surface[0] = kp * (reference - wt) + ki * integral
+    for i in range(time_s.shape[0] - 1):
+        h = (time_s[i + 1] - time_s[i]) / substeps
+        for s in range(substeps):
+            f = (s + 0.5) / substeps
+            u = kp * (reference - wt) + ki * integral
+            integral += h * (reference - wt)
+            wb = bit[i] + f * (bit[i + 1] - bit[i])
+            if j_pipe > 0:
+                t_1 = k_1 * twist_1 + c_1 * (wt - wp)
+                t_e = k * twist + c * (wp - wb)
+                # Symplectic Euler (speeds first); the caller's step resolves the modes.
+                wt += h * (u - d_top * wt - t_1) / j_top
+                wp += h * (t_1 - t_e) / j_pipe
+                twist_1 += h * (wt - wp)
+                twist += h * (wp - wb)
+            else:
+                wt += h * (u - d_top * wt - k * twist - c * (wt - wb)) / j_top
+                twist += h * (wt - wb)
+        out_top[i + 1] = wt
+        out_surface[i + 1] = kp * (reference - wt) + ki * integral
+        if not abs(wt) < 1e9:
+            for m in range(i + 2, time_s.shape[0]):
+                out_top[m] = np.nan
+                out_surface[m] = np.nan
+            return False
+    return True
+
+
+def simulate_top_side(
+    time_s: npt.NDArray[np.float64],
+    bit_speed_rad_s: npt.NDArray[np.float64],
+    x: npt.NDArray[np.float64],
+    state0: tuple[float, float, float, float, float],
+    substeps: int,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """The top drive under its PI speed loop with the string hanging from it down to a
+    measured bit speed (a kinematic boundary at the bottom): ``J_t w_t' = u - d_t w_t - T_1``
+    with ``u = k_p (r - w_t) + k_i int(r - w_t)``; with a pipe (``J_p > 0``) ``T_1 = k_1
+    (th_t - th_p) + c_1 (w_t - w_p)`` and ``J_p w_p' = T_1 - k (th_p - th_b) - c (w_p -
+    w_b)``, without one ``T_1 = k (th_t - th_b) + c (w_t - w_b)``. Linear and held by its
+    speed loop, so its errors decay; the phase of the measured bit speed drives it.
+
+    Args:
+        time_s: Sample times, s, shape ``(n,)``.
+        bit_speed_rad_s: Measured bit speed, rad/s, shape ``(n,)`` (linear in between).
+        x: ``(J_t, d_t, k, c, J_p, k_1, c_1, k_p, k_i, r)`` in kg m^2, N m s/rad, N m/rad,
+            N m s/rad, kg m^2, N m/rad, N m s/rad, N m s/rad, N m/rad, rad/s (``J_p = 0``:
+            no pipe).
+        state0: ``(twist, pipe speed, upper twist, top speed, integral)`` at ``time_s[0]``
+            (rad, rad/s, rad, rad/s, rad; twist is that of the lower spring ``k``, or of the
+            only one; ``integral`` the loop's ``int(r - w_t)``).
+        substeps: Steps per sample interval (symplectic Euler: they must resolve the modes).
+
+    Returns:
+        ``(top_speed_rad_s, surface_torque_nm)``, each shape ``(n,)`` (NaN after a divergence).
+    """
+    top = np.empty(time_s.shape[0])
+    surface = np.empty(time_s.shape[0])
+    _simulate_top_side(
+        np.ascontiguousarray(time_s, dtype=np.float64),
+        np.ascontiguousarray(bit_speed_rad_s, dtype=np.float64),
+        np.ascontiguousarray(x, dtype=np.float64), float(state0[0]), float(state0[1]),
+        float(state0[2]), float(state0[3]), float(state0[4]), int(substeps), top, surface,
+    )  # fmt: skip
+    return top, surface
 
 
 def simulate_free_running(
@@ -313,6 +419,7 @@ def simulate_free_running(
     integral0_rad: float,
     wob_n: npt.NDArray[np.float64] | None = None,
     substeps: int | None = None,
+    string: npt.NDArray[np.float64] | None = None,
 ) -> tuple[
     npt.NDArray[np.float64],
     npt.NDArray[np.float64],
@@ -321,8 +428,11 @@ def simulate_free_running(
 ]:
     """Simulate the bit and a modelled top drive, so that the plant self-excites.
 
-    The top drive (inertia ``J_t``) follows its PI speed loop: ``J_t w_t' = u - T_e`` with
-    ``u = k_p (r - w_t) + k_i int(r - w_t)``; the bit side is that of :func:`simulate_bit`.
+    The top drive (inertia ``J_t``) follows its PI speed loop: ``J_t w_t' = u - d_t w_t -
+    T_e`` with ``u = k_p (r - w_t) + k_i int(r - w_t)``; the bit side is that of
+    :func:`simulate_bit`. With a pipe (``string``, :data:`STRING_KEYS`, ``J_p > 0``) the
+    bit-side spring hangs from the pipe, which the spring ``k_1`` and damper ``c_1`` join
+    to the top drive (it starts at the top speed, its spring at the lower one's torque).
 
     Args:
         time_s: Output times, s, shape ``(n,)``, strictly increasing.
@@ -336,6 +446,8 @@ def simulate_free_running(
         wob_n: Weight on bit, N, shape ``(n,)`` (friction per newton of WOB), or None.
         substeps: Steps per output interval (default :func:`substeps_for`, and at least 20
             steps per time constant ``J_t / k_p`` of the speed loop).
+        string: ``(d_t, J_p, k_1, c_1)`` (:data:`STRING_KEYS`), or None: all 0 (no pipe,
+            no damping to ground).
 
     Returns:
         ``(top_speed_rad_s, bit_speed_rad_s, bit_torque_nm, surface_torque_nm)``, each shape
@@ -352,11 +464,22 @@ def simulate_free_running(
     n_sub = substeps or substeps_for(params, dt)
     if top[1] > 0:
         n_sub = max(n_sub, int(math.ceil(20 * dt * top[1] / top[0])))
+    upper = np.zeros(4) if string is None else np.ascontiguousarray(string, dtype=np.float64)
+    if upper.shape != (4,) or not np.all(np.isfinite(upper)) or np.any(upper < 0):
+        raise ValueError(f"string = {shown(upper)}: allowed 4 finite numbers >= 0")
+    if upper[1] > 0:
+        if upper[2] <= 0:
+            raise ValueError(f"string = {shown(upper)}: a pipe needs a stiffness > 0")
+        fastest = math.sqrt(upper[2] * (1 / top[0] + 1 / upper[1]) + params[P_K] / upper[1])
+        n_sub = max(n_sub, int(math.ceil(dt * fastest * 200 / (2 * math.pi))))
+        n_sub = max(n_sub, int(math.ceil(10 * dt * upper[3] / min(top[0], upper[1]))))
+    if upper[0] > 0:
+        n_sub = max(n_sub, int(math.ceil(10 * dt * upper[0] / top[0])))
     use_wob = wob_n is not None
     wob = np.ascontiguousarray(wob_n if use_wob else np.zeros(1), dtype=np.float64)
     outs = [np.empty_like(t) for _ in range(4)]
     _simulate_free(
-        t, wob, use_wob, FAMILY_CODES[family], params, top, float(twist0_rad),
+        t, wob, use_wob, FAMILY_CODES[family], params, top, upper, float(twist0_rad),
         float(top_speed0_rad_s), float(speed0_rad_s), float(integral0_rad), int(n_sub), *outs,
     )  # fmt: skip
     return outs[0], outs[1], outs[2], outs[3]

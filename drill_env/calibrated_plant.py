@@ -56,10 +56,15 @@ __all__ = [
     "parameter_unit",
 ]
 
-PLANT_FORMAT: Final = "drill-string-gym/calibrated-plant/2"
+PLANT_FORMAT: Final = "drill-string-gym/calibrated-plant/3"
 """The ``format`` of the plant files this version writes (2 adds each parameter's
-``interval_95``)."""
-READ_FORMATS: Final = ("drill-string-gym/calibrated-plant/1", PLANT_FORMAT)
+``interval_95``; 3 the optional upper string of ``top_drive``,
+:data:`drill_env.bit_model.STRING_KEYS`, which a reader of format 2 would ignore)."""
+READ_FORMATS: Final = (
+    "drill-string-gym/calibrated-plant/1",
+    "drill-string-gym/calibrated-plant/2",
+    PLANT_FORMAT,
+)
 """The plant file formats this version reads."""
 MAX_PLANT_BYTES: Final = 1 << 20
 """Largest plant file read, bytes."""
@@ -387,7 +392,9 @@ def drill_string_parameters(
     The string's stiffness ``k`` becomes three equal springs in series (``3 k`` each) joined by
     pipe and collar inertias of :data:`MAP_INERTIA_FRACTION` bit inertias (the bit-side model
     has none; they set modes far above the stick-slip one); its damping ``c`` three dampers of
-    ``3 c``. The friction maps exactly for ``karnopp`` and ``stribeck_viscous`` (``R`` = 1 m,
+    ``3 c``. A plant with an identified pipe (``top_drive`` keys ``pipe_*``) keeps it: the
+    4-DOF pipe is that inertia on its spring and damper, and ``k``, ``c`` become two springs
+    of ``2 k`` and dampers of ``2 c`` around the collar. The friction maps exactly for ``karnopp`` and ``stribeck_viscous`` (``R`` = 1 m,
     so ``mu = a`` with WOB; without WOB ``mu R WOB`` = the torque at ``wob_n`` = 1 N unless
     ``wob_n`` is given); a ``memory`` plant loses its memory time (the compiled 4-DOF kernel
     has no friction state): its lag is dropped and the rest kept. The top drive is the
@@ -401,19 +408,23 @@ def drill_string_parameters(
     a_a = plant.value("static_friction") / wob
     a_0 = plant.value("sliding_friction") / wob
     top = plant.top_drive or {}
+    pipe = float(top.get("pipe_inertia_kg_m2", 0.0))
+    # With an identified pipe it is the 4-DOF pipe, on its spring; the bit-side spring then
+    # joins it to the bit in two halves (2 k each) through a collar of the stated fraction.
+    lower = 2 if pipe > 0 else 3
     return DrillStringParameters(
         J_dt=float(top.get("inertia_kg_m2", MAP_TOP_INERTIA_FACTOR * j)),
-        J_pi=MAP_INERTIA_FRACTION * j,
+        J_pi=pipe if pipe > 0 else MAP_INERTIA_FRACTION * j,
         J_co=MAP_INERTIA_FRACTION * j,
         J_bi=j,
         c_dt=float(top.get("damping_nm_s_rad", 0.0)),
-        c_pi=3 * c,
-        c_co=3 * c,
-        c_bi=3 * c,
+        c_pi=float(top.get("pipe_damping_nm_s_rad", 0.0)) if pipe > 0 else 3 * c,
+        c_co=lower * c,
+        c_bi=lower * c,
         c_bit=plant.value("viscous_friction"),
-        k_pi=3 * k,
-        k_co=3 * k,
-        k_bi=3 * k,
+        k_pi=float(top["pipe_stiffness_nm_rad"]) if pipe > 0 else 3 * k,
+        k_co=lower * k,
+        k_bi=lower * k,
         R=1.0,
         mu_a=a_a,
         mu_0=a_0,

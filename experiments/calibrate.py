@@ -34,6 +34,7 @@ from drill_env.validation import shown as shown_value
 from experiments.arguments import ArgumentParser
 from experiments.calibration_fit import (
     FEATURE_KEYS,
+    WEAKLY_PINNED,
     FitResult,
     calibrate,
     feature_errors,
@@ -206,7 +207,7 @@ def _uncertainty_figure(result: FitResult) -> Any:
     ax.set_xscale("log")
     ax.set_xlim(1e-3, 200)
     ax.axvline(25, color="C3", lw=0.8, ls="--")
-    ax.set_xlabel("relative standard deviation (%, bootstrap); dashed: identifiability limit")
+    ax.set_xlabel("relative standard deviation (%); dashed: identifiability limit")
     ax.set_title(f"parameter uncertainty, family {plant.family}", fontsize=10)
     return fig
 
@@ -286,20 +287,15 @@ def _report(
                 "-" if p.interval_95 is None
                 else f"{p.interval_95[0]:.4g} to {p.interval_95[1]:.4g}"
             )  # fmt: skip
+            status = "fitted, weakly pinned" if WEAKLY_PINNED in p.note else "fitted"
             lines.append(
                 f"| {name} | {p.value:.6g} | {p.unit} | {_format(p.relative_std, 2)} | "
-                f"{interval} | fitted |"
+                f"{interval} | {status} |"
             )
         else:
             lines.append(f"| {name} | (held at {p.value:.4g}) | {p.unit} | - | - | {p.note} |")
     boot = result.bootstrap
-    how = (
-        f"a residual block bootstrap ({boot.replicates} replicates, blocks of "
-        f"{boot.block_samples} samples: the fitted residuals resampled onto the fitted "
-        "simulation and the parameters refitted)"
-        if boot is not None
-        else "the Laplace approximation"
-    )
+    how = boot.description() if boot is not None else "the Laplace approximation"
     lines += [
         "",
         f"Initial twist of the window: {plant.initial_twist_rad:.6g} rad (fitted, a nuisance "
@@ -338,7 +334,38 @@ def _top_drive_lines(result: FitResult) -> list[str]:
         f"and {v['integral_gain_nm_rad']:.4g} N m/rad around {v['reference_speed_rad_s']:.4g} "
         f"rad/s (R^2 {top.loop_r2:.3f}). `drill-gym replay --free-running` runs the plant with "
         "this top drive instead of the measured top speed.",
+        *_string_lines(result),
     ]
+
+
+def _string_lines(result: FitResult) -> list[str]:
+    string = result.string
+    if string is None or not string.models:
+        return []
+    lines = [
+        "",
+        "The string above the bit side, fitted to the top speed and surface torque (the "
+        "identified speed loop, driven by the measured bit speed; Laplace relative std in "
+        "brackets):",
+        "",
+        "| model | normalised RMS | BIC | parameters |",
+        "|---|---|---|---|",
+    ]
+    for model in string.models.values():
+        parts = []
+        for name, value in model.values.items():
+            if name in model.held:
+                parts.append(f"{name} held at 0 (not identifiable)")
+            else:
+                parts.append(f"{name} {value:.4g} ({_format(model.relative_std.get(name), 2)})")
+        lines.append(f"| {model.name} | {model.rms:.3f} | {model.bic:.1f} | {'; '.join(parts)} |")
+    chosen = (
+        "the pipe: free running uses its top drive, pipe and spring"
+        if string.chosen == "pipe"
+        else f"one inertia ({string.reason}): free running uses the top drive above"
+    )
+    lines += ["", f"Chosen: {chosen}."]
+    return lines
 
 
 LOG_HELP: Final = "the measured log (.csv, or .parquet with pyarrow)"

@@ -10,8 +10,9 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Final
+from typing import Final, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -27,9 +28,11 @@ from drill_env.bit_model import (
     P_K,
     P_TAU,
     P_XI,
+    STRING_KEYS,
     TOP_DRIVE_KEYS,
     simulate_bit,
     simulate_free_running,
+    simulate_top_side,
     substeps_for,
 )
 from drill_env.calibrated_plant import (
@@ -48,6 +51,7 @@ __all__ = [
     "calibrate",
     "features",
     "initial_estimates",
+    "identify_string",
     "identify_top_drive",
     "simulate_free",
     "simulate_plant",
@@ -410,8 +414,14 @@ JACOBIAN_STEP: Final = 1e-3
 inertia and stiffness less well (one seed: -4.6 % and -9 % against -0.1 % and -2.7 %)."""
 
 
+class _Residuals(Protocol):
+    """A least-squares problem: the residual vector of a parameter vector."""
+
+    def residuals(self, theta: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
+
+
 def _jacobian(
-    problem: _Problem, theta: npt.NDArray[np.float64], step: float = JACOBIAN_STEP
+    problem: _Residuals, theta: npt.NDArray[np.float64], step: float = JACOBIAN_STEP
 ) -> npt.NDArray[np.float64]:
     columns = []
     for i in range(theta.size):
@@ -424,7 +434,7 @@ def _jacobian(
 
 
 def _levenberg_marquardt(
-    problem: _Problem,
+    problem: _Residuals,
     theta: npt.NDArray[np.float64],
     max_iterations: int = 60,
     max_log_step: float = 4.0,
@@ -520,6 +530,8 @@ def _fit_family(
     direct: npt.NDArray[np.float64],
     user_fixed: dict[str, float],
     balance: MomentumBalance | None = None,
+    refined: int = STARTS_REFINED,
+    screen: bool = True,
 ) -> FamilyFit:
     bit = log.column("bit_speed_rad_s")
     torque = log.column("bit_torque_nm")
@@ -577,7 +589,7 @@ def _fit_family(
         first_ids = {id(item) for item in firsts}
         chosen_starts = firsts + [item for item in tried if id(item) not in first_ids]
         best_run = None
-        for _, _, q, th in chosen_starts[: max(STARTS_REFINED, len(firsts))]:
+        for _, _, q, th in chosen_starts[: max(refined, len(firsts))]:
             problem.fixed_p = q
             problem.free = free_shooting if shooting is not None else free_full
             if short is not None:
@@ -627,7 +639,11 @@ def _fit_family(
             j = int(np.argmax(np.abs(row)))
             corr[name] = (problem.free[j], float(row[j]))
         worst = max(rel, key=lambda k: rel[k] if math.isfinite(rel[k]) else math.inf, default=None)
-        if worst is None or (math.isfinite(rel[worst]) and rel[worst] <= MAX_RELATIVE_STD):
+        if (
+            not screen
+            or worst is None
+            or (math.isfinite(rel[worst]) and rel[worst] <= MAX_RELATIVE_STD)
+        ):
             break
         if len(rel) == 1:
             raise ValueError(
@@ -684,13 +700,118 @@ BOOTSTRAP_SEED: Final = 20_240_601
 
 @dataclass
 class Bootstrap:
-    """The residual block bootstrap of one fit: per free parameter the relative standard
-    deviation (of its logarithm over the replicates) and the 95 % percentile interval."""
+    """The uncertainty of one fit's free parameters: per parameter the relative standard
+    deviation (of its logarithm) and the 95 % interval. ``method`` is ``"cycle_jackknife"``
+    (:func:`cycle_jackknife`: ``replicates`` refits, one per left-out group of cycles) or
+    ``"residual_bootstrap"`` (:func:`bootstrap`: ``replicates`` resamples in blocks of
+    ``block_samples``)."""
 
     relative_std: dict[str, float]
     interval_95: dict[str, tuple[float, float]]
     replicates: int
     block_samples: int
+    method: str = "residual_bootstrap"
+
+    def description(self) -> str:
+        """One sentence saying how the intervals were made, for the report and the file."""
+        if self.method == "cycle_jackknife":
+            return (
+                f"a jackknife over whole stick-slip cycles ({self.replicates} whole refits, "
+                "each leaving out one group of consecutive measured cycles; Student-t "
+                f"intervals with {self.replicates - 1} degrees of freedom)"
+            )
+        return (
+            f"a residual block bootstrap ({self.replicates} replicates, blocks of "
+            f"{self.block_samples} samples: the fitted residuals resampled onto the fitted "
+            "simulation and the parameters refitted)"
+        )
+
+
+STUDENT_T_975: Final = (
+    12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228,
+    2.201, 2.179, 2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086,
+)  # fmt: skip
+"""The 97.5 % quantile of Student's t with 1 to 20 degrees of freedom."""
+
+
+def student_t_975(dof: int) -> float:
+    """The 97.5 % quantile of Student's t with ``dof`` >= 1 degrees of freedom (a table to
+    20, then the expansion ``z + (z^3 + z) / (4 dof) + (5 z^5 + 16 z^3 + 3 z) / (96 dof^2)``,
+    within 1e-3 of the exact quantile)."""
+    if dof < 1:
+        raise ValueError(f"dof = {dof}: allowed >= 1")
+    if dof <= len(STUDENT_T_975):
+        return STUDENT_T_975[dof - 1]
+    z = 1.959964
+    return z + (z**3 + z) / (4 * dof) + (5 * z**5 + 16 * z**3 + 3 * z) / (96 * dof**2)
+
+
+WEAKLY_PINNED: Final = "weakly pinned: the refits without some cycles move it far"
+"""Note of an identified parameter whose resampled spread exceeds :data:`MAX_RELATIVE_STD`
+(the Laplace screen passed it, the cycles of the window do not agree on it)."""
+JACKKNIFE_MIN_CYCLES: Final = 4
+"""Fewest measured stick-slip cycles in the window for the cycle jackknife (with fewer the
+residual block bootstrap gives the intervals)."""
+JACKKNIFE_MAX_GROUPS: Final = 6
+"""Most groups of the cycle jackknife: a window of more cycles is cut into this many groups
+of consecutive whole cycles, one refit per group left out (each refit is a whole fit)."""
+
+
+def cycle_labels(log: MeasuredLog) -> npt.NDArray[np.intp] | None:
+    """The jackknife group of every sample, ``(n,)``: stick-slip cycles run from the middle of
+    one measured stuck run to the middle of the next (the samples before the first belong to
+    the first), and consecutive cycles form at most :data:`JACKKNIFE_MAX_GROUPS` groups of
+    nearly equal counts; None with fewer than :data:`JACKKNIFE_MIN_CYCLES` cycles."""
+    runs = stuck_segments(log, 1)
+    if runs is None or len(runs) < JACKKNIFE_MIN_CYCLES:
+        return None
+    groups = min(len(runs), JACKKNIFE_MAX_GROUPS)
+    labels = np.zeros(log.time_s.size, dtype=np.intp)
+    for cycle, (a, b, *_) in enumerate(runs):
+        labels[a:b] = cycle * groups // len(runs)
+    return labels
+
+
+def cycle_jackknife(
+    fit: FamilyFit,
+    labels: npt.NDArray[np.intp],
+    refit: Callable[[npt.NDArray[np.float64], dict[str, float]], FamilyFit],
+    weights: npt.NDArray[np.float64],
+) -> Bootstrap:
+    """Jackknife over whole stick-slip cycles of the whole fit of one family.
+
+    For each group of measured cycles (``labels``, :func:`cycle_labels`) the residuals of
+    those samples (bit speed, torque on bit, momentum balance) are left out (``weights`` zeroed)
+    and the family is fitted again by ``refit(weights, held)`` -- from the direct
+    estimates, by the same multiple shooting, the parameters the fit held kept at their
+    values and no further one held -- so that the
+    spread of the refits contains everything that moves the estimate when the data change:
+    the noise, the model's misfit that differs from cycle to cycle, and where the
+    optimiser stops on a stick-slip cost that is rough at the scale of one cycle's phase.
+    Cycles are the independent units of a stick-slip log: each prediction starts afresh
+    from a measured stuck state. The variance of each log-parameter is ``(G - 1) / G`` times
+    the sum of squares of the ``G`` refits about their mean, and the interval is
+    ``log(theta) +- t_{G-1} se`` about the full fit. It is conditional on the held
+    parameters.
+    """
+    groups = int(labels.max()) + 1
+    rows = np.tile(labels, weights.size // labels.size + 1)[: weights.size]
+    held = {name: float(fit.p[MODEL_PARAMETERS[name][0]]) for name in fit.fixed}
+    draws = [refit(np.where(rows == g, 0.0, weights), held) for g in range(groups)]
+    quantile = student_t_975(groups - 1)
+    rel: dict[str, float] = {}
+    interval: dict[str, tuple[float, float]] = {}
+    for name in fit.free:
+        if name == "initial_twist":
+            continue
+        index = MODEL_PARAMETERS[name][0]
+        centre = math.log(fit.p[index])
+        logs = np.log([max(d.p[index], 1e-300) for d in draws])
+        se = math.sqrt((groups - 1) / groups * float(np.sum((logs - logs.mean()) ** 2)))
+        rel[name] = se
+        half = min(quantile * se, 300.0)  # beyond e^300 the interval says: anything
+        interval[name] = (math.exp(centre - half), math.exp(centre + half))
+    return Bootstrap(rel, interval, groups, 0, "cycle_jackknife")
 
 
 def _shooting_problem(
@@ -821,6 +942,7 @@ class FitResult:
     wall_s: float
     top_drive: TopDriveFit | None = None
     bootstrap: Bootstrap | None = None
+    string: StringFit | None = None
 
 
 def fit_weights(window: MeasuredLog) -> tuple[npt.NDArray[np.float64], list[Defect]]:
@@ -876,6 +998,7 @@ def calibrate(
     direct, twist0 = initial_estimates(window, uses_wob)
     balance = MomentumBalance.of(window) if _balance_estimates(window)[4] else None
     fits: dict[str, FamilyFit] = {}
+    family_starts: dict[str, list[tuple[npt.NDArray[np.float64], float]]] = {}
     previous: tuple[npt.NDArray[np.float64], float] | None = None
     for family in FAMILIES:
         if family not in families:
@@ -884,6 +1007,7 @@ def calibrate(
         starts = [(direct.copy(), twist0)]
         if previous is not None:
             starts.append(previous)
+        family_starts[family] = starts
         fit = _fit_family(window, family, uses_wob, weights, starts, direct, fam_fixed, balance)
         fits[family] = fit
         previous = (fit.p.copy(), fit.twist0)
@@ -894,17 +1018,44 @@ def calibrate(
         f.n_eff = n_eff
         f.bic = n_eff * math.log(f.cost / f.n) + len(f.free) * math.log(n_eff)
     chosen = min(fits.values(), key=lambda f: f.bic)
-    # The uncertainty of the chosen family's parameters: a residual block bootstrap (the
-    # Laplace screen of the fit decided which parameters are identified).
-    boot = bootstrap(_shooting_problem(window, chosen, uses_wob, weights, balance))
+    # The uncertainty of the chosen family's parameters: the delete-one-cycle jackknife of
+    # its whole fit when the window has enough stick-slip cycles, else a residual block
+    # bootstrap (the Laplace screen of the fit decided which parameters are identified).
+    labels = cycle_labels(window)
+    if labels is None:
+        boot = bootstrap(_shooting_problem(window, chosen, uses_wob, weights, balance))
+    else:
+
+        def refit(w: npt.NDArray[np.float64], held: dict[str, float]) -> FamilyFit:
+            # From the direct estimates (the simpler family's optimum would carry the full
+            # window's data into the refit), its best start refined.
+            starts = [(q.copy(), x) for q, x in family_starts[chosen.family][:1]]
+            return _fit_family(
+                window, chosen.family, uses_wob, w, starts, direct, held, balance, refined=1,
+                screen=False,
+            )  # fmt: skip
+
+        boot = cycle_jackknife(chosen, labels, refit, weights)
     plant = _plant_of(chosen, window, uses_wob, window_s, log.source, fits, defects, weights, boot)
     top = identify_top_drive(window, float(chosen.p[P_J]))
+    string = None
     if top.values is not None:
         top_values = {**top.values, "pi_law_r2": top.loop_r2, "momentum_balance_r2": top.balance_r2}
+        loop = (
+            top.values["speed_gain_nm_s_rad"], top.values["integral_gain_nm_rad"],
+            top.values["reference_speed_rad_s"],
+        )  # fmt: skip
+        string = identify_string(
+            window, (float(chosen.p[P_K]), float(chosen.p[P_C])), loop, top.values["inertia_kg_m2"]
+        )
+        if string.chosen == "pipe":
+            values = string.models["pipe"].values
+            top_values["inertia_kg_m2"] = values["top_inertia_kg_m2"]
+            top_values.update({key: values[key] for key in STRING_KEYS})
         plant = dataclasses.replace(plant, top_drive=top_values)
     return FitResult(
         plant, fits, defects, int((weights == 0).sum()), time.perf_counter() - started, top,
-        boot,
+        boot, string,
     )  # fmt: skip
 
 
@@ -938,11 +1089,18 @@ def _plant_of(
                 value, parameter_unit(name, uses_wob), False, None, fit.fixed[name]
             )
         elif boot is not None and name in boot.relative_std:
+            spread = boot.relative_std[name]
+            weak = (
+                f"; {WEAKLY_PINNED} (relative std {spread:.2g} above {MAX_RELATIVE_STD:.0%}): "
+                "read the interval, not the value"
+                if spread > MAX_RELATIVE_STD
+                else ""
+            )
             parameters[name] = FittedParameter(
-                value, parameter_unit(name, uses_wob), True, boot.relative_std[name],
-                f"fitted (output error on bit speed and torque on bit); uncertainty: residual "
-                f"block bootstrap ({boot.replicates} replicates, blocks of {boot.block_samples} "
-                f"samples; Laplace relative std {fit.relative_std.get(name, math.nan):.2g})",
+                value, parameter_unit(name, uses_wob), True, spread,
+                f"fitted (output error on bit speed and torque on bit); uncertainty: "
+                f"{boot.description()}; Laplace relative std "
+                f"{fit.relative_std.get(name, math.nan):.2g}{weak}",
                 boot.interval_95[name],
             )  # fmt: skip
         else:
@@ -1194,6 +1352,231 @@ def identify_top_drive(window: MeasuredLog, bit_inertia_kg_m2: float) -> TopDriv
     return TopDriveFit(values, loop_r2, balance_r2)
 
 
+@dataclass
+class StringModelFit:
+    """One model of the string above the bit side, fitted by :func:`identify_string`.
+
+    ``values`` by name (``top_inertia_kg_m2`` and the :data:`STRING_KEYS`), ``relative_std``
+    of the free ones (Laplace), ``held`` the reason of each held one, ``rms`` the top-speed
+    residual divided by the measured top speed's standard deviation."""
+
+    name: str
+    values: dict[str, float]
+    relative_std: dict[str, float]
+    held: dict[str, str]
+    rms: float
+    bic: float
+    free: int
+
+
+@dataclass
+class StringFit:
+    """The evidence for a pipe inertia between the top drive and the bit side: both models'
+    fits and the chosen one (``"one_inertia"`` or ``"pipe"``), or why none was made."""
+
+    models: dict[str, StringModelFit]
+    chosen: str
+    reason: str = ""
+
+
+class _TopSideProblem:
+    """Output error of the top speed and the surface torque of
+    :func:`drill_env.bit_model.simulate_top_side` (the identified PI loop, driven by the
+    measured bit speed), for :func:`_levenberg_marquardt`."""
+
+    def __init__(
+        self,
+        window: MeasuredLog,
+        lower: tuple[float, float],
+        loop: tuple[float, float, float],
+        pipe: bool,
+        held: dict[int, float],
+    ) -> None:
+        self.time = window.time_s
+        self.surface = window.column("surface_torque_nm")
+        self.bit = window.column("bit_speed_rad_s")
+        self.top = window.column("top_speed_rad_s")
+        self.top0 = float(np.median(self.top[:3]))
+        self.lower = lower
+        self.loop = loop
+        kp, ki, reference = loop
+        self.integral0 = (float(np.median(self.surface[:3])) - kp * (reference - self.top0)) / ki
+        self.pipe = pipe
+        self.held = held
+        self.scales = (float(np.std(self.top)) or 1.0, float(np.std(self.surface)) or 1.0)
+        # theta: log J_t, log d_t, twist0 k / T, [log J_p, log k_1, log c_1, twist_1 k_1 / T,
+        # (w_p0 - w_t0) / std(w_t)]; T the mean surface torque.
+        self.torque_scale = float(np.mean(np.abs(self.surface))) or 1.0
+
+    def unpack(
+        self, theta: npt.NDArray[np.float64]
+    ) -> tuple[npt.NDArray[np.float64], tuple[float, float, float, float, float]]:
+        th = theta.copy()
+        for index, value in self.held.items():
+            th[index] = value
+        k, c = self.lower
+        x = np.zeros(10)
+        x[0], x[1], x[2], x[3] = math.exp(th[0]), math.exp(th[1]), k, c
+        x[7:10] = self.loop
+        twist0 = th[2] * self.torque_scale / k
+        if not self.pipe:
+            return x, (twist0, 0.0, 0.0, self.top0, self.integral0)
+        x[4], x[5], x[6] = math.exp(th[3]), math.exp(th[4]), math.exp(th[5])
+        twist_1 = th[6] * self.torque_scale / x[5]
+        pipe0 = self.top0 + th[7] * self.scales[0]
+        return x, (twist0, pipe0, twist_1, self.top0, self.integral0)
+
+    def substeps(self, x: npt.NDArray[np.float64]) -> int:
+        dt = float(np.median(np.diff(self.time)))
+        j_top, d_top, k, c, j_pipe, k_1, c_1, kp = x[:8]
+        if j_pipe > 0:
+            omega = math.sqrt(k_1 * (1 / j_top + 1 / j_pipe) + k / j_pipe)
+            rate = max((kp + d_top + c_1) / j_top, (c_1 + c) / j_pipe)
+        else:
+            omega = math.sqrt(k / j_top)
+            rate = (kp + d_top + c) / j_top
+        return int(min(5000, max(4, math.ceil(dt * omega / 0.05), math.ceil(dt * rate / 0.2))))
+
+    def residuals(self, theta: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        x, state0 = self.unpack(theta)
+        top, surface = simulate_top_side(self.time, self.bit, x, state0, self.substeps(x))
+        r = np.concatenate(
+            [(top - self.top) / self.scales[0], (surface - self.surface) / self.scales[1]]
+        )
+        return np.asarray(np.where(np.isfinite(r), r, 1e3))
+
+
+STRING_NAMES: Final = (
+    "top_inertia_kg_m2", "damping_nm_s_rad", "", "pipe_inertia_kg_m2", "pipe_stiffness_nm_rad",
+    "pipe_damping_nm_s_rad",
+)  # fmt: skip
+"""Names of the log-parameters of :class:`_TopSideProblem` (the third is the initial twist)."""
+
+
+def _fit_string_model(
+    window: MeasuredLog,
+    lower: tuple[float, float],
+    loop: tuple[float, float, float],
+    pipe: bool,
+    top_inertia: float,
+) -> tuple[StringModelFit, npt.NDArray[np.float64]]:
+    """Fit one model of the string above the bit side (several starts, Levenberg-Marquardt,
+    the damping terms the Laplace screen cannot identify held near 0 and the rest refitted);
+    returns the fit and its top-speed residual."""
+    k, c = lower
+    surface = window.column("surface_torque_nm")
+    torque_scale = float(np.mean(np.abs(surface))) or 1.0
+    twist_start = float(np.median(surface[:3])) / torque_scale
+    # The top drive's damping to ground starts at 1 % of the mean torque at the mean speed.
+    mean_speed = max(float(np.mean(np.abs(window.column("top_speed_rad_s")))), 1e-9)
+    d_start = math.log(max(0.01 * torque_scale / mean_speed, 1e-12))
+    starts = []
+    if pipe:
+        for share in (0.25, 0.5):
+            for stiff in (1.0, 3.0):
+                j_top = share * top_inertia
+                j_pipe = (1 - share) * top_inertia
+                c_1 = 0.05 * math.sqrt(stiff * k * j_pipe)
+                starts.append(np.array([
+                    math.log(j_top), d_start, twist_start, math.log(j_pipe),
+                    math.log(stiff * k), math.log(c_1), twist_start, 0.0,
+                ]))  # fmt: skip
+    else:
+        starts.append(np.array([math.log(top_inertia), d_start, twist_start]))
+    held: dict[int, float] = {}
+    held_reason: dict[str, str] = {}
+    while True:
+        best: tuple[float, npt.NDArray[np.float64]] | None = None
+        problem = _TopSideProblem(window, lower, loop, pipe, held)
+        for theta0 in starts:
+            theta, cost, _ = _levenberg_marquardt(problem, theta0.copy(), 40)
+            if best is None or cost < best[0]:
+                best = (cost, theta)
+        assert best is not None
+        cost, theta = best
+        r = problem.residuals(theta)
+        jac = _jacobian(problem, theta)
+        free = [i for i in range(theta.size) if i not in held]
+        jf = jac[:, free]
+        n = r.size
+        fraction = _effective_fraction(r)
+        s2 = cost / max(n - len(free), 1)
+        info = jf.T @ jf
+        ridge = 1e-10 * max(float(np.trace(info)), 1e-300) / info.shape[0]
+        cov = np.linalg.inv(info + ridge * np.eye(len(free))) * s2 / fraction
+        std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        rel = {STRING_NAMES[i]: float(std[m]) for m, i in enumerate(free) if i < 6 and i != 2}
+        dampings = [n for n in ("damping_nm_s_rad", "pipe_damping_nm_s_rad") if n in rel]
+        worst = max(dampings, key=lambda name: rel[name], default="")
+        if not worst or rel[worst] <= MAX_RELATIVE_STD:
+            break
+        index = STRING_NAMES.index(worst)
+        held[index] = math.log(1e-9)
+        held_reason[worst] = (
+            f"not identifiable from this window (relative std {rel[worst]:.2g}): held at 0"
+        )
+        starts = [theta]
+    x, _ = problem.unpack(theta)
+    values = {"top_inertia_kg_m2": float(x[0]), "damping_nm_s_rad": float(x[1])}
+    if pipe:
+        values.update(
+            pipe_inertia_kg_m2=float(x[4]), pipe_stiffness_nm_rad=float(x[5]),
+            pipe_damping_nm_s_rad=float(x[6]),
+        )  # fmt: skip
+    for name in held_reason:
+        values[name] = 0.0
+    n_eff = max(n * fraction, len(free) + 2.0)
+    fit = StringModelFit(
+        "pipe" if pipe else "one_inertia", values, rel, held_reason,
+        math.sqrt(cost / n), n_eff * math.log(cost / n) + len(free) * math.log(n_eff), len(free),
+    )  # fmt: skip
+    return fit, r
+
+
+def identify_string(
+    window: MeasuredLog,
+    lower: tuple[float, float],
+    loop: tuple[float, float, float],
+    top_inertia: float,
+) -> StringFit:
+    """Whether the log supports a pipe inertia between the top drive and the bit side.
+
+    Two models of the string above the bit side are fitted to the measured top speed and
+    surface torque, each under the identified PI speed ``loop = (k_p, k_i, r)`` and hanging
+    down to the measured bit speed (:func:`drill_env.bit_model.simulate_top_side`, the bit
+    side's spring ``lower = (k, c)`` at the bottom): the top drive alone on that spring
+    (``one_inertia``: ``J_t``, its damping to ground ``d_t``), and a pipe ``J_p`` joined to
+    the top drive by ``k_1, c_1`` between them (``pipe``); ``top_inertia`` (kg m^2) sets the
+    starts. The pipe is chosen when its BIC (the one-inertia residual's effective sample size
+    for both) is lower and its two inertias and its stiffness are identified (Laplace
+    relative std at most :data:`MAX_RELATIVE_STD`); damping terms the data cannot identify
+    are held at 0 and reported.
+    """
+    needed = ("surface_torque_nm", "bit_speed_rad_s", "top_speed_rad_s")
+    if not all(window.has(name) for name in needed):
+        return StringFit({}, "one_inertia", "the window lacks the surface torque or bit speed")
+    one, r_one = _fit_string_model(window, lower, loop, False, top_inertia)
+    pipe, r_pipe = _fit_string_model(window, lower, loop, True, top_inertia)
+    n = r_one.size
+    n_eff = max(n * _effective_fraction(r_one), pipe.free + 2.0)
+    for model, r in ((one, r_one), (pipe, r_pipe)):
+        model.bic = n_eff * math.log(float(r @ r) / n) + model.free * math.log(n_eff)
+    identified = all(
+        pipe.relative_std.get(name, math.inf) <= MAX_RELATIVE_STD
+        for name in ("top_inertia_kg_m2", "pipe_inertia_kg_m2", "pipe_stiffness_nm_rad")
+    )
+    models = {"one_inertia": one, "pipe": pipe}
+    if pipe.bic < one.bic and identified:
+        return StringFit(models, "pipe")
+    why = (
+        "the one-inertia model has the lower BIC"
+        if pipe.bic >= one.bic
+        else "the pipe's or the top drive's inertia or the pipe's stiffness is not "
+        "identifiable from the window"
+    )
+    return StringFit(models, "one_inertia", why)
+
+
 def top_drive_vector(plant: CalibratedPlant) -> npt.NDArray[np.float64]:
     """The plant's identified top drive as ``(J_t, k_p, k_i, r)``; ValueError without one."""
     top = plant.top_drive or {}
@@ -1229,6 +1612,7 @@ def simulate_free(
     """
     top_drive = top_drive_vector(plant)
     j_t, kp, ki, reference = top_drive
+    string = np.array([float((plant.top_drive or {}).get(key, 0.0)) for key in STRING_KEYS])
     p = plant.model_vector()
     if plant.uses_wob and not log.has("wob_n"):
         raise ValueError("the plant's friction scales with WOB but the log has no column 'wob_n'")
@@ -1263,12 +1647,21 @@ def simulate_free(
         for x0 in balance + span * np.linspace(-1.0, 1.0, 61):
             _, s, q, _ = simulate_free_running(
                 head, p, plant.family, top_drive, float(x0), top0, speed0, integral0,
-                None if wob is None else wob[:n],
+                None if wob is None else wob[:n], string=string,
             )  # fmt: skip
             cost = float(np.mean(((s - bit) / scales[0]) ** 2 + ((q - torque) / scales[1]) ** 2))
             if cost < best[0]:
                 best = (cost, float(x0))
         twist0 = best[1]
     return simulate_free_running(
-        log.time_s, p, plant.family, top_drive, twist0, top0, speed0, integral0, wob
+        log.time_s,
+        p,
+        plant.family,
+        top_drive,
+        twist0,
+        top0,
+        speed0,
+        integral0,
+        wob,
+        string=string,
     )

@@ -1,8 +1,9 @@
-"""The plant file's format 2 (intervals, identified top drive) and the format-1 files it
-still reads."""
+"""The plant file's format 3 (intervals, identified top drive with an optional pipe) and the
+format-1 and format-2 files it still reads."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -46,7 +47,7 @@ def _plant() -> CalibratedPlant:
     )
 
 
-def test_format_2_round_trip_with_intervals_and_top_drive(tmp_path: Path) -> None:
+def test_format_3_round_trip_with_intervals_and_top_drive(tmp_path: Path) -> None:
     plant = _plant()
     path = plant.save(tmp_path / "plant.json")
     data = json.loads(path.read_text())
@@ -68,6 +69,33 @@ def test_format_1_files_are_still_read(tmp_path: Path) -> None:
     plant = load_plant(tmp_path / "old.json")
     assert plant.parameters["bit_inertia"].interval_95 is None
     assert plant.top_drive is None
+
+
+def test_format_2_files_are_still_read(tmp_path: Path) -> None:
+    data = _plant().to_json()
+    data["format"] = "drill-string-gym/calibrated-plant/2"
+    (tmp_path / "two.json").write_text(json.dumps(data))
+    plant = load_plant(tmp_path / "two.json")
+    assert plant.top_drive == TOP_DRIVE
+    assert drill_string_parameters(plant).J_pi == pytest.approx(0.05 * 0.02)
+
+
+def test_an_identified_pipe_is_the_4dof_pipe(tmp_path: Path) -> None:
+    """A plant with a pipe keeps it in the 4-DOF map; the bit-side spring's compliance is
+    kept (two springs of 2 k in series)."""
+    pipe = {
+        **TOP_DRIVE,
+        "damping_nm_s_rad": 0.002,
+        "pipe_inertia_kg_m2": 0.06,
+        "pipe_stiffness_nm_rad": 8.0,
+        "pipe_damping_nm_s_rad": 0.004,
+    }
+    plant = dataclasses.replace(_plant(), top_drive=pipe)
+    again = load_plant(plant.save(tmp_path / "plant.json"))
+    params = drill_string_parameters(again)
+    assert (params.J_pi, params.k_pi, params.c_pi) == pytest.approx((0.06, 8.0, 0.004))
+    assert params.c_dt == pytest.approx(0.002)
+    assert 1 / (1 / params.k_co + 1 / params.k_bi) == pytest.approx(VALUES["stiffness"])
 
 
 @pytest.mark.parametrize(
