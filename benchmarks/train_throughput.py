@@ -200,7 +200,7 @@ def compare(args: argparse.Namespace) -> None:
         if not theirs:
             continue
         # A rate's best is its highest; the updates' is a cost, the lowest.
-        cost = "updates" in key
+        cost = key.startswith("(b) PPO updates alone")
         ratio = min(theirs) / min(ours) if cost else max(ours) / max(theirs)
         print(
             f"{key:42} {min(theirs):8,.0f}-{max(theirs):<8,.0f} {min(ours):8,.0f}-{max(ours):<8,.0f}"
