@@ -29,7 +29,7 @@ from drill_env.layout import (
 from drill_env.limits import MAX_EPISODE_S, MAX_NUM_ENVS
 from drill_env.options import EnvConfig, FieldEnvConfig
 from drill_env.parameters import PLANT_DT_S
-from drill_env.rewards import TERMS, reward_terms, total_reward
+from drill_env.rewards import TERMS, report_rewards
 from drill_env.validation import check_int, check_seeds, shown
 
 __all__ = ["DrillStringFieldVectorEnv", "DrillStringVectorEnv"]
@@ -62,7 +62,11 @@ class DrillStringVectorEnv(VectorEnv):
         self.single_action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
-        self._residual_scale = self.config.residual_scale_nm if self.config.residual else None
+        residual_scale = self.config.residual_scale_nm if self.config.residual else None
+        # The reward weights are fixed at make: the same for every string.
+        self._report_rewards = report_rewards(
+            self.config.reward_weights, self.config.max_torque_nm, residual_scale
+        )
         self._needs_reset = np.zeros(num_envs, dtype=bool)
         self._started = False
         # Each string's report time from which its episode is truncated (set at reset: the
@@ -134,7 +138,8 @@ class DrillStringVectorEnv(VectorEnv):
         npt.NDArray[np.bool_],
         dict[str, Any],
     ]:
-        terms, clipped = self._advance(actions)
+        term_rows, clipped = self._advance(actions)
+        terms = dict(zip(TERMS, term_rows, strict=True))
         b = self._batch
         terminated, truncated = self._terminated, self._truncated
         infos = self._infos(terms)
@@ -163,12 +168,10 @@ class DrillStringVectorEnv(VectorEnv):
         self._advance(actions)
         return self._batch.observations(), self._rewards, self._terminated, self._truncated
 
-    def _advance(
-        self, actions: Any
-    ) -> tuple[dict[str, npt.NDArray[np.float64]], npt.NDArray[np.bool_]]:
+    def _advance(self, actions: Any) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
         """One step of every string (next-step autoreset first); sets the step's rewards,
-        terminated and truncated, and returns the reward terms and which actions were
-        clipped."""
+        terminated and truncated, and returns the reward terms (a row per name of
+        ``drill_env.rewards.TERMS``) and which actions were clipped."""
         if not self._started:
             raise RuntimeError("call reset() before step()")
         a, clipped = validate_actions(actions, self.num_envs, batched=True)
@@ -194,9 +197,7 @@ class DrillStringVectorEnv(VectorEnv):
         else:
             b.step(a)
         report = b.report
-        weights = self.config.reward_weights  # fixed at make: the same for every string
-        terms = reward_terms(report, weights, self.config.max_torque_nm, self._residual_scale)
-        rewards = total_reward(terms, weights)
+        terms, rewards = self._report_rewards(report)
         terminated = b.status == STATUS_DIVERGED
         if terminated.any():
             rewards[terminated] = -1.0

@@ -172,3 +172,34 @@ def test_batched_actions_in_range_pass_unchanged(dtype: type, shape: tuple[int, 
             validate_actions(np.array([0.0, bad, 0.0], dtype=dtype).reshape(shape), 3, True)
     with pytest.raises(ValueError, match=r"action must have shape \(3, 1\)"):
         validate_actions(np.zeros((3, 2), dtype=dtype), 3, batched=True)
+
+
+@pytest.mark.parametrize(
+    ("weights", "residual_scale_nm"),
+    [
+        ({}, 20_000.0),
+        ({}, None),
+        ({"stuck": 0.5, "torque": 2.0, "residual": 0.5}, 0.5),
+        ({"chattering": 0.0, "torque": 0.0}, 3e4),
+    ],
+)
+def test_batch_rewards_are_reward_terms_and_total_reward_bit_for_bit(
+    weights: dict[str, float], residual_scale_nm: float | None
+) -> None:
+    """The vector env's compiled rewards against the reference functions, on random report
+    rows with edge cases: no steps, a capped chattering term, NaN."""
+    from drill_env.layout import N_REPORT, REP_STEPS, REP_VARIATION
+    from drill_env.rewards import TERMS, RewardWeights, report_rewards, reward_terms, total_reward
+
+    rng = np.random.default_rng(6)
+    report = rng.uniform(0.0, 1.0, (64, N_REPORT)) * rng.choice([1e-3, 1.0, 1e5, 1e9], (64, 1))
+    report[:, REP_STEPS] = rng.integers(0, 101, 64)
+    report[:4, REP_STEPS] = [0.0, -0.0, 1.0, np.nan]
+    report[4:8, REP_VARIATION] = [5e4, 5e4 + 1e-9, np.inf, np.nan]
+    reward_weights = RewardWeights(**weights)
+    terms, rewards = report_rewards(reward_weights, 50_000.0, residual_scale_nm)(report)
+    expected_terms = reward_terms(report, reward_weights, 50_000.0, residual_scale_nm)
+    expected = total_reward(expected_terms, reward_weights)
+    for row, name in zip(terms, TERMS, strict=True):
+        assert row.tobytes() == np.asarray(expected_terms[name], np.float64).tobytes(), name
+    assert rewards.tobytes() == expected.tobytes()
