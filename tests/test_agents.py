@@ -274,6 +274,27 @@ def test_lean_running_statistics_are_np_mean_and_np_var() -> None:
         assert mine.count == theirs.count
 
 
+@pytest.mark.slow
+def test_train_throughput_benchmark_compares_two_checkouts() -> None:
+    """``benchmarks/train_throughput.py --against`` as a user runs it (this checkout against
+    itself, a tiny budget): every rate and its speed-up."""
+    root = Path(__file__).resolve().parents[1]
+    result = subprocess.run(
+        [sys.executable, "benchmarks/train_throughput.py", "--against", str(root),
+         "--decisions", "320", "--repeat", "1", "--rounds", "1"],
+        cwd=root, capture_output=True, text=True, check=True, timeout=900,
+    )  # fmt: skip
+    rows = [line for line in result.stdout.splitlines() if line.startswith("(")]
+    assert [row[:24] for row in rows] == [
+        "(a) training env alone, ",
+        "(a) training env alone, ",
+        "(b) PPO collecting rollo",
+        "(b) PPO end to end (roll",
+        "(b) PPO updates alone   ",
+    ]
+    assert all(float(row.split()[-1]) > 0 for row in rows)
+
+
 # ------------------------------------------------------------------------ training, loading
 def test_tiny_training_run_writes_a_loadable_model(trained: Path) -> None:
     for name in MODEL_FILES:

@@ -168,3 +168,31 @@ def test_unseeded_resets_continue_numpys_sequence() -> None:
         assert batch.episodes[0].scenario == config.scenario(spawn_generators(reference))
         key.append(len(COMPONENTS))
         env.reset()
+
+
+def test_reset_cost_benchmark_prints_its_table() -> None:
+    """``benchmarks/reset_cost.py`` as a user runs it, on a short budget."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    result = subprocess.run(
+        [sys.executable, "benchmarks/reset_cost.py", "--episodes", "0", "30", "--repeat", "3"],
+        cwd=root, env=dict(os.environ, PYTHONPATH=str(root)), capture_output=True, text=True,
+        check=True, timeout=300,
+    )  # fmt: skip
+    lines = result.stdout.splitlines()
+    assert lines[1].split() == [
+        "episode",
+        "reset()",
+        "us",
+        "sequences",
+        "us",
+        "numpy",
+        "us",
+        "ratio",
+    ]
+    assert [line.split()[0] for line in lines[2:]] == ["0", "30"]
+    assert all(float(line.split()[-1]) > 0 for line in lines[2:])
