@@ -221,7 +221,7 @@ def make_training_env(config: TrainConfig, vecnormalize_file: Path | None = None
     version are loaded by :func:`agents.checkpoints.load_checkpoint`)."""
     from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor, VecNormalize
 
-    from agents.vec_env import GymnasiumVecEnv
+    from agents.vec_env import GymnasiumVecEnv, LeanVecNormalize
 
     vector_env = gym.make_vec(
         config.env_id,
@@ -236,7 +236,7 @@ def make_training_env(config: TrainConfig, vecnormalize_file: Path | None = None
         venv = VecNormalize.load(str(vecnormalize_file), venv)
         venv.training = True
         return venv
-    return VecNormalize(
+    return LeanVecNormalize(  # VecNormalize's numbers with fewer Python operations per step
         venv,
         norm_obs=config.norm_obs,
         norm_reward=config.norm_reward,

@@ -6,13 +6,20 @@
     stepped with zero actions (the base controller alone) and with random actions;
 (b) with torch and stable-baselines3 installed: PPO with the default hyperparameters for
     ``--rollouts`` rollouts of ``n_steps * num_envs`` decisions, timed while it collects them
-    (policy inference and the environment) and end to end (with the updates).
+    (policy inference and the environment) and end to end (with the updates), and what the
+    updates alone cost per decision;
+(c) where a step of the training env goes: the compiled plant loops, the measurement-noise
+    draws, the rest of the native vector env, and SB3's side (the adapter, episode statistics
+    and normalisation), microseconds per step of all ``num_envs`` strings.
 
 Each rate is the best of ``--repeat`` runs (CPU time of this process: steadier than the wall
-clock on a shared machine). To compare two versions of the code, run this file with each on
-the path, e.g. ``PYTHONPATH=<checkout>``.
+clock on a shared machine). ``--against <checkout>`` compares with another version of the
+code: this file runs ``--rounds`` times with each checkout on ``PYTHONPATH``, alternately, and
+prints each rate's range and the ratio of the best rates (the other version needs only
+``drill_env`` and ``agents``).
 
-Run: ``OMP_NUM_THREADS=1 .venv/bin/python benchmarks/train_throughput.py``.
+Run: ``OMP_NUM_THREADS=1 .venv/bin/python benchmarks/train_throughput.py`` (from the checkout
+to measure, or with it on ``PYTHONPATH``).
 """
 
 from __future__ import annotations
@@ -20,7 +27,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import importlib.util
+import os
+import re
+import subprocess
+import sys
 import time
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -47,8 +60,9 @@ def env_rate(config: TrainConfig, decisions: int, action: str, repeat: int) -> f
     return best
 
 
-def ppo_rates(config: TrainConfig, rollouts: int, repeat: int) -> tuple[float, float]:
-    """(b) Decisions per CPU second of PPO while collecting rollouts, and end to end."""
+def ppo_rates(config: TrainConfig, rollouts: int, repeat: int) -> tuple[float, float, float]:
+    """(b) Decisions per CPU second of PPO while collecting rollouts, and end to end; CPU
+    microseconds of the updates per decision (the least of the runs)."""
     import torch as th
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -69,6 +83,7 @@ def ppo_rates(config: TrainConfig, rollouts: int, repeat: int) -> tuple[float, f
 
     th.set_num_threads(config.torch_threads)
     best_collect = best_total = 0.0
+    update_us = float("inf")
     for _ in range(repeat):
         venv = make_training_env(config)
         model = make_model(config, venv)
@@ -78,18 +93,55 @@ def ppo_rates(config: TrainConfig, rollouts: int, repeat: int) -> tuple[float, f
         total_s = time.process_time() - start
         best_collect = max(best_collect, model.num_timesteps / timer.collecting_s)
         best_total = max(best_total, model.num_timesteps / total_s)
+        update_us = min(update_us, 1e6 * (total_s - timer.collecting_s) / model.num_timesteps)
         venv.close()
-    return best_collect, best_total
+    return best_collect, best_total, update_us
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--decisions", type=int, default=32_000, help="decisions per environment-alone run"
-    )
-    parser.add_argument("--rollouts", type=int, default=1, help="PPO rollouts per run")
-    parser.add_argument("--repeat", type=int, default=3, help="runs of each measurement")
-    args = parser.parse_args()
+def step_parts(config: TrainConfig, steps: int, repeat: int) -> dict[str, float]:
+    """(c) CPU microseconds per step of the training env (random actions), by part: the
+    kernel calls and the noise refills timed inside the native vector env, the native env's
+    own rate, and the whole training env's (the least of ``repeat`` runs of each)."""
+    venv = make_training_env(config)
+    venv.seed(config.seed)
+    venv.reset()
+    native = venv
+    while not hasattr(native, "batch"):  # down SB3's wrappers and the adapter
+        native = native.venv if hasattr(native, "venv") else native.env
+    batch = native.batch
+    spent = {"kernel": 0.0, "noise": 0.0}
+
+    def timed(name: str, function: Any) -> Any:
+        def call(*args: Any) -> Any:
+            start = time.process_time()
+            result = function(*args)
+            spent[name] += time.process_time() - start
+            return result
+
+        return call
+
+    batch._advance = timed("kernel", batch._advance)
+    batch._refill_noise = timed("noise", batch._refill_noise)
+    rng = np.random.default_rng(0)
+    actions = [rng.uniform(-1, 1, (venv.num_envs, 1)).astype(np.float32) for _ in range(100)]
+    step_native = getattr(native, "step_without_info", native.step)
+    parts = dict.fromkeys(("native", "training", "kernel", "noise"), float("inf"))
+    for _ in range(repeat):  # the least of each, the two envs alternately
+        for name, step in (("native", step_native), ("training", venv.step)):
+            spent.update(kernel=0.0, noise=0.0)
+            start = time.process_time()
+            for k in range(steps):
+                step(actions[k % 100])
+            parts[name] = min(parts[name], 1e6 * (time.process_time() - start) / steps)
+            if name == "native":
+                parts["kernel"] = min(parts["kernel"], 1e6 * spent["kernel"] / steps)
+                parts["noise"] = min(parts["noise"], 1e6 * spent["noise"] / steps)
+    venv.close()
+    return parts
+
+
+def measure(args: argparse.Namespace) -> None:
+    """Measure this version (the one on the path) and print the rates."""
     config = dataclasses.replace(TrainConfig(), verbose=0)
     print(
         f"drill_env from {drill_env.__file__}\n"
@@ -100,12 +152,79 @@ def main() -> None:
     for action in ("zero", "random"):
         rate = env_rate(config, args.decisions, action, args.repeat)
         print(f"(a) training env alone, {action + ' actions:':<16} {rate:10,.0f} decisions/s")
-    if importlib.util.find_spec("torch") is None:
+    if importlib.util.find_spec("torch") is not None:
+        collect, total, update_us = ppo_rates(config, args.rollouts, args.repeat)
+        print(f"(b) PPO collecting rollouts:              {collect:10,.0f} decisions/s")
+        print(f"(b) PPO end to end (rollouts + updates):  {total:10,.0f} decisions/s")
+        print(f"(b) PPO updates alone:                    {update_us:10.1f} us per decision")
+    else:
         print("(b) PPO: torch is not installed (pip install '.[rl]')")
-        return
-    collect, total = ppo_rates(config, args.rollouts, args.repeat)
-    print(f"(b) PPO collecting rollouts:              {collect:10,.0f} decisions/s")
-    print(f"(b) PPO end to end (rollouts + updates):  {total:10,.0f} decisions/s")
+    parts = step_parts(config, max(1, args.decisions // config.num_envs), args.repeat)
+    print(
+        f"(c) per step of {config.num_envs} strings, us: plant loops {parts['kernel']:.0f}, "
+        f"noise draws {parts['noise']:.0f}, rest of the vector env "
+        f"{parts['native'] - parts['kernel'] - parts['noise']:.0f}, SB3 side "
+        f"{parts['training'] - parts['native']:.0f}; training env {parts['training']:.0f}"
+    )
+
+
+RATE_LINE = re.compile(r"^\((a|b)\) (.+?):?\s+([\d,.]+) (decisions/s|us per decision)$")
+
+
+def compare(args: argparse.Namespace) -> None:
+    """Run this file alternately with this checkout and ``args.against`` on the path; print
+    each rate's range per version and the ratio of the best."""
+    here = Path(__file__).resolve().parents[1]
+    versions = {"this version": here, "other version": Path(args.against).resolve()}
+    if not (versions["other version"] / "drill_env").is_dir():
+        sys.exit(f"--against {args.against}: no drill_env package there")
+    rates: dict[str, dict[str, list[float]]] = {name: {} for name in versions}
+    options = ["--decisions", str(args.decisions), "--rollouts", str(args.rollouts)]
+    options += ["--repeat", str(args.repeat)]
+    for round_ in range(args.rounds):
+        for name, root in versions.items():
+            environment = dict(os.environ, PYTHONPATH=str(root))
+            load = os.getloadavg()[0]
+            print(f"round {round_ + 1}, {name} ({root}), load average {load:.1f}", flush=True)
+            output = subprocess.run(
+                [sys.executable, __file__, *options], env=environment, check=True,
+                capture_output=True, text=True,
+            ).stdout  # fmt: skip
+            for line in output.splitlines():
+                match = RATE_LINE.match(line)
+                if match:
+                    key = f"({match[1]}) {match[2]}"
+                    rates[name].setdefault(key, []).append(float(match[3].replace(",", "")))
+    print(f"\n{'':42} {'other version':>17} {'this version':>17} {'speed-up':>8}")
+    for key, ours in rates["this version"].items():
+        theirs = rates["other version"].get(key)
+        if not theirs:
+            continue
+        # A rate's best is its highest; the updates' is a cost, the lowest.
+        cost = key.startswith("(b) PPO updates alone")
+        ratio = min(theirs) / min(ours) if cost else max(ours) / max(theirs)
+        print(
+            f"{key:42} {min(theirs):8,.0f}-{max(theirs):<8,.0f} {min(ours):8,.0f}-{max(ours):<8,.0f}"
+            f" {ratio:6.2f}"
+        )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--decisions", type=int, default=32_000, help="decisions per environment-alone run"
+    )
+    parser.add_argument("--rollouts", type=int, default=1, help="PPO rollouts per run")
+    parser.add_argument("--repeat", type=int, default=3, help="runs of each measurement")
+    parser.add_argument(
+        "--against", metavar="CHECKOUT", help="another version's checkout to compare with"
+    )
+    parser.add_argument("--rounds", type=int, default=2, help="alternate runs with --against")
+    args = parser.parse_args()
+    if args.against:
+        compare(args)
+    else:
+        measure(args)
 
 
 if __name__ == "__main__":

@@ -91,6 +91,7 @@ from drill_env.scenarios import (
     MAX_KNOTS,
     FieldRandomization,
     Scenario,
+    carried_seed_sequence,
     knot_arrays,
     profile_value,
     spawn_generators,
@@ -175,7 +176,7 @@ def _max_nodes(config: EnvConfig) -> int:
 class _StringEpisode:
     config: EnvConfig
     scenario: Scenario
-    seed_root: np.random.SeedSequence
+    seed_root: np.random.bit_generator.ISpawnableSeedSequence  # spawns the next episode's
     noise_rng: np.random.Generator
     noise_out: npt.NDArray[np.float64] | None  # where the step's noise is drawn; None: no noise
     sensor_rng: np.random.Generator
@@ -396,18 +397,21 @@ class StringBatch:
         """Start a new episode of string ``i``.
 
         With a ``seed`` the episode's generators come from ``SeedSequence(seed)``; without, from
-        the next child of the string's last seed sequence (fresh entropy the first time).
+        the next child of the string's last seed sequence (fresh entropy the first time). The
+        sequences carry their hash forward (:class:`drill_env.scenarios.CarriedSeedSequence`):
+        numpy's, bit for bit, at a cost that does not grow with the number of episodes.
         """
         config = episode_config(self.config, options)
         last = self.episodes[i]
+        root: np.random.bit_generator.ISpawnableSeedSequence
         if seed is not None:
-            root = np.random.SeedSequence(seed)
+            root = carried_seed_sequence(np.random.SeedSequence(seed))
         elif last is not None:
             root = last.seed_root.spawn(1)[0]
         elif previous_root is not None:
-            root = previous_root.spawn(1)[0]
+            root = carried_seed_sequence(previous_root.spawn(1)[0])
         else:
-            root = np.random.SeedSequence()
+            root = carried_seed_sequence(np.random.SeedSequence())
         generators = spawn_generators(root)
         scenario = config.scenario(generators)
         a = self.arrays

@@ -127,6 +127,16 @@ def validate_actions(
         v = float(action[0])
         if -1.0 <= v <= 1.0:
             return np.array([v]), np.zeros(1, dtype=bool)
+    elif (
+        batched
+        and type(action) is np.ndarray
+        and action.dtype.kind == "f"
+        and action.dtype.itemsize <= 8
+        and action.shape in ((num, size), (num,) if size == 1 else (num, size))
+    ):  # the common batched case: real values all in [-1, 1] (NaN fails the test)
+        a = action.astype(np.float64).reshape((num,) if size == 1 else (num, size))
+        if np.abs(a).max() <= 1.0:
+            return a, np.zeros(a.shape, dtype=bool)
     expected = f"({size},)" if not batched else f"({num}, {size})"
     if type(action) is np.ndarray:  # a plain array (a masked array is a subclass)
         a = action

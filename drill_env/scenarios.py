@@ -35,6 +35,7 @@ from drill_env.validation import check_choice, check_interval, check_range, show
 
 __all__ = [
     "COMPONENTS",
+    "CarriedSeedSequence",
     "FieldRandomization",
     "READINGS",
     "UNCERTAINTY_CONDITIONS",
@@ -43,6 +44,7 @@ __all__ = [
     "SpeedProfile",
     "UncertaintyReading",
     "WobProfile",
+    "carried_seed_sequence",
     "knot_arrays",
     "profile_value",
     "resolve_uncertainty",
@@ -364,7 +366,158 @@ class FieldRandomization:
         )
 
 
-def spawn_generators(seed_sequence: np.random.SeedSequence) -> dict[str, np.random.Generator]:
+# numpy's SeedSequence hash (O'Neill's seed_seq alternative, as numpy documents it): constants.
+_POOL_WORDS: Final = 4  # numpy's default pool size, 32-bit words
+_INIT_A: Final = 0x43B0D7E5
+_MULT_A: Final = 0x931E8875
+_INIT_B: Final = 0x8B51F9DD
+_MULT_B: Final = 0x58F38DED
+_MIX_MULT_L: Final = 0xCA01F9DD
+_MIX_MULT_R: Final = 0x4973F715
+_MASK32: Final = 0xFFFFFFFF
+
+
+def _words(value: object) -> list[int] | None:
+    """An int, or a sequence of ints, as numpy's SeedSequence reads it: 32-bit words, least
+    significant first (0 is one word); None for anything else (then numpy's own is used)."""
+    if isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)):
+        n = int(value)
+        if n < 0:
+            return None
+        words = [n & _MASK32]
+        n >>= 32
+        while n:
+            words.append(n & _MASK32)
+            n >>= 32
+        return words
+    if isinstance(value, (tuple, list)):
+        words = []
+        for item in value:
+            part = _words(item)
+            if part is None:
+                return None
+            words += part
+        return words
+    return None
+
+
+def _absorb(pool: list[int], hash_const: int, word: int) -> int:
+    """Mix one more entropy ``word`` into every word of ``pool`` (in place), as numpy's
+    SeedSequence does with the words past its pool size; returns the new hash constant."""
+    for i in range(_POOL_WORDS):
+        value = word ^ hash_const
+        hash_const = (hash_const * _MULT_A) & _MASK32
+        value = (value * hash_const) & _MASK32
+        value ^= value >> 16
+        mixed = (_MIX_MULT_L * pool[i] - _MIX_MULT_R * value) & _MASK32
+        pool[i] = mixed ^ (mixed >> 16)
+    return hash_const
+
+
+class CarriedSeedSequence(np.random.bit_generator.ISpawnableSeedSequence):
+    """numpy's :class:`numpy.random.SeedSequence`, with the hash of its entropy carried
+    forward: a child costs the same whatever the depth of its spawn key.
+
+    numpy hashes a sequence's entropy words, then its spawn key's, into its pool one after the
+    other; a child's words are its parent's plus its own index. This class keeps the pool and
+    the hash constant after its words, so that :meth:`spawn` hashes one word per child instead
+    of the whole key (numpy's cost grows with the key: about 2 us per word, per sequence).
+    :meth:`generate_state` and :meth:`spawn` give what numpy's would, bit for bit (checked
+    against numpy in the tests); build one with :func:`carried_seed_sequence`.
+    """
+
+    __slots__ = ("_hash_const", "_pool", "depth", "n_children_spawned")
+
+    def __init__(self, pool: list[int], hash_const: int, depth: int) -> None:
+        self._pool = pool
+        self._hash_const = hash_const
+        self.depth = depth
+        """Length of the spawn key (the generations below the root sequence)."""
+        self.n_children_spawned = 0
+        """How many children :meth:`spawn` made so far (the next child's index)."""
+
+    @property
+    def pool(self) -> npt.NDArray[np.uint32]:
+        """The hashed pool, (4,) uint32 (numpy's ``SeedSequence.pool``)."""
+        return np.array(self._pool, dtype=np.uint32)
+
+    def generate_state(
+        self, n_words: int, dtype: npt.DTypeLike = np.uint32
+    ) -> npt.NDArray[np.uint32 | np.uint64]:
+        """``n_words`` words of state of ``dtype`` (uint32 or uint64), as numpy's
+        ``SeedSequence.generate_state``."""
+        wide = np.dtype(dtype) == np.dtype(np.uint64)
+        if not wide and np.dtype(dtype) != np.dtype(np.uint32):
+            raise ValueError("only support uint32 or uint64")
+        hash_const = _INIT_B
+        pool = self._pool
+        words = []
+        for i in range(2 * n_words if wide else n_words):
+            value = pool[i % _POOL_WORDS] ^ hash_const
+            hash_const = (hash_const * _MULT_B) & _MASK32
+            value = (value * hash_const) & _MASK32
+            words.append(value ^ (value >> 16))
+        if wide:  # numpy's uint64 words are pairs of uint32 words, least significant first
+            return np.array(
+                [low | high << 32 for low, high in zip(words[::2], words[1::2], strict=True)],
+                dtype=np.uint64,
+            )
+        return np.array(words, dtype=np.uint32)
+
+    def spawn(self, n_children: int) -> list[CarriedSeedSequence]:
+        """The next ``n_children`` children, as numpy's ``SeedSequence.spawn``."""
+        children = []
+        for index in range(self.n_children_spawned, self.n_children_spawned + n_children):
+            pool = list(self._pool)
+            hash_const = self._hash_const
+            for word in _words(index) or ():
+                hash_const = _absorb(pool, hash_const, word)
+            children.append(CarriedSeedSequence(pool, hash_const, self.depth + 1))
+        self.n_children_spawned += n_children
+        return children
+
+
+def carried_seed_sequence(
+    sequence: np.random.SeedSequence,
+) -> CarriedSeedSequence | np.random.SeedSequence:
+    """``sequence`` as a :class:`CarriedSeedSequence` (its children numpy's, bit for bit), or
+    ``sequence`` itself when its entropy is not ints or numpy's pool differs from the hash
+    computed here (another pool size, or another hash in some numpy version)."""
+    entropy = _words(sequence.entropy)
+    key = _words(list(sequence.spawn_key))
+    if entropy is None or key is None or sequence.pool_size != _POOL_WORDS:
+        return sequence
+    if key and len(entropy) < _POOL_WORDS:  # with a spawn key, numpy pads the entropy
+        entropy += [0] * (_POOL_WORDS - len(entropy))
+    words = entropy + key
+    pool = [0] * _POOL_WORDS
+    hash_const = _INIT_A
+    for i in range(_POOL_WORDS):  # fill the pool
+        value = (words[i] if i < len(words) else 0) ^ hash_const
+        hash_const = (hash_const * _MULT_A) & _MASK32
+        value = (value * hash_const) & _MASK32
+        pool[i] = value ^ (value >> 16)
+    for source in range(_POOL_WORDS):  # mix every pool word into every other
+        for target in range(_POOL_WORDS):
+            if source != target:
+                value = pool[source] ^ hash_const
+                hash_const = (hash_const * _MULT_A) & _MASK32
+                value = (value * hash_const) & _MASK32
+                value ^= value >> 16
+                mixed = (_MIX_MULT_L * pool[target] - _MIX_MULT_R * value) & _MASK32
+                pool[target] = mixed ^ (mixed >> 16)
+    for word in words[_POOL_WORDS:]:  # then the rest of the words, one at a time
+        hash_const = _absorb(pool, hash_const, word)
+    if pool != sequence.pool.tolist():
+        return sequence
+    result = CarriedSeedSequence(pool, hash_const, len(sequence.spawn_key))
+    result.n_children_spawned = sequence.n_children_spawned
+    return result
+
+
+def spawn_generators(
+    seed_sequence: np.random.bit_generator.ISpawnableSeedSequence,
+) -> dict[str, np.random.Generator]:
     """One generator per random component (:data:`COMPONENTS`) from ``seed_sequence``, plus
     two streams of the measurement channel spawned from the ``noise`` component's sequence:
     ``sensors`` (surface torque and telemetry noise) and ``nodes`` (a distributed string's

@@ -29,7 +29,7 @@ from drill_env.layout import (
 from drill_env.limits import MAX_EPISODE_S, MAX_NUM_ENVS
 from drill_env.options import EnvConfig, FieldEnvConfig
 from drill_env.parameters import PLANT_DT_S
-from drill_env.rewards import TERMS, reward_terms, total_reward
+from drill_env.rewards import TERMS, report_rewards
 from drill_env.validation import check_int, check_seeds, shown
 
 __all__ = ["DrillStringFieldVectorEnv", "DrillStringVectorEnv"]
@@ -62,10 +62,19 @@ class DrillStringVectorEnv(VectorEnv):
         self.single_action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
-        self._residual_scale = self.config.residual_scale_nm if self.config.residual else None
+        residual_scale = self.config.residual_scale_nm if self.config.residual else None
+        # The reward weights are fixed at make: the same for every string.
+        self._report_rewards = report_rewards(
+            self.config.reward_weights, self.config.max_torque_nm, residual_scale
+        )
         self._needs_reset = np.zeros(num_envs, dtype=bool)
         self._started = False
-        self._duration_s = np.zeros(num_envs)  # each string's episode length, s (at reset)
+        # Each string's report time from which its episode is truncated (set at reset: the
+        # episode's length, or the step limit, less a rounding margin), s.
+        self._end_s = np.zeros(num_envs)
+        self._rewards = np.zeros(num_envs)  # the last step's (set by _advance)
+        self._terminated = np.zeros(num_envs, dtype=bool)
+        self._truncated = np.zeros(num_envs, dtype=bool)
         self._no_reasons = np.array([""] * num_envs)  # termination_reason when none ended
 
     @property
@@ -114,7 +123,7 @@ class DrillStringVectorEnv(VectorEnv):
             if s is None and self._batch.episodes[i] is None:
                 root = np.random.SeedSequence(int(self.np_random.integers(2**63)))
             self._batch.reset_string(i, s, options, previous_root=root)
-            self._duration_s[i] = self._episode_duration_s(i)
+            self._set_episode_end(i)
         self._needs_reset[mask] = False
         self._started = True
         zeros = np.zeros(self.num_envs)
@@ -129,38 +138,10 @@ class DrillStringVectorEnv(VectorEnv):
         npt.NDArray[np.bool_],
         dict[str, Any],
     ]:
-        if not self._started:
-            raise RuntimeError("call reset() before step()")
-        a, clipped = validate_actions(actions, self.num_envs, batched=True)
+        term_rows, clipped = self._advance(actions)
+        terms = dict(zip(TERMS, term_rows, strict=True))
         b = self._batch
-        resetting = self._needs_reset.copy()
-        for i in np.flatnonzero(resetting).tolist():
-            b.reset_string(i, None, None)
-            self._duration_s[i] = self._episode_duration_s(i)
-        a[resetting] = 0.0
-        clipped[resetting] = False
-        for i in np.flatnonzero(clipped):
-            episode = b.episodes[int(i)]
-            assert episode is not None
-            episode.actions_clipped += 1
-        # Strings starting a new episode (next-step autoreset) sit this step out.
-        b.status[resetting] = STATUS_PAUSED
-        b.step(a)
-        b.status[resetting] = STATUS_OK
-        report = b.report
-        weights = self.config.reward_weights  # fixed at make: the same for every string
-        terms = reward_terms(report, weights, self.config.max_torque_nm, self._residual_scale)
-        rewards = total_reward(terms, weights)
-        terminated = b.status == STATUS_DIVERGED
-        rewards[terminated] = -1.0
-        end_s = self._duration_s
-        if self.max_episode_steps is not None:
-            end_s = np.minimum(end_s, self.max_episode_steps * self.config.control_dt_s)
-        truncated = (report[:, REP_TIME] >= end_s - 1e-9) & ~terminated
-        rewards[resetting] = 0.0
-        terminated &= ~resetting
-        truncated &= ~resetting
-        self._needs_reset = terminated | truncated
+        terminated, truncated = self._terminated, self._truncated
         infos = self._infos(terms)
         infos["action_clipped"] = clipped
         infos["_action_clipped"] = np.ones(self.num_envs, dtype=bool)
@@ -172,7 +153,70 @@ class DrillStringVectorEnv(VectorEnv):
             else self._no_reasons.copy()
         )
         infos["_termination_reason"] = terminated
-        return b.observations(), rewards, terminated, truncated, infos
+        return b.observations(), self._rewards, terminated, truncated, infos
+
+    def step_without_info(
+        self, actions: Any
+    ) -> tuple[
+        npt.NDArray[np.float32],
+        npt.NDArray[np.float64],
+        npt.NDArray[np.bool_],
+        npt.NDArray[np.bool_],
+    ]:
+        """:meth:`step` without building ``infos`` (for a trainer that reads none of them):
+        the same transitions, observations, rewards, terminated and truncated, bit for bit."""
+        self._advance(actions)
+        return self._batch.observations(), self._rewards, self._terminated, self._truncated
+
+    def _advance(self, actions: Any) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
+        """One step of every string (next-step autoreset first); sets the step's rewards,
+        terminated and truncated, and returns the reward terms (a row per name of
+        ``drill_env.rewards.TERMS``) and which actions were clipped."""
+        if not self._started:
+            raise RuntimeError("call reset() before step()")
+        a, clipped = validate_actions(actions, self.num_envs, batched=True)
+        b = self._batch
+        needs_reset = self._needs_reset
+        resetting = needs_reset.any()
+        if resetting:
+            reset = needs_reset.copy()
+            for i in np.flatnonzero(reset).tolist():
+                b.reset_string(i, None, None)
+                self._set_episode_end(i)
+            a[reset] = 0.0
+            clipped[reset] = False
+        if clipped.any():
+            for i in np.flatnonzero(clipped).tolist():
+                episode = b.episodes[i]
+                assert episode is not None
+                episode.actions_clipped += 1
+        if resetting:  # strings starting a new episode (next-step autoreset) sit this step out
+            b.status[reset] = STATUS_PAUSED
+            b.step(a)
+            b.status[reset] = STATUS_OK
+        else:
+            b.step(a)
+        report = b.report
+        terms, rewards = self._report_rewards(report)
+        terminated = b.status == STATUS_DIVERGED
+        if terminated.any():
+            rewards[terminated] = -1.0
+        truncated = report[:, REP_TIME] >= self._end_s
+        truncated &= ~terminated
+        if resetting:
+            rewards[reset] = 0.0
+            terminated &= ~reset
+            truncated &= ~reset
+        self._needs_reset = terminated | truncated
+        self._rewards, self._terminated, self._truncated = rewards, terminated, truncated
+        return terms, clipped
+
+    def _set_episode_end(self, i: int) -> None:
+        """Note the report time that truncates string ``i``'s new episode."""
+        duration = self._episode_duration_s(i)
+        if self.max_episode_steps is not None:
+            duration = min(duration, self.max_episode_steps * self.config.control_dt_s)
+        self._end_s[i] = duration - 1e-9
 
     def _episode_duration_s(self, i: int) -> float:
         """The length of string ``i``'s episode, s (it may change at reset with ``options``)."""

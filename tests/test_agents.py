@@ -36,7 +36,7 @@ from agents.train import (  # noqa: E402
     planned_timesteps,
     train,
 )
-from agents.vec_env import GymnasiumVecEnv  # noqa: E402
+from agents.vec_env import GymnasiumVecEnv, LeanVecNormalize  # noqa: E402
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout  # noqa: E402
 from experiments.cli import main as cli_main  # noqa: E402
 from experiments.evaluate import main as evaluate_main  # noqa: E402
@@ -208,6 +208,91 @@ def test_adapter_resets_only_the_strings_that_ended() -> None:
     obs, rewards, dones, infos = venv.step(actions)  # env 0 runs on, env 1 ends
     assert obs[:, 0].tolist() == [1.0, 0.0] and rewards.tolist() == [1.0, 1.0]
     assert dones.tolist() == [False, True] and infos[1]["terminal_observation"][0] == 3.0
+
+
+def test_lean_training_wrappers_give_sb3s_numbers_bit_for_bit() -> None:
+    """The training env's own pieces (the adapter stepping without infos, LeanVecNormalize)
+    against SB3's VecNormalize over an adapter that copies infos: the same observations,
+    rewards, dones, terminal observations and running statistics, bit for bit, over episodes
+    that end."""
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    kwargs = {"base_controller": "proposed", "episode_s": 0.5, "randomize": True}
+
+    def adapter(info_keys: tuple[str, ...]) -> GymnasiumVecEnv:
+        vector_env = gym.make_vec("DrillString-v0", num_envs=4, max_episode_steps=4, **kwargs)
+        return GymnasiumVecEnv(vector_env, info_keys=info_keys)
+
+    lean_adapter = adapter(())
+    assert lean_adapter._step_without_info is not None
+    lean = LeanVecNormalize(VecMonitor(lean_adapter), gamma=0.99, clip_obs=2.0, clip_reward=0.5)
+    sb3 = VecNormalize(VecMonitor(adapter(("time_s",))), gamma=0.99, clip_obs=2.0, clip_reward=0.5)
+    for venv in (lean, sb3):
+        venv.seed(3)
+    np.testing.assert_array_equal(lean.reset(), sb3.reset())
+    rng = np.random.default_rng(2)
+    for _ in range(13):
+        actions = rng.uniform(-1, 1, (4, 1)).astype(np.float32)
+        got, expected = lean.step(actions), sb3.step(actions)
+        for a, b in zip(got[:3], expected[:3], strict=True):
+            assert a.dtype == b.dtype
+            np.testing.assert_array_equal(a, b)
+        for a, b in zip(got[3], expected[3], strict=True):
+            assert ("terminal_observation" in a) == ("terminal_observation" in b)
+            if "terminal_observation" in a:
+                np.testing.assert_array_equal(a["terminal_observation"], b["terminal_observation"])
+                assert a["episode"]["r"] == b["episode"]["r"]
+        np.testing.assert_array_equal(lean.get_original_obs(), sb3.get_original_obs())
+        np.testing.assert_array_equal(lean.get_original_reward(), sb3.get_original_reward())
+    for name in ("obs_rms", "ret_rms"):
+        mine, theirs = getattr(lean, name), getattr(sb3, name)
+        np.testing.assert_array_equal(mine.mean, theirs.mean)
+        np.testing.assert_array_equal(mine.var, theirs.var)
+        assert mine.count == theirs.count
+    assert lean.ret_rms.count > 10  # rewards were normalised over ended episodes
+
+
+def test_lean_running_statistics_are_np_mean_and_np_var() -> None:
+    from stable_baselines3.common.running_mean_std import RunningMeanStd
+
+    from agents.vec_env import _update_statistics
+
+    rng = np.random.default_rng(4)
+    for batch in (
+        rng.normal(3.0, 5.0, (16, 11)).astype(np.float32),
+        rng.normal(0.0, 1e-3, (7, 3)),
+        rng.normal(-2.0, 1e4, 16),
+        rng.normal(0.0, 1.0, 1),
+    ):
+        mine, theirs = RunningMeanStd(shape=batch.shape[1:]), RunningMeanStd(shape=batch.shape[1:])
+        for _ in range(3):
+            _update_statistics(mine, batch)
+            theirs.update(batch)
+            batch = batch * 1.5 + 0.25
+        assert np.asarray(mine.mean).tobytes() == np.asarray(theirs.mean).tobytes()
+        assert np.asarray(mine.var).tobytes() == np.asarray(theirs.var).tobytes()
+        assert mine.count == theirs.count
+
+
+@pytest.mark.slow
+def test_train_throughput_benchmark_compares_two_checkouts() -> None:
+    """``benchmarks/train_throughput.py --against`` as a user runs it (this checkout against
+    itself, a tiny budget): every rate and its speed-up."""
+    root = Path(__file__).resolve().parents[1]
+    result = subprocess.run(
+        [sys.executable, "benchmarks/train_throughput.py", "--against", str(root),
+         "--decisions", "320", "--repeat", "1", "--rounds", "1"],
+        cwd=root, capture_output=True, text=True, check=True, timeout=900,
+    )  # fmt: skip
+    rows = [line for line in result.stdout.splitlines() if line.startswith("(")]
+    assert [row[:24] for row in rows] == [
+        "(a) training env alone, ",
+        "(a) training env alone, ",
+        "(b) PPO collecting rollo",
+        "(b) PPO end to end (roll",
+        "(b) PPO updates alone   ",
+    ]
+    assert all(float(row.split()[-1]) > 0 for row in rows)
 
 
 # ------------------------------------------------------------------------ training, loading

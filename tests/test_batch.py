@@ -66,3 +66,15 @@ def test_slow_path_is_the_compiled_path_without_noise() -> None:
             np.testing.assert_array_equal(x_c, x_p)
             np.testing.assert_array_equal(rec_c[..., :12], rec_p[..., :12])
             np.testing.assert_array_equal(sums_c, sums_p)
+
+
+def test_a_noise_block_is_the_single_draws_of_its_generator() -> None:
+    """Drawing a block of normals (``standard_normal(out=...)``, as the noise blocks are
+    filled) gives the draws one at a time would, in order, and leaves the generator where
+    they would."""
+    block_rng, single_rng = (spawn_generators(np.random.SeedSequence(8))["noise"] for _ in "ab")
+    block = np.zeros((257, 4))
+    block_rng.standard_normal(out=block[1:])
+    singles = [single_rng.standard_normal() for _ in range(256 * 4)]
+    assert block[1:].ravel().tolist() == singles
+    assert block_rng.standard_normal() == single_rng.standard_normal()

@@ -7,7 +7,16 @@ import numpy as np
 import pytest
 
 from drill_env.layout import REC_REFERENCE
-from drill_env.scenarios import Randomization, SpeedProfile, WobProfile, resolve_uncertainty
+from drill_env.scenarios import (
+    COMPONENTS,
+    CarriedSeedSequence,
+    Randomization,
+    SpeedProfile,
+    WobProfile,
+    carried_seed_sequence,
+    resolve_uncertainty,
+    spawn_generators,
+)
 
 
 def test_constant_reference() -> None:
@@ -80,3 +89,110 @@ def test_env_follows_a_step_reference_at_plant_rate() -> None:
     np.testing.assert_array_equal(records[:20, REC_REFERENCE], 5.0)
     np.testing.assert_array_equal(records[20:, REC_REFERENCE], 9.0)
     assert info["reference_speed_rad_s"] == 9.0
+
+
+def _numpy_sequence(entropy: int, key: list[int]) -> np.random.SeedSequence:
+    """numpy's own SeedSequence with spawn key ``key``, given as one uint32 array: numpy hashes
+    the same words as for the tuple of ints, without converting each int on its own (which
+    makes a deep key slow)."""
+    return np.random.SeedSequence(entropy, spawn_key=(np.array(key, dtype=np.uint32),))
+
+
+def test_an_array_spawn_key_is_hashed_as_the_tuple_of_ints() -> None:
+    key = [0, *range(4, 4 * 60, 4)]
+    for depth in (1, 2, 5, 59):
+        as_ints = np.random.SeedSequence(77, spawn_key=tuple(key[:depth]))
+        np.testing.assert_array_equal(_numpy_sequence(77, key[:depth]).pool, as_ints.pool)
+
+
+@pytest.mark.parametrize("entropy", [0, 5, 2**32 - 1, 2**32, 2**63 - 1, 3**80])
+def test_carried_seed_sequence_is_numpys(entropy: int) -> None:
+    """Over thousands of episodes (each the next child of the last: what an unseeded reset
+    does), the carried sequence and every generator spawned from it are numpy's, bit for bit."""
+    episodes = 3000 if entropy == 5 else 200
+    sequence = carried_seed_sequence(np.random.SeedSequence(entropy))
+    assert isinstance(sequence, CarriedSeedSequence)
+    key: list[int] = []
+    for episode in range(episodes):
+        reference = _numpy_sequence(entropy, key)
+        np.testing.assert_array_equal(sequence.pool, reference.pool)
+        for dtype in (np.uint32, np.uint64):
+            np.testing.assert_array_equal(
+                sequence.generate_state(3, dtype), reference.generate_state(3, dtype)
+            )
+        expected = spawn_generators(reference)
+        got = spawn_generators(sequence)
+        assert list(got) == list(expected)
+        for name, generator in got.items():
+            draws = generator.standard_normal(2), generator.integers(2**40)
+            assert draws[0].tolist() == expected[name].standard_normal(2).tolist(), (episode, name)
+            assert draws[1] == expected[name].integers(2**40), (episode, name)
+        key.append(sequence.n_children_spawned)  # the index of the next child
+        sequence = sequence.spawn(1)[0]
+        assert sequence.depth == len(key)
+
+
+def test_carried_seed_sequence_of_a_spawned_sequence() -> None:
+    """From numpy's sequence at any depth and with children already spawned."""
+    original = np.random.SeedSequence(9, spawn_key=(3, 1, 4))
+    original.spawn(2)
+    sequence = carried_seed_sequence(original)
+    assert isinstance(sequence, CarriedSeedSequence)
+    assert sequence.depth == 3
+    for got, expected in zip(sequence.spawn(3), original.spawn(3), strict=True):
+        np.testing.assert_array_equal(got.pool, expected.pool)
+        assert got.spawn(1)[0].pool.tolist() == expected.spawn(1)[0].pool.tolist()
+
+
+def test_carried_seed_sequence_keeps_what_it_cannot_carry() -> None:
+    """Entropy that is not ints, or another pool size: numpy's own sequence is kept."""
+    for original in (
+        np.random.SeedSequence(np.array([1, 2], dtype=np.uint32)),
+        np.random.SeedSequence(1, pool_size=8),
+    ):
+        assert carried_seed_sequence(original) is original
+    with pytest.raises(ValueError, match="uint32 or uint64"):
+        carried_seed_sequence(np.random.SeedSequence(1)).generate_state(2, np.int64)
+
+
+def test_unseeded_resets_continue_numpys_sequence() -> None:
+    """An env's episodes after ``reset(seed=s)`` are those of numpy's SeedSequence(s) and its
+    chain of children (each episode spawns its components, then the next episode)."""
+    env = gym.make("DrillString-v0", randomize=True, episode_s=1.0)
+    batch = env.unwrapped.batch  # type: ignore[attr-defined]
+    config = batch.config
+    env.reset(seed=21)
+    key: list[int] = []
+    for _ in range(40):
+        reference = np.random.SeedSequence(21, spawn_key=tuple(key))
+        assert batch.episodes[0].scenario == config.scenario(spawn_generators(reference))
+        key.append(len(COMPONENTS))
+        env.reset()
+
+
+def test_reset_cost_benchmark_prints_its_table() -> None:
+    """``benchmarks/reset_cost.py`` as a user runs it, on a short budget."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    result = subprocess.run(
+        [sys.executable, "benchmarks/reset_cost.py", "--episodes", "0", "30", "--repeat", "3"],
+        cwd=root, env=dict(os.environ, PYTHONPATH=str(root)), capture_output=True, text=True,
+        check=True, timeout=300,
+    )  # fmt: skip
+    lines = result.stdout.splitlines()
+    assert lines[1].split() == [
+        "episode",
+        "reset()",
+        "us",
+        "sequences",
+        "us",
+        "numpy",
+        "us",
+        "ratio",
+    ]
+    assert [line.split()[0] for line in lines[2:]] == ["0", "30"]
+    assert all(float(line.split()[-1]) > 0 for line in lines[2:])

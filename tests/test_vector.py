@@ -121,3 +121,85 @@ def test_bad_vector_arguments() -> None:
         venv.reset(options={"reset_mask": np.array([True, False])})
     with pytest.raises(ValueError, match="seed list must have 2 entries"):
         venv.reset(seed=[1])
+
+
+def test_step_without_info_is_step_bit_for_bit() -> None:
+    """Two vector envs seeded alike, one stepped with ``step`` and one with
+    ``step_without_info``, over episodes that end (truncation and next-step autoreset), with
+    actions in range, at the bounds and beyond them (clipped)."""
+    kwargs = {"base_controller": "proposed", "episode_s": 0.5, "randomize": True}
+    full = gym.make_vec(ENV_ID, num_envs=4, max_episode_steps=3, **kwargs)
+    lean = gym.make_vec(ENV_ID, num_envs=4, max_episode_steps=3, **kwargs)
+    assert isinstance(lean, DrillStringVectorEnv)
+    np.testing.assert_array_equal(full.reset(seed=5)[0], lean.reset(seed=5)[0])
+    rng = np.random.default_rng(1)
+    ended = 0
+    for step in range(12):
+        actions = rng.uniform(-1.2, 1.2, (4, 1)).astype(np.float32)
+        if step == 2:
+            actions[:] = [[1.0], [-1.0], [-0.0], [0.0]]
+        *expected, infos = full.step(actions)
+        got = lean.step_without_info(actions)
+        for a, b in zip(got, expected, strict=True):
+            assert a.dtype == b.dtype
+            np.testing.assert_array_equal(a, b)
+        ended += int(expected[3].sum())
+    assert ended >= 8  # every string ended at least twice
+    # The clipped actions are counted per episode alike: the next full step reports them.
+    lean_infos = lean.step(np.zeros((4, 1), np.float32))[-1]
+    full_infos = full.step(np.zeros((4, 1), np.float32))[-1]
+    np.testing.assert_array_equal(
+        lean_infos["actions_clipped_total"], full_infos["actions_clipped_total"]
+    )
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64, np.float16])
+@pytest.mark.parametrize("shape", [(3, 1), (3,)])
+def test_batched_actions_in_range_pass_unchanged(dtype: type, shape: tuple[int, ...]) -> None:
+    """The batched fast path of validate_actions returns what the general path does."""
+    from drill_env.env import validate_actions
+
+    values = np.array([-1.0, -0.0, 1.0], dtype=dtype).reshape(shape)
+    a, clipped = validate_actions(values, 3, batched=True)
+    assert a.dtype == np.float64 and a.shape == (3,) and not clipped.any()
+    assert a.tolist() == [-1.0, -0.0, 1.0] and np.signbit(a[1])
+    assert not np.shares_memory(a, values)
+    beyond = np.array([0.5, 1.5, -2.0], dtype=dtype).reshape(shape)
+    a, clipped = validate_actions(beyond, 3, batched=True)
+    assert a.tolist() == [0.5, 1.0, -1.0] and clipped.tolist() == [False, True, True]
+    for bad in (np.nan, np.inf):
+        with pytest.raises(ValueError, match="action must be finite"):
+            validate_actions(np.array([0.0, bad, 0.0], dtype=dtype).reshape(shape), 3, True)
+    with pytest.raises(ValueError, match=r"action must have shape \(3, 1\)"):
+        validate_actions(np.zeros((3, 2), dtype=dtype), 3, batched=True)
+
+
+@pytest.mark.parametrize(
+    ("weights", "residual_scale_nm"),
+    [
+        ({}, 20_000.0),
+        ({}, None),
+        ({"stuck": 0.5, "torque": 2.0, "residual": 0.5}, 0.5),
+        ({"chattering": 0.0, "torque": 0.0}, 3e4),
+    ],
+)
+def test_batch_rewards_are_reward_terms_and_total_reward_bit_for_bit(
+    weights: dict[str, float], residual_scale_nm: float | None
+) -> None:
+    """The vector env's compiled rewards against the reference functions, on random report
+    rows with edge cases: no steps, a capped chattering term, NaN."""
+    from drill_env.layout import N_REPORT, REP_STEPS, REP_VARIATION
+    from drill_env.rewards import TERMS, RewardWeights, report_rewards, reward_terms, total_reward
+
+    rng = np.random.default_rng(6)
+    report = rng.uniform(0.0, 1.0, (64, N_REPORT)) * rng.choice([1e-3, 1.0, 1e5, 1e9], (64, 1))
+    report[:, REP_STEPS] = rng.integers(0, 101, 64)
+    report[:4, REP_STEPS] = [0.0, -0.0, 1.0, np.nan]
+    report[4:8, REP_VARIATION] = [5e4, 5e4 + 1e-9, np.inf, np.nan]
+    reward_weights = RewardWeights(**weights)
+    terms, rewards = report_rewards(reward_weights, 50_000.0, residual_scale_nm)(report)
+    expected_terms = reward_terms(report, reward_weights, 50_000.0, residual_scale_nm)
+    expected = total_reward(expected_terms, reward_weights)
+    for row, name in zip(terms, TERMS, strict=True):
+        assert row.tobytes() == np.asarray(expected_terms[name], np.float64).tobytes(), name
+    assert rewards.tobytes() == expected.tobytes()
