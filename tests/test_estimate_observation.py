@@ -4,6 +4,7 @@ speed loop running the observer beside it (baselines.speed_loop.speed_loop_obser
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -130,3 +131,24 @@ def test_train_config_takes_the_estimate_observation() -> None:
     assert TrainConfig(env_id=FIELD, observation="estimate").observation == "estimate"
     with pytest.raises(ValueError, match=r"allowed surface, estimate, state or empty"):
         TrainConfig(env_id=FIELD, observation="bit")
+
+
+def test_a_model_trained_on_the_estimate_loads_and_runs_with_it(tmp_path: Path) -> None:
+    """A tiny training with ``observation="estimate"`` writes a model whose ``env_kwargs``
+    name the mode; loaded, it drives the env with the 10-entry observation."""
+    pytest.importorskip("stable_baselines3")
+    from agents.policy import load_policy
+    from agents.train import train
+    from drill_env.evaluation import rollout
+
+    config = TrainConfig.for_env(
+        FIELD, observation="estimate", run_dir=str(tmp_path / "run"), total_timesteps=60,
+        num_envs=2, n_steps=30, batch_size=30, n_epochs=1, episode_s=3.0, control_dt_s=0.1,
+        checkpoint_every=0, validate_every=0, tensorboard=False,
+    )  # fmt: skip
+    policy = load_policy(train(config, progress=False))
+    assert policy.env_kwargs["observation"] == "estimate"
+    assert policy.metadata["observation_size"] == 10
+    env = gym.make(FIELD, randomize=False, episode_s=3.0, **policy.env_kwargs)
+    trace = rollout(env, policy, seed=1)
+    assert trace.observations.shape[1] == 10 and len(trace.actions) == 30
