@@ -172,8 +172,9 @@ class TrainConfig:
     drive). On the command line the settings not given then take that env's defaults."""
     observation: str = ""
     """Observation mode of ``DrillStringField-v0`` (``surface``: what a rig measures;
-    ``state``: every node measured); empty: the env's own default. ``DrillString-v0`` models
-    take the empty value."""
+    ``estimate``: that plus the base controller's observer estimate of the bit speed and the
+    bit-rock torque, computed from the same signals; ``state``: every node measured); empty:
+    the env's own default. ``DrillString-v0`` models take the empty value."""
     training_ranges: str = "env"
     """Scenario ranges of the training episodes on ``DrillStringField-v0``: ``env`` (the env's
     randomisation, docs/specification.md section 18) or ``wide`` (those ranges widened toward
@@ -369,10 +370,10 @@ class TrainConfig:
                 f"{_option('env_id')} {PAPER_ENV_ID}: allowed env (the ranges are set on "
                 f"{FIELD_ENV_ID} only)"
             )
-        if self.observation not in ("", "state", "surface"):
+        if self.observation not in ("", "state", "surface", "estimate"):
             raise ValueError(
                 f"{_option('observation')} = {shown(self.observation)} is not valid: allowed "
-                "surface, state or empty (the env's default)"
+                "surface, estimate, state or empty (the env's default)"
             )
         if not self.net_arch or any(
             isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 1024

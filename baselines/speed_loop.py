@@ -24,18 +24,35 @@ import numpy as np
 import numpy.typing as npt
 from numba import carray, njit
 
-from baselines.base import CompiledLawController, Gains
-from drill_env.control import compiled_law_function
+from baselines.base import CompiledLawController, Gains, Model
+from baselines.observer import (
+    OS_BIT_TORQUE,
+    OS_ESTIMATE,
+    ObserverGains,
+    design_observer,
+    initial_observer_state,
+    observer_update,
+    pack_observer,
+)
+from drill_env.control import CompiledLaw, compiled_law_function
 from drill_env.distributed import DistributedStringParameters
-from drill_env.layout import M_STATE, M_SURFACE_TORQUE, M_TOP_DRIVE_SPEED, N_MEASUREMENT
+from drill_env.layout import (
+    M_STATE,
+    M_SURFACE_TORQUE,
+    M_TOP_DRIVE_SPEED,
+    N_MEASUREMENT,
+    N_STATE,
+)
 from drill_env.limits import DEFAULT_TORQUE_LIMITS, TorqueLimits
 from drill_env.parameters import DrillStringParameters
+from drill_env.sensors import MeasurementChannel
 
 __all__ = [
     "DriveLimits",
     "SpeedLoopController",
     "SpeedLoopTuning",
     "speed_loop_law",
+    "speed_loop_observer_law",
     "speed_loop_torque",
 ]
 
@@ -45,6 +62,12 @@ N_PI_PARAMS: Final = 9
 # State vector.
 PS_INT, PS_SET_PREV, PS_ERROR, PS_T_MEAN, PS_STARTED = range(5)
 N_PI_STATE: Final = 5
+# With a state observer beside the loop (speed_loop_observer_law): two more parameters, the
+# sizes of both vectors, then the observer's parameter block; its state block follows the
+# loop's state.
+PI_PARAMS_SIZE, PI_STATE_SIZE = N_PI_PARAMS, N_PI_PARAMS + 1
+PI_OBSERVER: Final = N_PI_PARAMS + 2
+PS_OBSERVER: Final = N_PI_STATE
 
 
 @njit(cache=True)
@@ -100,6 +123,19 @@ def speed_loop_law(lp_ptr, ls_ptr, m_ptr, ref, dt):
     lp = carray(lp_ptr, (N_PI_PARAMS,))
     ls = carray(ls_ptr, (N_PI_STATE,))
     m = carray(m_ptr, (N_MEASUREMENT,))
+    return speed_loop_torque(lp, ls, m, ref, dt)
+
+
+@compiled_law_function
+def speed_loop_observer_law(lp_ptr, ls_ptr, m_ptr, ref, dt):
+    """:func:`speed_loop_torque` with a state observer (:mod:`baselines.observer`) advanced
+    one step first on the same measurements. The loop's torque does not read the estimate:
+    the observer only reports it (``observation="estimate"``)."""
+    head = carray(lp_ptr, (PI_OBSERVER,))
+    lp = carray(lp_ptr, (int(head[PI_PARAMS_SIZE]),))
+    ls = carray(ls_ptr, (int(head[PI_STATE_SIZE]),))
+    m = carray(m_ptr, (N_MEASUREMENT,))
+    observer_update(lp, PI_OBSERVER, ls, PS_OBSERVER, m, dt)
     return speed_loop_torque(lp, ls, m, ref, dt)
 
 
@@ -185,6 +221,36 @@ class SpeedLoopController(CompiledLawController):
 
     law = speed_loop_law
     error_slot = PS_ERROR
+    observer_gains = ObserverGains()
+    """The design of the state observer that runs beside the loop when the env's observation
+    asks for its estimate (``observation="estimate"``)."""
+
+    def compiled_law(
+        self,
+        model: Model | None = None,
+        torque_limits: TorqueLimits | None = None,
+        channel: MeasurementChannel | None = None,
+    ) -> CompiledLaw:
+        """The law for the compiled loop (:meth:`CompiledLawController.compiled_law`). With a
+        ``channel`` whose observation is ``"estimate"``, a state observer designed for that
+        channel and ``model`` runs beside the loop (:func:`speed_loop_observer_law`) and the
+        law names its estimate's slots for the env (``estimated_*``,
+        ``estimated_bit_torque_nm``); the torque is the loop's either way."""
+        if channel is None or channel.observation != "estimate":
+            return super().compiled_law(model, torque_limits)
+        model = self.model if model is None else model
+        design = design_observer(model, channel, self.observer_gains)
+        loop = self._pack(model, torque_limits or self._own_torque_limits())
+        state = np.concatenate([self._initial_state(), initial_observer_state(design)])
+        params = np.concatenate([loop, np.zeros(2), pack_observer(design)])
+        params[PI_PARAMS_SIZE] = params.size
+        params[PI_STATE_SIZE] = state.size
+        info = (("estimated_bit_torque_nm", PS_OBSERVER + OS_BIT_TORQUE),)
+        estimates = tuple((x, PS_OBSERVER + OS_ESTIMATE + x) for x in range(N_STATE))
+        return CompiledLaw(
+            speed_loop_observer_law, params, state, self.error_slot, self.gain_slot, info,
+            estimates,
+        ).validated()  # fmt: skip
 
     def _pack(
         self,

@@ -14,7 +14,7 @@ import math
 import numbers
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -41,6 +41,7 @@ from drill_env.layout import (
     CH_ACTUATOR,
     CH_HOLD,
     CH_TELEMETRY,
+    ESTIMATE_FIELDS,
     F_BASE_TORQUE,
     F_COMMAND,
     F_NOISE_STD,
@@ -62,6 +63,7 @@ from drill_env.layout import (
     N_REPORT,
     N_SCALARS,
     N_STATE,
+    OBS_BOUND,
     PROF_REF_T,
     PROF_REF_V,
     PROF_WOB_T,
@@ -186,6 +188,47 @@ class _StringEpisode:
     actions_clipped: int = 0
 
 
+class _EstimateObservation(NamedTuple):
+    """Where the estimate entries of ``observation="estimate"`` come from and go: the law's
+    state slots, the source columns, the observation columns and their scales."""
+
+    slots: list[int]
+    sources: list[int]
+    columns: list[int]
+    scales: npt.NDArray[np.float64]
+
+
+def _estimate_observation(
+    config: EnvConfig,
+    law: CompiledLaw | None,
+    first_source: int,
+    fields: tuple[ObservationField, ...],
+) -> _EstimateObservation:
+    """The estimate entries of the observation (none unless ``observation="estimate"``).
+
+    Raises:
+        ValueError: ``observation="estimate"`` with a base controller whose compiled law
+            reports no observer estimate.
+    """
+    if config.observation != "estimate":
+        return _EstimateObservation([], [], [], np.zeros(0))
+    named: dict[str, int] = {} if law is None else dict(law.info_slots)
+    if law is not None:
+        named.update((f"estimated_{STATE_NAMES[x]}", slot) for x, slot in law.estimate_slots)
+    missing = [name for name, _ in ESTIMATE_FIELDS if name not in named]
+    if missing:
+        raise ValueError(
+            f"observation = 'estimate' needs a base controller whose compiled law runs a state "
+            f"observer (a speed loop or a sliding-mode law: soft_speed, z_torque_tuned, "
+            f"proposed, ...): base_controller = {shown(config.base_controller)} reports no "
+            f"{', '.join(missing)}"
+        )
+    sources = [first_source + k for k in range(len(ESTIMATE_FIELDS))]
+    columns = [next(c for c, f in enumerate(fields) if f.source == s) for s in sources]
+    scales = observation_scales(tuple(fields[c] for c in columns), config.torque_scale_nm)
+    return _EstimateObservation([named[n] for n, _ in ESTIMATE_FIELDS], sources, columns, scales)
+
+
 class StringBatch:
     """``num`` drill strings sharing one :class:`EnvConfig` and one base controller type."""
 
@@ -216,6 +259,12 @@ class StringBatch:
                 ObservationField("weight_on_bit_n", extra, "force"),
                 ObservationField("rate_of_penetration_m_s", extra + 1, "rop"),
             )
+        estimate_source = extra + (2 if self.coupled else 0)
+        if config.observation == "estimate":  # filled from the law's state after each call
+            self.fields += tuple(
+                ObservationField(name, estimate_source + k, kind)
+                for k, (name, kind) in enumerate(ESTIMATE_FIELDS)
+            )
         self.obs_size = len(self.fields)
         controller = resolve_controller(config.base_controller)
         self.controllers: list[Controller] = []
@@ -242,6 +291,7 @@ class StringBatch:
         ]
         self.reports_law_slots = bool(self._info_slots or self._estimate_slots)
         """Whether the compiled law names state slots the env reports (:meth:`law_info`)."""
+        self._estimate_obs = _estimate_observation(config, law, estimate_source, self.fields)
         n, s = num, self.substeps
         # Noise is drawn in blocks: row noise_pos is the current measurement's, the rows after
         # it the next steps'. A block holds several decision periods (fewer for big batches).
@@ -270,7 +320,7 @@ class StringBatch:
             telemetry_buffer=np.zeros((n, telemetry_buffer_size(period, delay), 2)),
             records=np.zeros((n, s, N_RECORD)),
             report=np.zeros((n, N_REPORT)),
-            sources=np.zeros((n, extra + (2 if self.coupled else 0))),
+            sources=np.zeros((n, estimate_source + len(self._estimate_obs.slots))),
             obs=np.zeros((n, self.obs_size), dtype=np.float32),
         )
         rate = config.torque_rate_limit_nm_per_s
@@ -521,6 +571,8 @@ class StringBatch:
 
         with announce_compilation(*self._kernel_name()):
             kernel.observe(advance, a if self._packed is None else self._packed, self.settings, i)
+        if self._estimate_obs.slots:
+            self._write_estimates()
 
     def law_info(self) -> dict[str, npt.NDArray[np.float64]]:
         """The state slots the compiled law names (:class:`drill_env.control.CompiledLaw`
@@ -617,6 +669,8 @@ class StringBatch:
             self._advance(self._kernel_input, self.settings)
         else:
             self._step_python_controllers()
+        if self._estimate_obs.slots:
+            self._write_estimates()
 
     def step_one(self, action: float) -> float:
         """:meth:`step` for a batch of one under ``action`` in [-1, 1] (the single env's hot
@@ -632,7 +686,19 @@ class StringBatch:
             self._advance(self._kernel_input, self.settings)
         else:
             self._step_python_controllers()
+        if self._estimate_obs.slots:
+            self._write_estimates()
         return command
+
+    def _write_estimates(self) -> None:
+        """The observation's estimate entries (``observation="estimate"``) from the law's state
+        after the last call: scaled, NaN as 0, clipped to ``+-OBS_BOUND`` like every entry."""
+        a = self.arrays
+        e = self._estimate_obs
+        values = a.law_state[:, e.slots]
+        a.sources[:, e.sources] = values
+        scaled = np.nan_to_num(values * e.scales, nan=0.0, posinf=OBS_BOUND, neginf=-OBS_BOUND)
+        a.obs[:, e.columns] = np.clip(scaled, -OBS_BOUND, OBS_BOUND)
 
     def _step_python_controllers(self) -> None:
         """The slow path: call each Python controller at every plant step, and the kernel

@@ -520,7 +520,12 @@ class DrillStringFieldEnv(DrillStringEnv):
     0 before the first) and its age (10 s), then in residual mode the base controller's torque
     and error signal. ``observation="state"``: the whole measured state instead of the first
     two, node speeds (20 rad/s, noisy) and element twists (1 rad) from the top drive down,
-    padded with zeros to the deepest string the env can draw.
+    padded with zeros to the deepest string the env can draw. ``observation="estimate"``: the
+    surface observation, then the base controller's observer estimate of the bit speed (20
+    rad/s) and of the bit-rock torque (the torque scale), computed inside its compiled law from
+    the same surface signals and telemetry (``drill_env.layout.ESTIMATE_FIELDS``; the speed
+    loops then run the observer of docs/observer.md beside the loop, their torque unchanged;
+    a base controller without an observer is an error).
 
     ## Rewards
     The terms of ``DrillString-v0`` (``drill_env.rewards``), with the shipped field agent's
@@ -549,7 +554,7 @@ class DrillStringFieldEnv(DrillStringEnv):
     | ``residual_scale_nm`` | residual torque per unit action, N m (the field agent's) | 10,000 |
     | ``measured_depth_m`` | change the string's depth (drill pipe length), m | the preset's |
     | ``controller_parameters`` | the controllers' model of the string | the plant's |
-    | ``observation`` | ``"surface"`` or ``"state"`` | ``"surface"`` |
+    | ``observation`` | ``"surface"``, ``"estimate"`` or ``"state"`` | ``"surface"`` |
     | ``noise_std_rad_s`` | noise of the measured speeds, rad/s | 0.05 |
     | ``torque_noise_std_nm`` | noise of the measured surface torque, N m | 250 |
     | ``sensor_period_s`` | sampling period of the surface signals, s | 0.01 |

@@ -19,6 +19,7 @@ __all__ = [
     "N_FIXED_SOURCES",
     "MEASUREMENT_NAMES",
     "N_MEASUREMENT",
+    "ESTIMATE_FIELDS",
     "OBSERVATION_MODES",
     "N_PLANT_PARAMS",
     "N_RECORD",
@@ -198,9 +199,18 @@ SRC_LAST_COMMAND: Final = 8
 SRC_STATE: Final = 9  # from here: the measured state (speeds with noise, twists exact)
 N_FIXED_SOURCES: Final = 9
 
-OBSERVATION_MODES: Final = ("state", "surface")
+OBSERVATION_MODES: Final = ("state", "surface", "estimate")
 """``state``: the whole measured state; ``surface``: what a rig measures at surface (plus the
-downhole telemetry when there is any)."""
+downhole telemetry when there is any); ``estimate``: ``surface`` plus the base controller's
+observer estimate of the bit speed and the bit-rock torque, computed from those same signals
+(:data:`ESTIMATE_FIELDS`)."""
+ESTIMATE_FIELDS: Final = (
+    ("estimated_bit_speed_rad_s", "speed"),
+    ("estimated_bit_torque_nm", "torque"),
+)
+"""The entries ``observation="estimate"`` adds at the end of the observation, ``(name, scale
+kind)``: the base controller's observer estimates, reported under the same names in ``info``
+(the env fills them from the law's state after every decision)."""
 
 
 class ObservationField(NamedTuple):
@@ -256,8 +266,9 @@ def observation_fields(
 
     Args:
         residual: Residual mode: the base controller's torque and error signal are added last.
-        mode: ``"state"``: the measured ``state`` entries; ``"surface"``: the measured
-            top-drive speed and surface torque instead.
+        mode: ``"state"``: the measured ``state`` entries; ``"surface"`` and ``"estimate"``:
+            the measured top-drive speed and surface torque instead (the estimate's entries
+            need the law's state: the batch adds them, :data:`ESTIMATE_FIELDS`).
         telemetry: Whether downhole telemetry arrives: its last bit speed and that value's age
             follow the last torque.
         state: The state entries of the plant (the 4-DOF state by default;

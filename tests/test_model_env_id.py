@@ -103,7 +103,8 @@ def test_env_id_and_observation_are_checked(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match=r"env_kwargs\.observation is a keyword of Drill"):
         load_policy(_edited(tmp_path / "b", observation="state"))
     with pytest.raises(
-        ValueError, match=r"env_kwargs\.observation = 'all': allowed 'state' or 'surface'"
+        ValueError,
+        match=r"env_kwargs\.observation = 'all': allowed 'state', 'surface' or 'estimate'",
     ):
         load_policy(_edited(tmp_path / "c", env_id=FIELD, observation="all"))
 

@@ -254,7 +254,7 @@ def test_vector_env_reproduces_single_envs_with_every_channel_feature(env_id: st
         ({"telemetry_noise_std_rad_s": "a"}, TypeError,
          r"telemetry_noise_std_rad_s must be a real number, got 'a' \(str\)"),
         ({"observation": "bit"}, ValueError,
-         r"observation = 'bit' is not a known mode: allowed \['state', 'surface'\]"),
+         r"observation = 'bit' is not a known mode: allowed \['estimate', 'state', 'surface'\]"),
     ],
 )  # fmt: skip
 @pytest.mark.parametrize("env_id", ["DrillString-v0", "DrillStringField-v0"])
