@@ -365,6 +365,13 @@ def _string_lines(result: FitResult) -> list[str]:
         else f"one inertia ({string.reason}): free running uses the top drive above"
     )
     lines += ["", f"Chosen: {chosen}."]
+    if string.bridged_spikes:
+        lines += [
+            "",
+            f"{string.bridged_spikes} spike sample(s) of the bit speed, which drives this fit "
+            "through its integral, are bridged by the linear interpolation of their neighbours "
+            "here (the bit side's fit leaves them out of its residual instead).",
+        ]
     return lines
 
 

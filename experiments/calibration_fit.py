@@ -1323,14 +1323,17 @@ def identify_top_drive(window: MeasuredLog, bit_inertia_kg_m2: float) -> TopDriv
     net = _cumulative(t, surface)
     if window.has("bit_torque_nm") and window.has("bit_speed_rad_s"):
         net = net - _cumulative(t, window.column("bit_torque_nm"))
-        target = net - bit_inertia_kg_m2 * (window.column("bit_speed_rad_s") - window.column(
-            "bit_speed_rad_s")[0])  # fmt: skip
+        bit = window.column("bit_speed_rad_s")
+        target = net - bit_inertia_kg_m2 * (bit - bit[0])
     else:
         return TopDriveFit(None, reason="the window lacks the bit speed or the torque on bit")
     a = np.column_stack([top - top[0], np.ones_like(t), t])
-    coef, *_ = np.linalg.lstsq(a, target, rcond=None)
+    # A spike of a speed is one equation far off: left out, the data unchanged.
+    rows = ~(spike_mask(bit) | spike_mask(top))
+    coef, *_ = np.linalg.lstsq(a[rows], target[rows], rcond=None)
     inertia = float(coef[0])
-    balance_r2 = 1.0 - float(np.var(target - a @ coef) / (np.var(target) or 1.0))
+    misfit = target[rows] - a[rows] @ coef
+    balance_r2 = 1.0 - float(np.var(misfit) / (np.var(target[rows]) or 1.0))
     b = np.column_stack([np.ones_like(t), t, -top, -_cumulative(t, top)])
     loop, *_ = np.linalg.lstsq(b, surface, rcond=None)
     loop_r2 = 1.0 - float(np.var(surface - b @ loop) / (np.var(surface) or 1.0))
@@ -1377,6 +1380,24 @@ class StringFit:
     models: dict[str, StringModelFit]
     chosen: str
     reason: str = ""
+    bridged_spikes: int = 0
+    """Spike samples of the measured bit speed bridged in the driving signal
+    (:func:`driving_bit_speed`)."""
+
+
+def driving_bit_speed(window: MeasuredLog) -> tuple[npt.NDArray[np.float64], int]:
+    """The measured bit speed as the upper string's fit is driven by it, rad/s, and how many
+    samples were bridged: the spikes of :func:`drill_env.measured_log.spike_mask` replaced by
+    the linear interpolation of their neighbours. The bit speed drives the upper string
+    through its integral (the twist of the spring above the bit), so a one-sample spike of a
+    sensor would add a twist that never leaves; where the bit speed is fitted instead, its
+    spikes are left out of the residual (:func:`fit_weights`)."""
+    bit = window.column("bit_speed_rad_s")
+    spikes = spike_mask(bit)
+    if not spikes.any():
+        return bit, 0
+    keep = ~spikes
+    return np.interp(window.time_s, window.time_s[keep], bit[keep]), int(spikes.sum())
 
 
 class _TopSideProblem:
@@ -1394,7 +1415,7 @@ class _TopSideProblem:
     ) -> None:
         self.time = window.time_s
         self.surface = window.column("surface_torque_nm")
-        self.bit = window.column("bit_speed_rad_s")
+        self.bit, _ = driving_bit_speed(window)
         self.top = window.column("top_speed_rad_s")
         self.top0 = float(np.median(self.top[:3]))
         self.lower = lower
@@ -1435,16 +1456,28 @@ class _TopSideProblem:
         else:
             omega = math.sqrt(k / j_top)
             rate = (kp + d_top + c) / j_top
-        return int(min(5000, max(4, math.ceil(dt * omega / 0.05), math.ceil(dt * rate / 0.2))))
+        return int(max(4, math.ceil(dt * omega / 0.05), math.ceil(dt * rate / 0.2)))
 
     def residuals(self, theta: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         x, state0 = self.unpack(theta)
-        top, surface = simulate_top_side(self.time, self.bit, x, state0, self.substeps(x))
+        substeps = self.substeps(x)
+        if (
+            substeps > MAX_TOP_SIDE_SUBSTEPS
+        ):  # a mode the log cannot show: rejected, as a divergence
+            return np.full(2 * self.time.size, 1e3)
+        top, surface = simulate_top_side(self.time, self.bit, x, state0, substeps)
         r = np.concatenate(
             [(top - self.top) / self.scales[0], (surface - self.surface) / self.scales[1]]
         )
         return np.asarray(np.where(np.isfinite(r), r, 1e3))
 
+
+MAX_TOP_SIDE_SUBSTEPS: Final = 128
+"""Most integration steps per sample interval of the upper string's fit: enough to resolve
+a mode (or a loop's rate) at twice the sampling frequency. A mode above the log's Nyquist
+frequency cannot be identified from it, so trial values that need more steps are rejected
+like a divergence instead of costing up to 40 times more per evaluation (a spike in the
+measured bit speed drove a 3 s window's fit to two minutes)."""
 
 STRING_NAMES: Final = (
     "top_inertia_kg_m2", "damping_nm_s_rad", "", "pipe_inertia_kg_m2", "pipe_stiffness_nm_rad",
@@ -1566,15 +1599,16 @@ def identify_string(
         for name in ("top_inertia_kg_m2", "pipe_inertia_kg_m2", "pipe_stiffness_nm_rad")
     )
     models = {"one_inertia": one, "pipe": pipe}
+    bridged = driving_bit_speed(window)[1]
     if pipe.bic < one.bic and identified:
-        return StringFit(models, "pipe")
+        return StringFit(models, "pipe", bridged_spikes=bridged)
     why = (
         "the one-inertia model has the lower BIC"
         if pipe.bic >= one.bic
         else "the pipe's or the top drive's inertia or the pipe's stiffness is not "
         "identifiable from the window"
     )
-    return StringFit(models, "one_inertia", why)
+    return StringFit(models, "one_inertia", why, bridged)
 
 
 def top_drive_vector(plant: CalibratedPlant) -> npt.NDArray[np.float64]:
