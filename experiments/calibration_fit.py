@@ -131,7 +131,7 @@ class MomentumBalance:
         def cumulative(y: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
             return np.concatenate(([0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * dt)))
 
-        bit = log.column("bit_speed_rad_s")
+        bit, _ = driving_bit_speed(log)
         twist = cumulative(log.column("top_speed_rad_s") - bit)
         q, _ = np.linalg.qr(np.column_stack([np.ones_like(t), t]))
         torque_integral = cumulative(log.column("bit_torque_nm"))
@@ -155,7 +155,7 @@ def _balance_estimates(log: MeasuredLog) -> tuple[float, float, float, float, bo
         return np.concatenate(([0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * dt)))
 
     top = log.column("top_speed_rad_s")
-    bit = log.column("bit_speed_rad_s")
+    bit, _ = driving_bit_speed(log)
     torque = log.column("bit_torque_nm")
     twist_rel = cumulative(top - bit)
     a = np.column_stack([bit, -cumulative(twist_rel), -t, -twist_rel, -np.ones_like(t)])
@@ -1386,12 +1386,12 @@ class StringFit:
 
 
 def driving_bit_speed(window: MeasuredLog) -> tuple[npt.NDArray[np.float64], int]:
-    """The measured bit speed as the upper string's fit is driven by it, rad/s, and how many
-    samples were bridged: the spikes of :func:`drill_env.measured_log.spike_mask` replaced by
-    the linear interpolation of their neighbours. The bit speed drives the upper string
-    through its integral (the twist of the spring above the bit), so a one-sample spike of a
-    sensor would add a twist that never leaves; where the bit speed is fitted instead, its
-    spikes are left out of the residual (:func:`fit_weights`)."""
+    """The measured bit speed as the fits integrate it, rad/s, and how many samples were
+    bridged: the spikes of :func:`drill_env.measured_log.spike_mask` replaced by the linear
+    interpolation of their neighbours. The upper string's fit and the momentum balances use
+    the bit speed through its integral (the twist of the spring above the bit), so a
+    one-sample spike of a sensor would add a twist that never leaves; where the bit speed is
+    fitted instead, its spikes are left out of the residual (:func:`fit_weights`)."""
     bit = window.column("bit_speed_rad_s")
     spikes = spike_mask(bit)
     if not spikes.any():

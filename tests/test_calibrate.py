@@ -16,7 +16,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import drill_env  # noqa: F401  (registers the envs)
-from drill_env.bit_model import P_A0, P_AA, P_CV, P_K, P_TAU, P_XI, simulate_bit
+from drill_env.bit_model import P_A0, P_AA, P_CV, P_J, P_K, P_TAU, P_XI, simulate_bit
 from drill_env.calibrated_plant import (
     PLANT_FORMAT,
     CalibratedPlant,
@@ -429,3 +429,20 @@ def test_the_arguments_are_the_specs_fields(capsys: pytest.CaptureFixture[str]) 
             main(argv)
         assert exit_info.value.code == 2
         assert message in capsys.readouterr().err
+
+
+def test_a_one_sample_spike_of_the_bit_speed_does_not_move_the_fit() -> None:
+    """A sensor's spike is left out where the bit speed is fitted and bridged where it is
+    integrated (the momentum balances, the upper string): the fit with one spike is the fit
+    without it, and the report counts the bridged sample."""
+    clean = lab_log(seed=1, duration_s=6.0, defects=False)
+    spiky = lab_log(seed=1, duration_s=6.0, defects=False)
+    spiky.column("bit_speed_rad_s")[3500] += 30.0
+    fits = [calibrate(log, (2.0, 5.0), families=("karnopp",)) for log in (clean, spiky)]
+    (a, b) = (f.fits["karnopp"].p[P_J] for f in fits)
+    assert b == pytest.approx(a, rel=0.05)
+    assert fits[1].string is not None and fits[0].string is not None
+    assert fits[1].string.chosen == fits[0].string.chosen
+    assert (fits[0].string.bridged_spikes, fits[1].string.bridged_spikes) == (0, 1)
+    top = [f.top_drive.values["inertia_kg_m2"] for f in fits if f.top_drive and f.top_drive.values]
+    assert len(top) == 2 and top[1] == pytest.approx(top[0], rel=0.02)
