@@ -74,7 +74,7 @@ from experiments.paths import output_file
 from experiments.plots import realism_figure, save_figure
 from experiments.results_db import Fields, Flag, Number, Schema
 from experiments.spec_cli import option, spec_from_args, spec_parser
-from experiments.sweep import RunnerSpec, Task, TaskResult, chunks, run_sweep
+from experiments.sweep import RunnerSpec, Task, TaskResult, item_tasks, run_sweep
 from experiments.tables import Column, markdown_table, write_csv, write_json
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -513,15 +513,7 @@ class RealismStudy:
         """The missing runs in tasks of :attr:`task_runs`."""
         wanted = set(missing)
         runs = [r for r in self.runs() if r["item"] in wanted]
-        return [
-            Task(
-                f"realism/{chunk[0]['item']}",
-                run_task,
-                {"runs": chunk},
-                tuple(r["item"] for r in chunk),
-            )
-            for chunk in chunks(runs, self.task_runs)
-        ]
+        return item_tasks("realism", run_task, "runs", runs, self.task_runs)
 
 
 def _mean(values: Sequence[Any]) -> float:

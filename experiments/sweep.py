@@ -85,6 +85,7 @@ __all__ = [
     "check_observations",
     "check_task_size",
     "chunks",
+    "item_tasks",
     "ray_session",
     "read_results",
     "report_outcome",
@@ -285,6 +286,26 @@ def chunks(values: Sequence[Any], size: int) -> Iterator[list[Any]]:
     """``values`` in consecutive lists of at most ``size`` (>= 1)."""
     for start in range(0, len(values), max(1, int(size))):
         yield list(values[start : start + max(1, int(size))])
+
+
+def item_tasks(
+    prefix: str,
+    function: Callable[..., TaskResult],
+    argument: str,
+    records: Sequence[Mapping[str, Any]],
+    size: int,
+) -> list[Task]:
+    """Tasks of at most ``size`` of ``records`` (mappings with an ``"item"`` key), each passed
+    to ``function`` as the keyword ``argument`` and keyed ``PREFIX/<its first item>``."""
+    return [
+        Task(
+            f"{prefix}/{chunk[0]['item']}",
+            function,
+            {argument: chunk},
+            tuple(r["item"] for r in chunk),
+        )  # fmt: skip
+        for chunk in chunks(records, size)
+    ]
 
 
 def _execute(function: Callable[..., TaskResult], kwargs: Mapping[str, Any]) -> TaskResult:

@@ -93,7 +93,7 @@ from experiments.sweep import (
     RunnerSpec,
     Task,
     TaskResult,
-    chunks,
+    item_tasks,
 )
 from experiments.tables import Column, markdown_table, write_json
 
@@ -672,15 +672,7 @@ class WavesStudy:
         """The missing runs in tasks of :attr:`task_runs`."""
         wanted = set(missing)
         jobs = [j for j in self.jobs() if j["item"] in wanted]
-        return [
-            Task(
-                f"waves/{chunk[0]['item']}",
-                waves_task,
-                {"jobs": chunk},
-                tuple(j["item"] for j in chunk),
-            )
-            for chunk in chunks(jobs, self.task_runs)
-        ]
+        return item_tasks("waves", waves_task, "jobs", jobs, self.task_runs)
 
 
 STRING_COLUMNS: Final = (
