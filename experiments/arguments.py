@@ -12,6 +12,7 @@ import argparse
 import math
 import os
 import sys
+import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Final, NoReturn
@@ -193,7 +194,9 @@ def names_type(valid: Callable[[], Sequence[str]], what: str) -> Callable[[str],
 def check_output_folder(path: str | Path) -> Path:
     """``path`` as the output folder of a command, after checking that the command can write
     there: an existing folder that is writable, or a missing one whose nearest existing parent
-    is a writable folder (it is not created here).
+    is a writable folder (it is not created here). Writable means that an empty folder can be
+    made in it and removed again, so that a folder the permission bits call writable but that
+    takes no entries (``/proc``, a full or read-only mount) is refused before any work.
 
     Raises:
         ValueError: ``path`` is an existing file (or lies inside one), or the folder it is or
@@ -210,6 +213,13 @@ def check_output_folder(path: str | Path) -> Path:
         raise ValueError(f"{str(folder)!r} lies inside {str(existing)!r}, which is a file")
     if not os.access(existing, os.W_OK | os.X_OK):
         raise ValueError(f"{str(folder)!r}: the folder {str(existing)!r} is not writable")
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".drill-gym-write-check-", dir=existing))
+    except OSError as err:
+        raise ValueError(
+            f"{str(folder)!r}: the folder {str(existing)!r} takes no new entries "
+            f"({err.strerror or err})"
+        ) from None
     return folder
 
 

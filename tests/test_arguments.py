@@ -92,6 +92,7 @@ def test_check_output_folder_accepts_new_and_existing_folders(tmp_path: Path) ->
     assert check_output_folder(tmp_path) == tmp_path
     assert check_output_folder(tmp_path / "a" / "b") == tmp_path / "a" / "b"
     assert not (tmp_path / "a").exists()  # checked, not made
+    assert sorted(tmp_path.iterdir()) == []  # the write check leaves nothing behind
     (tmp_path / "link").symlink_to(tmp_path / "missing")
     with pytest.raises(ValueError, match=r"'.*link' is a FIFO, a device or a broken link, not"):
         check_output_folder(tmp_path / "link")  # a dangling link is not a folder
@@ -100,6 +101,18 @@ def test_check_output_folder_accepts_new_and_existing_folders(tmp_path: Path) ->
         ValueError, match=r"'.*fifo' is a FIFO, a device or a broken link, not a folder"
     ):
         check_output_folder(tmp_path / "fifo")
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux's /proc")
+def test_a_folder_that_takes_no_entries_is_refused_before_any_work(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """``/proc`` passes the permission bits for root but takes no new folder: refused at
+    once, whoever runs the tests."""
+    err = _refused(["compare", "--out", "/proc/drill-gym-results"], capsys)
+    assert "'/proc/drill-gym-results'" in err
+    assert "takes no new entries" in err or "is not writable" in err
+    assert "compare (serial)" not in err  # no run started
 
 
 def test_train_refuses_a_run_folder_that_is_a_file(
