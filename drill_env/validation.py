@@ -44,14 +44,11 @@ MAX_SHOWN_CHARS: Final = 80
 """Longest text :func:`shown` and :func:`printable` put in a message (longer is cut with ...)."""
 
 
-def printable(text: object, limit: int = MAX_SHOWN_CHARS, cell: bool = False) -> str:
-    """``text`` made safe for one line of a terminal, a log or (``cell``) a Markdown table
-    cell: control and format characters (newlines, escape sequences, bidirectional overrides)
-    become ``\\xNN`` or ``\\uNNNN``, in a cell ``|`` (its border) becomes ``\\|``, and more
-    than ``limit`` characters are cut with ``...``."""
+def _escaped(text: str, cell: bool) -> str:
+    """``text`` with control and format characters as ``\\xNN`` or ``\\uNNNN`` (and, in a
+    Markdown ``cell``, ``|`` as ``\\|``)."""
     out: list[str] = []
-    # Every character gives at least one, so the first limit + 1 decide the result.
-    for char in str(text)[: limit + 1]:
+    for char in text:
         if cell and char == "|":
             out.append("\\|")
         elif char == "\\" or char.isprintable() or char == " ":
@@ -61,8 +58,24 @@ def printable(text: object, limit: int = MAX_SHOWN_CHARS, cell: bool = False) ->
         else:
             code = ord(char)
             out.append(f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}")
-    line = "".join(out)
-    return line if len(line) <= limit else line[: max(0, limit - 3)] + "..."
+    return "".join(out)
+
+
+def printable(text: object, limit: int = MAX_SHOWN_CHARS, cell: bool = False) -> str:
+    """``text`` made safe for one line of a terminal, a log or (``cell``) a Markdown table
+    cell: control and format characters (newlines, escape sequences, bidirectional overrides)
+    become ``\\xNN`` or ``\\uNNNN``, in a cell ``|`` (its border) becomes ``\\|``, and more
+    than ``limit`` characters are cut in the middle with ``...``, keeping a third of them from
+    the end (the file's name at the end of a long path)."""
+    full = str(text)
+    # Every character gives at least one, so the first limit + 1 decide whether it fits.
+    line = _escaped(full[: limit + 1], cell)
+    if len(line) <= limit:
+        return line
+    keep = max(0, limit - 3)
+    tail_chars = keep // 3
+    tail = _escaped(full[-tail_chars:], cell)[-tail_chars:] if tail_chars else ""
+    return line[: keep - tail_chars] + "..." + tail
 
 
 MAX_MESSAGE_CHARS: Final = 1000

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The whole test suite: ruff (lint and format), mypy, then pytest without the slow tests.
 # Arguments are passed on to pytest (a later `-m slow` overrides the default `-m "not slow"`).
+# pytest runs on every core, at most four (pytest-xdist; `-n 0` after it: one process).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
@@ -17,4 +18,4 @@ echo "== ruff format --check"
 echo "== mypy"
 .venv/bin/mypy
 echo "== pytest"
-.venv/bin/python -m pytest -m "not slow" -q "$@"
+.venv/bin/python -m pytest -m "not slow" -q -n auto --maxprocesses 4 "$@"
