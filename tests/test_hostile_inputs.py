@@ -228,6 +228,16 @@ def test_printable_leaves_no_control_characters(text: str) -> None:
     assert re.search(r"(?<!\\)\|", cell) is None
 
 
+def test_a_long_path_keeps_its_file_name_and_its_start() -> None:
+    path = "/data/" + "deep/" * 40 + "gains.json"
+    line = printable(path)
+    assert len(line) == MAX_SHOWN_CHARS and "..." in line
+    assert line.startswith("/data/deep/") and line.endswith("/gains.json")
+    assert printable("short path/gains.json") == "short path/gains.json"
+    cut = printable("\n" * 200 + "end")  # escapes count against the limit too
+    assert len(cut) <= MAX_SHOWN_CHARS and cut.endswith("end") and cut.isprintable()
+
+
 def test_shown_bounds_huge_integers_and_hostile_reprs() -> None:
     class Evil:
         def __repr__(self) -> str:
