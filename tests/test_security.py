@@ -434,7 +434,7 @@ def test_logs_and_plants_that_are_not_regular_files_are_never_opened(
     [
         ('{"format": NaN}', r"NaN is not allowed"),
         ('{"format": 1e400}', r"the number '1e400' is beyond the float range"),
-        ('{"format": ' + "9" * 400 + "}", r"the integer '9+\.\.\. is beyond the float range"),
+        ('{"format": ' + "9" * 400 + "}", r"the integer '9+\.\.\.9+' is beyond the float range"),
         ('{"format": 1, "format": 2}', r"field 'format' appears twice"),
         ("[" * 100_000 + "]" * 100_000, r"nested too deeply"),
         ('{"\x1b[2J": 1', r"is not JSON"),
