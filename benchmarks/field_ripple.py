@@ -25,7 +25,8 @@ import numpy as np
 import numpy.typing as npt
 
 from agents import load_policy
-from drill_env.evaluation import episode_metrics, rollout
+from drill_env.evaluation import ZeroAction, episode_metrics, rollout
+from experiments.arguments import number_type
 from experiments.benchmark import load_suite
 
 
@@ -45,14 +46,6 @@ class Smoothed:
         return self.last, state
 
 
-class ZeroResidual:
-    """The base loop alone: a residual of 0 at every decision."""
-
-    def predict(self, obs: Any, state: Any = None, episode_start: Any = None,
-                deterministic: bool = True) -> tuple[npt.NDArray[np.float32], Any]:  # fmt: skip
-        return np.zeros((1,), dtype=np.float32), state
-
-
 class ChatteringLog(gym.Wrapper[Any, Any, Any, Any]):
     """Keeps the chattering term of every step's reward."""
 
@@ -70,15 +63,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("model", help="a field model folder")
     parser.add_argument("--suite", default="field-v1", help="a field suite (default field-v1)")
-    parser.add_argument("--runs", type=int, default=2, help="reset seeds per scenario (2)")
-    parser.add_argument("--keep", type=float, nargs="*", default=[0.5, 0.8],
+    parser.add_argument("--runs", type=number_type(1, 1000, integer=True), default=2,
+                        help="reset seeds per scenario (2)")  # fmt: skip
+    parser.add_argument("--keep", type=number_type(0, 1), nargs="*", default=[0.5, 0.8],
                         help="low-pass factors of the smoothed residual (0.5 0.8)")  # fmt: skip
     args = parser.parse_args()
     agent = load_policy(args.model)
     suite = load_suite(args.suite)
     variants: list[tuple[str, Any]] = [("model", lambda: agent)]
     variants += [(f"keep {k}", lambda k=k: Smoothed(agent, k)) for k in args.keep]
-    variants.append(("zero residual", ZeroResidual))
+    variants.append(("zero residual", ZeroAction))  # the base loop alone
     print("scenario | " + " | ".join(name for name, _ in variants))
     print("  each: severity / IAE / RMSD / median chattering term / median action step")
     for scenario in (s for s in suite.scenarios if s.prone):

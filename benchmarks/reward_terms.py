@@ -69,7 +69,10 @@ def main() -> None:
     base = recipe.pop("base_controller")
     noise = np.random.default_rng(0)
     std = float(np.exp(config.log_std_init))
-    gauss: Policy = lambda env: noise.normal(0.0, std, 1).clip(-1, 1).astype(np.float32)  # noqa: E731
+
+    def gauss(env: Any) -> np.ndarray:
+        return noise.normal(0.0, std, 1).clip(-1, 1).astype(np.float32)
+
     for name, policy in (("action 0", zero), (f"N(0, {std:.2f}) actions", gauss)):
         line = term_ranges(FIELD_ENV_ID, base, policy, args.episodes, **recipe)
         print(f"[field training, {name}] {line}")
