@@ -1,8 +1,8 @@
 """Train the shipped field agent with its defaults and time it; draw learning curves.
 
 ``drill-gym train --env DrillStringField-v0`` with every other setting at the field defaults
-(:data:`agents.config.ENV_DEFAULTS`): a residual PPO policy on top of ``soft_speed`` that sees
-the rig's surface signals and the mud-pulse telemetry (``frame_stack`` 1: the current
+(:data:`agents.config.ENV_DEFAULTS`): a residual PPO policy on top of ``z_torque_tuned`` that
+sees the rig's surface signals and the mud-pulse telemetry (``frame_stack`` 1: the current
 observation only).
 Prints the wall time (the whole run: simulation, PPO updates, validations, checkpoints) and
 the selected model; ``--ship`` copies the model to ``agents/models/field_agent/`` (recording

@@ -529,7 +529,7 @@ class DrillStringFieldEnv(DrillStringEnv):
 
     ## Rewards
     The terms of ``DrillString-v0`` (``drill_env.rewards``), with the shipped field agent's
-    weights by default (``FIELD_REWARD_WEIGHTS``: tracking 1, chattering 0.1 with a 50 kN m
+    weights by default (``FIELD_REWARD_WEIGHTS``: tracking 3, chattering 0.1 with a 50 kN m
     scale, stuck 0.5, torque 2, residual 0.5), so the reward is in ``[-3.5, 0]``.
 
     ## Starting State

@@ -18,8 +18,8 @@ Total::
 in ``[-1 - w_torque - w_residual, 0]``: ``[-2, 0]`` with the default weights, which are the
 shipped agent's training recipe (``agents/models/residual_ppo``): tracking 1, chattering 0.1
 with a 50 kN m scale, stuck 0, torque 1, residual 0. ``DrillStringField-v0``'s defaults are its
-shipped agent's (``agents/models/field_agent``, :data:`FIELD_REWARD_WEIGHTS`): stuck 0.5,
-torque 2, residual 0.5, so its reward is in ``[-3.5, 0]``. The 50 kN m
+shipped agent's (``agents/models/field_agent``, :data:`FIELD_REWARD_WEIGHTS`): tracking 3,
+stuck 0.5, torque 2, residual 0.5, so its reward is in ``[-3.5, 0]``. The 50 kN m
 scale keeps the chattering term below its cap under the default 0.1 rad/s measurement noise
 (a 5 kN m scale was exceeded at every decision by a controller that reacts to the noise).
 """
@@ -107,10 +107,11 @@ class RewardWeights:
         require("chattering_scale_nm", self.chattering_scale_nm, "> 0 and finite", 0 < s < np.inf)
 
 
-FIELD_REWARD_WEIGHTS: Final = RewardWeights(stuck=0.5, torque=2.0, residual=0.5)
+FIELD_REWARD_WEIGHTS: Final = RewardWeights(tracking=3.0, stuck=0.5, torque=2.0, residual=0.5)
 """The default weights of ``DrillStringField-v0``: its shipped agent's recipe (the stuck term
 counts the time the bit sticks, the torque and residual terms hold the agent at no more RMS
-torque than its base loop)."""
+torque than its base loop, the tracking weight of 3 makes a ripple of the bit speed cost more
+against them)."""
 
 
 def reward_terms(
