@@ -13,6 +13,8 @@ file's content (:func:`content_hash`). The shipped suites:
 * ``field-v1``: the held-out set of ``DrillStringField-v0`` (f01-f16,
   :data:`experiments.heldout.FIELD_HELD_OUT`);
 * ``deep-v1``: deep strings on ``DrillStringField-v0`` (the distributed presets at 4-6 km).
+* ``outside-v1``: ``DrillStringField-v0`` outside the shipped field agent's training ranges
+  (``agents.train.TRAINING_RANGES['wide']``), one way or more per scenario.
 
 Each scenario runs with five reset seeds (they drive the noise; the first one is the seed of
 ``drill-gym evaluate``). Every run goes through the one scoring path
@@ -1434,8 +1436,8 @@ DESCRIPTION: Final = """\
 Score controllers and agents on fixed, versioned scenario suites: per suite and metric, the
 interquartile mean over every scenario and seed with its 95 % stratified-bootstrap interval, a
 score from 0 (the suite's reference) to 1 (the best entry), performance profiles. Suites:
-heldout-v1, corners-v1 (DrillString-v0), field-v1, deep-v1 (DrillStringField-v0). Writes
-scorecard.md/.csv, runs.csv, profiles.png to --out. More: docs/reports/benchmark.md.
+heldout-v1, corners-v1 (DrillString-v0), field-v1, deep-v1, outside-v1 (DrillStringField-v0).
+Writes scorecard.md/.csv, runs.csv, profiles.png to --out. More: docs/reports/benchmark.md.
 
 examples:
   drill-gym benchmark                                  # every shipped controller and agent

@@ -50,6 +50,7 @@ SHIPPED_SHA256 = {
     "deep-v1": "67862ca23da63dd51b65cb227902c683970077bda8595c0c62db249f79fd29fd",
     "field-v1": "272d8883699f9cabaf992d6f490ddb449895dc077efab106c82b2581deba6945",
     "heldout-v1": "6521c30de01cdfc01c44b886dbe1ce3fbf57ce6ccf4422340e9d39d3dc15ba63",
+    "outside-v1": "53732a798c779afcd64e2f49c2d91969a9084fc2e75aaa35f620d4a5bc31318b",
 }
 """The content of every shipped suite. A shipped suite is never edited: a changed suite is a
 new file ``NAME-v(N+1).json`` with a new line here, and the old one stays as it was."""
@@ -108,6 +109,25 @@ def test_the_deep_suite_is_4_to_6_km_of_the_distributed_presets() -> None:
     assert all(c is not None and 4_000 <= c.measured_depth_m <= 6_000 for c in cases)
     assert {c.parameters for c in cases if c is not None} == set(DISTRIBUTED_PRESETS)
     assert 0 < sum(s.prone for s in suite.scenarios) < len(suite.scenarios)
+
+
+def test_the_outside_suite_leaves_the_field_agents_training_ranges_with_seeds_of_its_own() -> None:
+    from agents.train import TRAINING_RANGES
+
+    suite = load_suite("outside")
+    assert suite.label == "outside-v1" and suite.env_id == "DrillStringField-v0"
+    cases = [s.held.field for s in suite.scenarios]
+    assert all(c is not None and not c.in_range(TRAINING_RANGES["wide"]) for c in cases)
+    assert 0 < sum(s.prone for s in suite.scenarios) < len(suite.scenarios)
+    mine = {seed for s in suite.scenarios for seed in s.seeds}
+    others = {
+        seed
+        for label in shipped_suites()
+        if label != suite.label
+        for s in load_suite(label).scenarios
+        for seed in s.seeds
+    }
+    assert len(mine) == sum(len(s.seeds) for s in suite.scenarios) and mine.isdisjoint(others)
 
 
 def _tiny(tmp_path: Path, name: str = "tiny", **changes: Any) -> Path:
@@ -389,7 +409,7 @@ def test_the_command_line_is_the_spec() -> None:
     )
     assert spec.suite_names() == ["deep"] and spec.entry_names() == ["proposed", "stiff_pi"]
     every = benchmark.BenchmarkSpec()
-    assert every.suite_names() == ["corners", "deep", "field", "heldout"]
+    assert every.suite_names() == ["corners", "deep", "field", "heldout", "outside"]
     assert (
         "proposed" in every.entry_names() and "--policies" not in benchmark._parser().format_help()
     )
