@@ -1337,6 +1337,7 @@ def profiles_figure(suites: Sequence[Suite], rows: Sequence[Mapping[str, Any]]) 
     an entry's runs whose value is at or below each x (the severity over the prone scenarios);
     one curve per entry."""
     from matplotlib.figure import Figure
+    from matplotlib.ticker import NullFormatter
 
     n_rows, n_cols = len(suites), len(METRICS)
     fig = Figure(figsize=(4.0 * n_cols + 2.6, 2.9 * n_rows), layout="constrained")
@@ -1371,6 +1372,7 @@ def profiles_figure(suites: Sequence[Suite], rows: Sequence[Mapping[str, Any]]) 
             spread = [float(v) for v in finite if math.isfinite(float(v))]
             if spread and min(spread) > 0 and max(spread) > 20 * min(spread):
                 ax.set_xscale("log")  # values over more than a decade
+                ax.xaxis.set_minor_formatter(NullFormatter())  # labels at the decades only
             ax.set_xlabel(metric_title(metric), fontsize=8)
             ax.set_ylim(0.0, 1.02)
             ax.tick_params(labelsize=7)

@@ -644,3 +644,27 @@ def test_on_ray_the_scorecard_is_the_serial_one(tmp_path: Path) -> None:
     assert main([*base, "--out", str(tmp_path / "serial")]) == 0
     assert main([*base, "--out", str(tmp_path / "ray"), "--workers", "2"]) == 0
     assert _tables(tmp_path / "ray") == _tables(tmp_path / "serial")
+
+
+def test_the_profiles_label_a_log_axis_at_its_decades_only() -> None:
+    """Values over 1.5 decades (a log axis) get tick labels that do not overlap: matplotlib
+    labels the minor ticks of so short a log axis, and they run into each other."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from experiments.plots import text_problems
+
+    suite = load_suite("outside-v1")
+    rng = np.random.default_rng(0)
+    rows = [
+        {
+            "suite": suite.label,
+            "entry": entry,
+            "scenario": scenario.id,
+            **{metric: float(rng.uniform(2e3, 6e4)) for metric in METRICS},
+        }
+        for entry in ("a", "b")
+        for scenario in suite.scenarios
+    ]
+    fig = benchmark.profiles_figure([suite], rows)
+    FigureCanvasAgg(fig)
+    assert text_problems(fig) == []
