@@ -101,13 +101,16 @@ def depth_validation(
 ) -> list[dict[str, Any]]:
     """Per model: its mean IAE, RMSD and stick-slip severity relative to its base controller
     alone on ``episodes`` scenarios of the field randomisation with the measured depth drawn
-    from ``depth_range_m`` (m), at the validation's reset seeds and noise."""
+    from ``depth_range_m`` (m), at the validation's reset seeds and noise, and the ratio of the
+    interquartile means of the severity (``severity_iqm``: a ripple on the scenarios that do not
+    stick, which the mean hides behind the ones that do)."""
     import gymnasium as gym
     import numpy as np
 
     import drill_env  # noqa: F401  (registers the envs)
     from agents.train import VALIDATION_SEED
     from drill_env.evaluation import episode_metrics, rollout
+    from experiments.benchmark import iqm
 
     seeds = [VALIDATION_SEED + k for k in range(episodes)]
     out: list[dict[str, Any]] = []
@@ -134,6 +137,8 @@ def depth_validation(
             )
             for key in ("iae", "rmsd_nm", "stick_slip_severity")
         }
+        severity = [[m["stick_slip_severity"] for m in ms] for ms in (metrics, reference[base])]
+        ratios["severity_iqm"] = iqm(severity[0]) / iqm(severity[1])
         out.append({"model": str(model), **ratios})
     return out
 
@@ -286,7 +291,8 @@ def main() -> None:
         for row in rows:
             print(
                 f"{row['model']}: IAE ratio {row['iae']:.3f}, RMSD ratio {row['rmsd_nm']:.3f}, "
-                f"severity ratio {row['stick_slip_severity']:.3f}"
+                f"severity ratio {row['stick_slip_severity']:.3f} (of the IQMs "
+                f"{row['severity_iqm']:.3f})"
             )
         return
     if args.ship_model:
