@@ -138,7 +138,8 @@ def depth_validation(
             for key in ("iae", "rmsd_nm", "stick_slip_severity")
         }
         severity = [[m["stick_slip_severity"] for m in ms] for ms in (metrics, reference[base])]
-        ratios["severity_iqm"] = iqm(severity[0]) / iqm(severity[1])
+        base_iqm = iqm(severity[1])  # 0 only where the base loop turns the bit perfectly evenly
+        ratios["severity_iqm"] = iqm(severity[0]) / base_iqm if base_iqm > 0 else float("inf")
         out.append({"model": str(model), **ratios})
     return out
 
