@@ -25,6 +25,7 @@ from typing import Any, Final
 from drill_env.ids import COUPLED_ENV_ID as _COUPLED_ENV_ID
 from drill_env.ids import ENV_ID
 from drill_env.ids import FIELD_ENV_ID as _FIELD_ENV_ID
+from drill_env.rewards import FIELD_REWARD_WEIGHTS, RewardWeights
 from drill_env.validation import printable, shown
 
 __all__ = [
@@ -65,10 +66,11 @@ ENV_DEFAULTS: Final[dict[str, dict[str, Any]]] = {
         "control_dt_s": 0.2,
         "residual_scale_nm": 10_000.0,
         "noise_std_rad_s": 0.05,
-        "reward_tracking": 3.0,
-        "reward_stuck": 0.5,
-        "reward_torque": 2.0,
-        "reward_residual": 0.5,
+        **{  # the env's default reward weights, where they differ from the paper string's
+            f"reward_{weight.name}": getattr(FIELD_REWARD_WEIGHTS, weight.name)
+            for weight in dataclasses.fields(RewardWeights)
+            if getattr(FIELD_REWARD_WEIGHTS, weight.name) != getattr(RewardWeights(), weight.name)
+        },
         "n_steps": 500,
         "batch_size": 1000,
         "gamma": 0.99,
