@@ -38,7 +38,7 @@ import sys
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Final
+from typing import Any, Final, NamedTuple
 
 import gymnasium as gym
 import numpy as np
@@ -61,6 +61,7 @@ from drill_env import RewardWeights
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout
 from drill_env.files import write_text
 from drill_env.limits import DEFAULT_TORQUE_LIMITS
+from drill_env.metrics import interquartile_mean
 from drill_env.options import FIELD_MAX_TORQUE_NM, FieldEnvConfig
 from drill_env.scenarios import RPM, FieldRandomization
 from drill_env.validation import shown
@@ -68,7 +69,9 @@ from drill_env.validation import shown
 __all__ = [
     "REFERENCE_CONTROLLER",
     "TRAINING_RANGES",
+    "VALIDATION_COLUMNS",
     "VALIDATION_SEED",
+    "ValidationScore",
     "env_kwargs",
     "find_last_checkpoint",
     "make_model",
@@ -87,7 +90,8 @@ set of ``drill-gym evaluate`` is a fixed list of scenarios)."""
 
 RMSD_TARGET = 0.99
 """Model selection on validation: score = mean IAE ratio + 10 x the mean RMSD ratio's excess
-over this (a 1 % margin below the base controller's RMSD)."""
+over this (a 1 % margin below the base controller's RMSD), plus the severity term of
+:func:`validation_score`."""
 
 
 def validation_scenarios(config: TrainConfig) -> tuple[dict[str, Any], list[int]]:
@@ -104,18 +108,53 @@ def validation_scenarios(config: TrainConfig) -> tuple[dict[str, Any], list[int]
     return kwargs, [VALIDATION_SEED + k for k in range(config.validation_episodes)]
 
 
-def validation_score(
-    metrics: Sequence[Mapping[str, Any]], reference: Sequence[Mapping[str, Any]]
-) -> tuple[float, float, float, float]:
-    """The validation ratios and score of episode metrics against the base controller's on the
-    same scenarios: mean IAE, RMSD and severity ratios and the selection score
-    ``IAE ratio + 10 max(RMSD ratio - RMSD_TARGET, 0)`` (lower is better)."""
+class ValidationScore(NamedTuple):
+    """A policy's validation against its base controller on the same scenarios (lower is
+    better throughout)."""
 
-    def ratio(key: str) -> float:
-        return float(np.mean([m[key] for m in metrics]) / np.mean([m[key] for m in reference]))
+    iae_ratio: float
+    """Mean IAE over the base controller's."""
+    rmsd_ratio: float
+    """Mean RMS torque over the base controller's."""
+    severity_ratio: float
+    """Mean stick-slip severity over the base controller's."""
+    severity_iqm_ratio: float
+    """Interquartile mean of the stick-slip severity over the base controller's: a ripple on
+    the scenarios that do not stick, which the mean hides behind the ones that do. (Each
+    ratio is 1 when both values are 0, infinite when only the base controller's is.)"""
+    score: float
+    """The selection score ``iae_ratio + 10 max(rmsd_ratio - RMSD_TARGET, 0) + severity_weight
+    max(severity_iqm_ratio - 1, 0)``."""
+
+
+def validation_score(
+    metrics: Sequence[Mapping[str, Any]],
+    reference: Sequence[Mapping[str, Any]],
+    severity_weight: float = 0.0,
+) -> ValidationScore:
+    """The validation ratios and selection score of episode metrics against the base
+    controller's on the same scenarios (:class:`ValidationScore`); ``severity_weight``
+    (``TrainConfig.validation_severity_weight``) prices a severity IQM above the base
+    controller's, 0 leaves it out."""
+
+    def ratio(key: str, statistic: Any = np.mean) -> float:
+        policy, base = (float(statistic([m[key] for m in ms])) for ms in (metrics, reference))
+        return policy / base if base > 0 else (1.0 if policy == 0 else math.inf)
 
     iae, rmsd, sev = ratio("iae"), ratio("rmsd_nm"), ratio("stick_slip_severity")
-    return iae, rmsd, sev, float(iae + 10.0 * max(rmsd - RMSD_TARGET, 0.0))
+    sev_iqm = ratio("stick_slip_severity", interquartile_mean)
+    score = iae + 10.0 * max(rmsd - RMSD_TARGET, 0.0)
+    if severity_weight:
+        score += severity_weight * max(sev_iqm - 1.0, 0.0)
+    return ValidationScore(iae, rmsd, sev, sev_iqm, float(score))
+
+
+VALIDATION_COLUMNS: Final = {
+    False: ("timesteps", *ValidationScore._fields),
+    True: ("timesteps", "mean_reward", "base_mean_reward", "score"),
+}
+"""The columns of a run's ``validation.csv``: by whether the env is ``DrillStringCoupled-v0``
+(a mean reward, the env's own) or not (the ratios of :class:`ValidationScore`)."""
 
 
 def policy_env_kwargs(config: TrainConfig) -> dict[str, Any]:
@@ -676,7 +715,8 @@ def _run_callback(
                     self.next_checkpoint += every
 
         def _on_step(self) -> bool:
-            if validation is not None and self.num_timesteps >= validation.next_at:
+            # the model at the end of the run is validated after its last update, once
+            if validation is not None and validation.next_at <= self.num_timesteps < total:
                 validation.next_at += config.validate_every
                 validation.run(self.model, self.model.get_env())
             return True
@@ -753,24 +793,24 @@ class _Validation:
                 )
             self.best = float(score)
         self.next_at = 0
-        if not self.csv.exists():
-            header = (
-                "timesteps,mean_reward,base_mean_reward,score\n"
-                if self.coupled
-                else "timesteps,iae_ratio,rmsd_ratio,severity_ratio,score\n"
-            )
-            write_text(self.csv, header)
+        if self.csv.exists():  # a resumed run goes on with its own columns
+            self.columns = self.csv.read_text().partition("\n")[0].split(",")
+        else:
+            self.columns = list(VALIDATION_COLUMNS[self.coupled])
+            write_text(self.csv, ",".join(self.columns) + "\n")
 
-    def _write(self, model: Any, values: dict[str, float], line: str, steps: int) -> None:
-        """One validation's ``values`` to TensorBoard (at once, at ``steps``) and its ``line``
-        to ``validation.csv``."""
+    def _write(self, model: Any, values: dict[str, float], steps: int) -> None:
+        """One validation's ``values`` (keyed by column) to TensorBoard (at once, at ``steps``,
+        under ``validation/``) and as a line of ``validation.csv``."""
         from stable_baselines3.common.logger import TensorBoardOutputFormat
 
+        logged = {f"validation/{k}": v for k, v in values.items()}
         for output in model.logger.output_formats:
             if isinstance(output, TensorBoardOutputFormat):
-                output.write(values, {k: () for k in values}, step=steps)
+                output.write(logged, {k: () for k in logged}, step=steps)
+        row = {"timesteps": str(steps), **{k: f"{v:.5f}" for k, v in values.items()}}
         with self.csv.open("a") as f:
-            f.write(line + "\n")
+            f.write(",".join(row.get(c, "") for c in self.columns) + "\n")
 
     def _keep_if_best(self, policy: ResidualPolicy, score: float, steps: int) -> bool:
         """Save ``policy`` to ``best/`` with its score when ``score`` is the lowest so far;
@@ -791,34 +831,27 @@ class _Validation:
         if self.coupled:
             return self._run_coupled(model, policy, steps)
         metrics = [episode_metrics(rollout(self.env, policy, s)) for s in self.seeds]
-        iae, rmsd, sev, score = validation_score(metrics, self.reference)
-        values = {
-            "validation/iae_ratio": float(iae),
-            "validation/rmsd_ratio": float(rmsd),
-            "validation/severity_ratio": float(sev),
-            "validation/score": score,
-        }
-        self._write(model, values, f"{steps},{iae:.5f},{rmsd:.5f},{sev:.5f},{score:.5f}", steps)
-        best = self._keep_if_best(policy, score, steps)
+        result = validation_score(metrics, self.reference, self.config.validation_severity_weight)
+        self._write(model, result._asdict(), steps)
+        best = self._keep_if_best(policy, result.score, steps)
         if not self.progress:
-            return score
+            return result.score
         print(
-            f"validation at {steps:,} decisions: IAE ratio {iae:.3f}, RMSD ratio {rmsd:.3f}, "
-            f"severity ratio {sev:.3f}, score {score:.3f}"
+            f"validation at {steps:,} decisions: IAE ratio {result.iae_ratio:.3f}, RMSD ratio "
+            f"{result.rmsd_ratio:.3f}, severity ratio {result.severity_ratio:.3f} (IQM "
+            f"{result.severity_iqm_ratio:.3f}), score {result.score:.3f}"
             + (" (best so far, saved to best/)" if best else ""),
             flush=True,
         )
-        return score
+        return result.score
 
     def _run_coupled(self, model: Any, policy: ResidualPolicy, steps: int) -> float:
         """Validation on ``DrillStringCoupled-v0``: the mean reward per decision against the
         base loops' on the same seeds; score ``base - agent`` (lower is better)."""
         mean = coupled_mean_reward(self.env, policy, self.seeds)
         score = self.reference_return - mean
-        values = {"validation/mean_reward": mean, "validation/score": score}
-        self._write(
-            model, values, f"{steps},{mean:.5f},{self.reference_return:.5f},{score:.5f}", steps
-        )
+        values = {"mean_reward": mean, "base_mean_reward": self.reference_return, "score": score}
+        self._write(model, values, steps)
         best = self._keep_if_best(policy, score, steps)
         if self.progress:
             print(

@@ -18,7 +18,7 @@ samples) into ``docs/reports/figures/field_agent_<id>.png``, from the shipped mo
 evaluate --env DrillStringField-v0``) by group (:data:`GROUPS`: within the training ranges, the
 deep string, outside the ranges, all): IAE, RMSD and the stick-slip severity of the prone
 scenarios. ``--depth-validation LOW HIGH N MODEL ...`` scores models as the validation does
-(ratios of the mean IAE, RMSD and severity to ``soft_speed`` on N scenarios of the training
+(ratios to the base controller alone and the selection score on N scenarios of the env's
 randomisation, the validation's reset seeds) with the depth drawn from LOW-HIGH m only: does
 a deeper validation set rank checkpoints as the deep held-out strings do? ``--ship-model
 MODEL --wall-s S`` ships the model of a finished run of the default command
@@ -99,18 +99,16 @@ def group_means(rows: Sequence[Mapping[str, str]]) -> list[dict[str, Any]]:
 def depth_validation(
     models: Sequence[Path], depth_range_m: tuple[float, float], episodes: int
 ) -> list[dict[str, Any]]:
-    """Per model: its mean IAE, RMSD and stick-slip severity relative to its base controller
-    alone on ``episodes`` scenarios of the field randomisation with the measured depth drawn
-    from ``depth_range_m`` (m), at the validation's reset seeds and noise, and the ratio of the
-    interquartile means of the severity (``severity_iqm``: a ripple on the scenarios that do not
-    stick, which the mean hides behind the ones that do)."""
+    """Per model: its validation against its base controller alone
+    (:func:`agents.train.validation_score` with the model's own severity weight: the ratios of
+    the mean IAE, RMSD and stick-slip severity, of the severity's interquartile means, and the
+    selection score) on ``episodes`` scenarios of the field randomisation with the measured
+    depth drawn from ``depth_range_m`` (m), at the validation's reset seeds and noise."""
     import gymnasium as gym
-    import numpy as np
 
     import drill_env  # noqa: F401  (registers the envs)
-    from agents.train import VALIDATION_SEED
+    from agents.train import VALIDATION_SEED, validation_score
     from drill_env.evaluation import episode_metrics, rollout
-    from experiments.benchmark import iqm
 
     seeds = [VALIDATION_SEED + k for k in range(episodes)]
     out: list[dict[str, Any]] = []
@@ -131,16 +129,10 @@ def depth_validation(
             reference[base] = [episode_metrics(rollout(env, ZeroAction(), s)) for s in seeds]
         env = gym.make(policy.env_id, **common, **policy.env_kwargs)
         metrics = [episode_metrics(rollout(env, policy, s)) for s in seeds]
-        ratios = {
-            key: float(
-                np.mean([m[key] for m in metrics]) / np.mean([m[key] for m in reference[base]])
-            )
-            for key in ("iae", "rmsd_nm", "stick_slip_severity")
-        }
-        severity = [[m["stick_slip_severity"] for m in ms] for ms in (metrics, reference[base])]
-        base_iqm = iqm(severity[1])  # 0 only where the base loop turns the bit perfectly evenly
-        ratios["severity_iqm"] = iqm(severity[0]) / base_iqm if base_iqm > 0 else float("inf")
-        out.append({"model": str(model), **ratios})
+        weight = record.get("validation_severity_weight", 0.0)
+        out.append(
+            {"model": str(model), **validation_score(metrics, reference[base], weight)._asdict()}
+        )
     return out
 
 
@@ -200,9 +192,14 @@ def scenario_figures(model: Path, out: Path) -> list[Path]:
 
 def ship(model: Path, source: str) -> Path:
     """Copy the model folder ``model`` to ``agents/models/field_agent/`` with ``source`` (the
-    command that retrains it) in its record; ``model`` may be that folder itself."""
+    command that retrains it) in its record and the folders of the run that trained it left
+    out (they name the trainer's machine, not the command); ``model`` may be that folder
+    itself."""
     policy = load_policy(model)  # read before the target is cleared
     policy.metadata["source"] = source
+    record = policy.metadata.get("train_config")
+    if isinstance(record, dict):
+        record.update(run_dir="", save_dir="")
     target = DEFAULT_MODEL_DIR / NAME
     if target.exists():
         shutil.rmtree(target)
@@ -287,21 +284,27 @@ def main() -> None:
         print(group_table(args.groups))
         return
     if args.depth_validation:
-        low, high, n, *models = args.depth_validation
-        rows = depth_validation([Path(m) for m in models], (float(low), float(high)), int(n))
+        try:
+            low, high, n, *models = args.depth_validation
+            depths_m, episodes = (float(low), float(high)), int(n)
+        except ValueError:
+            parser.error("--depth-validation: expected LOW HIGH N MODEL ... (m, m, episodes)")
+        if not (0 < depths_m[0] <= depths_m[1] and episodes >= 1 and models):
+            parser.error("--depth-validation: allowed 0 < LOW <= HIGH m, N >= 1, a MODEL")
+        rows = depth_validation([Path(m) for m in models], depths_m, episodes)
         for row in rows:
             print(
-                f"{row['model']}: IAE ratio {row['iae']:.3f}, RMSD ratio {row['rmsd_nm']:.3f}, "
-                f"severity ratio {row['stick_slip_severity']:.3f} (of the IQMs "
-                f"{row['severity_iqm']:.3f})"
+                f"{row['model']}: IAE ratio {row['iae_ratio']:.3f}, RMSD ratio "
+                f"{row['rmsd_ratio']:.3f}, severity ratio {row['severity_ratio']:.3f} (of the "
+                f"IQMs {row['severity_iqm_ratio']:.3f}), score {row['score']:.3f}"
             )
         return
     if args.ship_model:
         record = load_policy(args.ship_model).metadata
         seed = record["train_config"]["seed"]
         selected = record.get("selected", "best on validation")
-        wall = "" if args.wall_s is None else f", {args.wall_s:.0f} s wall"
-        source = f"{RETRAIN} --seed {seed} (the selected model: {selected}{wall})"
+        timed = "" if args.wall_s is None else f", {args.wall_s:.0f} s wall"
+        source = f"{RETRAIN} --seed {seed} (the selected model: {selected}{timed})"
         print(f"shipped to {ship(args.ship_model, source)}")
         return
     if args.figures:

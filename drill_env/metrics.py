@@ -15,6 +15,7 @@ import numpy.typing as npt
 from drill_env.validation import shown
 
 __all__ = [
+    "IQM_TRIM",
     "METRIC_KEYS",
     "METRIC_LABELS",
     "SEVERITY_WINDOW_S",
@@ -22,6 +23,7 @@ __all__ = [
     "STICK_SLIP_SEVERITY",
     "WindowStatistics",
     "episode_metrics_from_samples",
+    "interquartile_mean",
     "stick_slip_severity",
 ]
 
@@ -33,6 +35,8 @@ STICK_SLIP_SEVERITY: Final = 0.5
 """A run stick-slips when its severity exceeds this (or its bit sticks) in the window."""
 STEADY_SEVERITY: Final = 0.1
 """Below this severity a run turns steadily (it has no stick-slip cycle to time)."""
+IQM_TRIM: Final = 0.25
+"""Share of the values the interquartile mean cuts from each end."""
 
 METRIC_KEYS: Final = (
     "ise",
@@ -58,6 +62,27 @@ METRIC_LABELS: Final[dict[str, str]] = {
     "stuck_fraction": "stuck fraction",
 }
 """Axis label (with unit) of each key of :data:`METRIC_KEYS`."""
+
+
+def interquartile_mean(values: Any, axis: int | None = None) -> Any:
+    """Interquartile mean: the mean of ``values`` after cutting ``int(IQM_TRIM * n)`` of the
+    ``n`` values from each end, along ``axis`` (``None``: all values, flattened). The
+    estimator of rliable and of ``scipy.stats.trim_mean(values, 0.25)``, in numpy.
+
+    Raises:
+        ValueError: no value to average.
+    """
+    array = np.asarray(values, dtype=float)
+    if axis is None:
+        array, axis = array.ravel(), 0
+    count = array.shape[axis]
+    if count == 0:
+        raise ValueError("interquartile_mean of no values: allowed at least one value")
+    low = int(IQM_TRIM * count)
+    ordered = np.partition(array, (low, count - low - 1), axis=axis)
+    middle = [slice(None)] * ordered.ndim
+    middle[axis] = slice(low, count - low)
+    return np.mean(ordered[tuple(middle)], axis=axis)
 
 
 def stick_slip_severity(high: Any, low: Any, mean: Any) -> Any:

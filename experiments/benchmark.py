@@ -83,7 +83,7 @@ from drill_env.control import controller_names
 from drill_env.distributed import DISTRIBUTED_PRESETS
 from drill_env.evaluation import Policy, ZeroAction, episode_metrics
 from drill_env.files import write_text
-from drill_env.metrics import METRIC_KEYS
+from drill_env.metrics import METRIC_KEYS, interquartile_mean
 from drill_env.scenarios import WobProfile
 from drill_env.validation import shown
 from experiments.arguments import SEED_HIGH, ArgumentParser, one_line, output_folder
@@ -176,8 +176,6 @@ CONFIDENCE: Final = 0.95
 """Confidence level of the intervals."""
 DEFAULT_RESAMPLES: Final = 2000
 """Bootstrap resamples of each interval."""
-TRIM: Final = 0.25
-"""Share of the runs cut from each end for the interquartile mean."""
 IDLE_DECISION_S: Final = 1.0
 """Decision period of a controller's run (its residual is zero; the controller itself runs at
 every plant step, and the noise samples do not depend on the decision period)."""
@@ -946,17 +944,13 @@ class BenchmarkStudy:
 
 # ------------------------------------------------------------------------------ statistics
 def iqm(values: Any) -> float:
-    """Interquartile mean of ``values`` (any shape, flattened): the mean after cutting
-    :data:`TRIM` of the values from each end (``scipy.stats.trim_mean``, as rliable does)."""
-    from scipy.stats import trim_mean
-
-    return float(trim_mean(np.ravel(np.asarray(values, dtype=float)), TRIM))
+    """Interquartile mean of ``values`` (any shape, flattened):
+    :func:`drill_env.metrics.interquartile_mean`, rliable's estimator."""
+    return float(interquartile_mean(values))
 
 
 def _iqm_of_strata(*strata: Any, axis: int = -1) -> Any:
-    from scipy.stats import trim_mean
-
-    return trim_mean(np.concatenate(strata, axis=axis), TRIM, axis=axis)
+    return interquartile_mean(np.concatenate(strata, axis=axis), axis=axis)
 
 
 def iqm_interval(
@@ -1027,8 +1021,6 @@ def _two_level_bootstrap(
     resample and scenario, its training seeds drawn with replacement (independently in every
     scenario, as rliable resamples the runs of each task), then each drawn seed's reset seeds
     with replacement; the IQM of the pooled draw."""
-    from scipy.stats import trim_mean
-
     point = iqm(np.concatenate([g.ravel() for g in grids]))
     if all(np.ptp(g) == 0.0 for g in grids):
         return point, point, point
@@ -1040,7 +1032,7 @@ def _two_level_bootstrap(
         rows = rng.integers(trained, size=(n, trained))
         columns = rng.integers(reset, size=(n, trained, reset))
         drawn.append(grid[rows[:, :, None], columns].reshape(n, trained * reset))
-    stats = trim_mean(np.concatenate(drawn, axis=1), TRIM, axis=1)
+    stats = interquartile_mean(np.concatenate(drawn, axis=1), axis=1)
     tail = 50.0 * (1.0 - confidence)
     low, high = np.percentile(stats, [tail, 100.0 - tail])
     return point, float(low), float(high)

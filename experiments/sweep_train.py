@@ -50,6 +50,7 @@ command refuses unless ``--trust-pickle`` names that folder (resume only a sweep
 from __future__ import annotations
 
 import contextlib
+import csv
 import dataclasses
 import json
 import math
@@ -310,7 +311,7 @@ class SweepSpec:
         config = TrainConfig.for_env(self.env_id, **{**self.settings, "seed": self.seeds[0]})
         if not config.validate_every:
             return 1
-        return planned_timesteps(config) // config.validate_every + 1
+        return (planned_timesteps(config) - 1) // config.validate_every + 1
 
 
 def _space(spec: SweepSpec) -> dict[str, Any]:
@@ -343,16 +344,7 @@ def _report_validations() -> Iterator[None]:
 
     def run(self: Any, model: Any, venv: Any) -> float:
         score = original(self, model, venv)
-        steps, iae, rmsd, severity, _ = self.csv.read_text().splitlines()[-1].split(",")
-        tune.report(
-            {
-                "timesteps": int(steps),
-                METRIC: float(iae),
-                "rmsd_ratio": float(rmsd),
-                "severity_ratio": float(severity),
-                "score": float(score),
-            }
-        )
+        tune.report(_validations(self.csv)[-1])
         return score
 
     training._Validation.run = run  # type: ignore[method-assign]
@@ -378,15 +370,9 @@ def final_validation(config: TrainConfig, model: Path) -> dict[str, float]:
     finally:
         env.close()
         base_env.close()
-    iae, rmsd, severity, score = validation_score(metrics, reference)
+    result = validation_score(metrics, reference, config.validation_severity_weight)
     steps = policy.metadata.get("run_timesteps", policy.metadata.get("timesteps", 0))
-    return {
-        "timesteps": int(steps),
-        METRIC: iae,
-        "rmsd_ratio": rmsd,
-        "severity_ratio": severity,
-        "score": score,
-    }
+    return {"timesteps": int(steps), **result._asdict()}
 
 
 def train_trial(config: dict[str, Any]) -> None:
@@ -436,20 +422,14 @@ def _same_run(run_dir: Path, config: TrainConfig) -> bool:
 
 
 def _validations(csv_file: Path) -> list[dict[str, Any]]:
-    """The validations of a run as its ``validation.csv`` records them (Tune's reports)."""
-    reports = []
-    for line in csv_file.read_text().splitlines()[1:]:
-        steps, iae, rmsd, severity, score = line.split(",")
-        reports.append(
-            {
-                "timesteps": int(steps),
-                METRIC: float(iae),
-                "rmsd_ratio": float(rmsd),
-                "severity_ratio": float(severity),
-                "score": float(score),
-            }
-        )
-    return reports
+    """The validations of a run as its ``validation.csv`` records them (Tune's reports): the
+    decisions and each ratio and the score, by column (a run of an earlier version has no
+    ``severity_iqm_ratio``)."""
+    with csv_file.open(newline="") as f:
+        return [
+            {k: int(v) if k == "timesteps" else float(v) for k, v in row.items() if v}
+            for row in csv.DictReader(f)
+        ]
 
 
 def _scheduler(spec: SweepSpec) -> Any:
@@ -463,10 +443,11 @@ def _scheduler(spec: SweepSpec) -> Any:
             grace_period=spec.grace_period,
             min_samples_required=2,
         )
+    last = spec.validations() + 1  # above the last report: a trial that ends is not stopped
     return ASHAScheduler(
         time_attr="training_iteration",
-        max_t=spec.validations() + 1,  # above the last report: a trial that ends is not stopped
-        grace_period=spec.grace_period,
+        max_t=last,
+        grace_period=min(spec.grace_period, last),  # longer than the run: never stopped
         reduction_factor=2,
     )
 

@@ -410,10 +410,16 @@ def score_of(record: Mapping[str, Any], reference: Mapping[str, Any]) -> Score:
     episodes: :func:`agents.train.validation_score`, the rule that selects the agent's model;
     a candidate with a diverged episode or a non-finite metric is not feasible."""
     metrics, base = _metrics(record), _metrics(reference)
-    iae, rmsd, sev, score = validation_score(metrics, base)
+    result = validation_score(metrics, base)
     finite = all(math.isfinite(m[k]) for m in metrics for k in METRICS)
-    feasible = finite and not any(record["diverged"]) and math.isfinite(score)
-    return Score(iae, rmsd, sev, score if feasible else math.inf, feasible)
+    feasible = finite and not any(record["diverged"]) and math.isfinite(result.score)
+    return Score(
+        result.iae_ratio,
+        result.rmsd_ratio,
+        result.severity_ratio,
+        result.score if feasible else math.inf,
+        feasible,
+    )
 
 
 # ------------------------------------------------------------------------------ search

@@ -736,6 +736,7 @@ def test_the_default_command_trains_the_shipped_agent() -> None:
         "observation": "",
         "frame_stack": 1,
         "training_ranges": "env",
+        "validation_severity_weight": 0.0,
     }
     record = {**later, **shipped["train_config"]}
     defaults = dataclasses.asdict(TrainConfig())

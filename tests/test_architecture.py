@@ -248,6 +248,8 @@ CONTROLLER_LISTS_ALLOWED: Final[dict[str, str]] = {
 
 SEVERITY_LITERALS_ALLOWED: Final[dict[str, str]] = {
     "experiments/plots.py:SEVERITY_LIMIT": "the top of the maps' colour scale, not a threshold",
+    "agents/config.py:validation_severity_weight": "a weight of the selection score",
+    "agents/train.py:severity_weight": "the same weight, as an argument",
 }
 """Numbers bound to a severity name outside :mod:`drill_env.metrics`, ``path:name`` -> why."""
 

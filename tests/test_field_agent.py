@@ -96,6 +96,81 @@ def test_bad_env_settings_are_one_line_errors() -> None:
         parse_config(["--frame-stack", "0"])
 
 
+def _episodes(
+    severity: list[float], iae: float = 10.0, rmsd: float = 1e4
+) -> list[dict[str, float]]:
+    return [{"iae": iae, "rmsd_nm": rmsd, "stick_slip_severity": s} for s in severity]
+
+
+def test_the_severity_term_prices_a_ripple_the_mean_hides() -> None:
+    """Four scenarios: the policy lowers the one that sticks (1.0 -> 0.4) and doubles the
+    ripple on two that do not (0.1 -> 0.2). The mean severity falls (0.8 / 1.2), the
+    interquartile mean (the middle two of four) doubles: only the severity term sees it."""
+    from agents.train import RMSD_TARGET, validation_score
+
+    base = _episodes([0.0, 0.1, 0.1, 1.0])
+    policy = _episodes([0.0, 0.2, 0.2, 0.4], iae=9.0, rmsd=1.02e4)
+    plain = validation_score(policy, base)
+    assert plain.iae_ratio == pytest.approx(0.9) and plain.rmsd_ratio == pytest.approx(1.02)
+    assert plain.severity_ratio == pytest.approx(0.8 / 1.2)
+    assert plain.severity_iqm_ratio == pytest.approx(2.0)
+    assert plain.score == pytest.approx(0.9 + 10 * (1.02 - RMSD_TARGET))
+    weighted = validation_score(policy, base, severity_weight=1.5)
+    assert weighted.score == pytest.approx(plain.score + 1.5 * (2.0 - 1.0))
+    # a ripple below the base loop's costs nothing
+    assert validation_score(base, policy, 1.5).score == validation_score(base, policy).score
+    # an even base loop: an even policy ties, a rippling one is infinitely worse
+    even = _episodes([0.0, 0.0, 0.0, 0.0])
+    assert validation_score(even, even, 1.0).severity_iqm_ratio == 1.0
+    assert validation_score(policy, even, 1.0).score == float("inf")
+    assert validation_score(policy, even).score < float("inf")  # weight 0: not priced
+
+
+def test_the_field_defaults_select_on_validation_with_the_severity_term() -> None:
+    config = TrainConfig.for_env(FIELD)
+    assert config.validation_severity_weight > 0 and config.validate_every > 0
+    assert config.total_timesteps % config.validate_every == 0  # the last model competes
+    assert TrainConfig().validation_severity_weight == 0  # the paper string's rule unchanged
+    with pytest.raises(ValueError, match=r"^--validation-severity-weight = -1 is out of range"):
+        TrainConfig(validation_severity_weight=-1)
+
+
+def test_a_resumed_run_keeps_the_validation_columns_it_started_with(tmp_path: Path) -> None:
+    """A run of an earlier version (no ``severity_iqm_ratio`` column) goes on writing its own
+    columns; the sweep runner reads both kinds of file by column."""
+    from types import SimpleNamespace
+
+    from agents.train import VALIDATION_COLUMNS, _Validation
+    from experiments.sweep_train import _validations
+
+    old = "timesteps,iae_ratio,rmsd_ratio,severity_ratio,score"
+    (tmp_path / "validation.csv").write_text(old + "\n100,0.90000,1.00000,0.80000,0.90000\n")
+    config = TrainConfig(validation_episodes=1, episode_s=1.0)
+    validation = _Validation(config, tmp_path, progress=False)
+    quiet = SimpleNamespace(logger=SimpleNamespace(output_formats=[]))
+    values = dict(zip(VALIDATION_COLUMNS[False][1:], (0.8, 0.99, 0.7, 1.2, 0.8), strict=True))
+    validation._write(quiet, values, 200)
+    lines = (tmp_path / "validation.csv").read_text().splitlines()
+    assert lines == [
+        old,
+        "100,0.90000,1.00000,0.80000,0.90000",
+        "200,0.80000,0.99000,0.70000,0.80000",
+    ]
+    rows = _validations(tmp_path / "validation.csv")
+    assert rows[1] == {
+        "timesteps": 200,
+        "iae_ratio": 0.8,
+        "rmsd_ratio": 0.99,
+        "severity_ratio": 0.7,
+        "score": 0.8,
+    }
+    fresh = tmp_path / "fresh"
+    fresh.mkdir()
+    validation = _Validation(config, fresh, progress=False)
+    validation._write(quiet, values, 200)
+    assert _validations(fresh / "validation.csv") == [{"timesteps": 200, **values}]
+
+
 def test_wide_training_ranges_contain_the_envs_and_leave_validation_alone() -> None:
     from agents.train import TRAINING_RANGES, env_kwargs, validation_scenarios
     from drill_env.scenarios import FieldRandomization
@@ -307,7 +382,9 @@ def test_tiny_field_training_writes_a_field_model(field_run: tuple[TrainConfig, 
     }
     assert policy.metadata["train_config"]["env_id"] == FIELD
     lines = (run / "validation.csv").read_text().splitlines()
-    assert lines[0].startswith("timesteps,iae_ratio") and len(lines) == 1 + 3
+    # at 60 decisions and once at the end (120), after the last update
+    assert lines[0].startswith("timesteps,iae_ratio") and len(lines) == 1 + 2
+    assert [line.split(",")[0] for line in lines[1:]] == ["60", "120"]
     # the first validation (60 decisions in) is close to the base controller
     assert abs(float(lines[1].split(",")[1]) - 1.0) < 0.2
 
@@ -357,6 +434,11 @@ def test_shipped_field_model_names_its_env_and_how_to_retrain_it() -> None:
     record = policy.metadata["train_config"]
     assert record["env_id"] == FIELD
     assert "drill-gym train --env DrillStringField-v0" in policy.metadata["source"]
+    # trained with the field defaults: the default command retrains it
+    for name, value in ENV_DEFAULTS[FIELD].items():
+        assert record[name] == value, name
+    assert record["seed"] == TrainConfig().seed
+    assert record["run_dir"] == record["save_dir"] == ""  # no folder of the trainer's machine
 
 
 _NUMPY_ONLY = """

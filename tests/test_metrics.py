@@ -160,3 +160,22 @@ class TestValidation:
     def test_bad_dt(self, dt: float) -> None:
         with pytest.raises(ValueError, match=r"dt_s = .* is out of range: allowed > 0"):
             metrics(np.full(10, 12.0), dt=dt)
+
+
+def test_interquartile_mean_is_scipys_trimmed_mean() -> None:
+    """rliable's IQM is ``scipy.stats.trim_mean(x, 0.25)``: the same values, bit for bit, in
+    every shape and along every axis, and a hand-counted case (8 values: the middle 4)."""
+    from drill_env.metrics import interquartile_mean
+
+    trim_mean = pytest.importorskip("scipy.stats").trim_mean
+    rng = np.random.default_rng(3)
+    for n in range(1, 30):
+        values = rng.standard_normal((n, 5)) * 10.0 ** rng.integers(-3, 4)
+        assert interquartile_mean(values) == trim_mean(values, 0.25, axis=None)
+        for axis in (0, 1, -1):
+            np.testing.assert_array_equal(
+                interquartile_mean(values, axis=axis), trim_mean(values, 0.25, axis=axis)
+            )
+    assert interquartile_mean([8.0, 1.0, 7.0, 2.0, 6.0, 3.0, 5.0, 100.0]) == 5.25
+    with pytest.raises(ValueError, match="no values"):
+        interquartile_mean([])

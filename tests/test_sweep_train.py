@@ -98,11 +98,12 @@ def test_two_trial_sweep_on_the_local_cluster(
     from agents.policy import load_policy
 
     out = tmp_path / "sweep"
-    # No ASHA rung before the end (grace of 4 validations, 3 reported): both trials complete.
+    # No ASHA rung before the end (a grace of 4 validations, more than the 2 reported): both
+    # trials complete.
     argv = ["sweep-train", "--seeds", "1", "2", "--grace-period", "4", *TINY]
     assert cli_main([*argv, "--out", str(out)]) == 0
     printed = capsys.readouterr().out
-    assert "sweep-train: 2 trials (2 seeds), 3 validations each, scheduler asha" in printed
+    assert "sweep-train: 2 trials (2 seeds), 2 validations each, scheduler asha" in printed
     with (out / "trials.csv").open() as f:
         rows = list(csv.DictReader(f))
     assert sorted(r["seed"] for r in rows) == ["1", "2"]
@@ -112,7 +113,7 @@ def test_two_trial_sweep_on_the_local_cluster(
         assert list((run / "tb").rglob("events.out.tfevents.*"))
         assert sorted(p.name for p in (run / "checkpoints").iterdir()) == ["steps_100", "steps_200"]
         validations = (run / "validation.csv").read_text().splitlines()
-        assert len(validations) == 1 + int(row["validations"]) == 4
+        assert len(validations) == 1 + int(row["validations"]) == 3
         best_line = min(validations[1:], key=lambda line: float(line.split(",")[1]))
         assert float(row["best_iae_ratio"]) == pytest.approx(float(best_line.split(",")[1]))
         assert (run / "model" / "policy.safetensors").is_file()
@@ -170,26 +171,26 @@ def test_a_sweep_without_validations_reports_its_final_model(
 
 def test_the_final_validation_is_the_training_validation(tmp_path: Path) -> None:
     """:func:`final_validation` of a model scores it as the training's own validation does
-    (its ``validation.csv`` line of the final model, written with five decimals)."""
+    (its ``validation.csv`` line of the final model, written with five decimals), the
+    severity term of the selection score included."""
     pytest.importorskip("stable_baselines3")
     from agents.config import TrainConfig
-    from agents.train import train
+    from agents.train import VALIDATION_COLUMNS, train
 
     config = TrainConfig(
         total_timesteps=100, num_envs=2, n_steps=50, batch_size=50, validate_every=100,
-        validation_episodes=1, episode_s=10.0, checkpoint_every=0, tensorboard=False,
-        run_dir=str(tmp_path / "run"),
+        validation_episodes=2, episode_s=10.0, checkpoint_every=0, tensorboard=False,
+        run_dir=str(tmp_path / "run"), validation_severity_weight=3.0,
     )  # fmt: skip
     model = train(config, progress=False)
-    steps, iae, rmsd, severity, score = (
-        (tmp_path / "run" / "validation.csv").read_text().splitlines()[-1].split(",")
-    )
+    csv_file = tmp_path / "run" / "validation.csv"
+    assert csv_file.read_text().partition("\n")[0] == ",".join(VALIDATION_COLUMNS[False])
+    recorded = sweep_train._validations(csv_file)[-1]
     result = sweep_train.final_validation(config, model)
-    assert result["timesteps"] == int(steps) == 100
-    assert result["iae_ratio"] == pytest.approx(float(iae), abs=1e-5)
-    assert result["rmsd_ratio"] == pytest.approx(float(rmsd), abs=1e-5)
-    assert result["severity_ratio"] == pytest.approx(float(severity), abs=1e-5)
-    assert result["score"] == pytest.approx(float(score), abs=1e-5)
+    assert result["timesteps"] == recorded["timesteps"] == 100
+    assert set(result) == set(recorded) == set(VALIDATION_COLUMNS[False])
+    for key in VALIDATION_COLUMNS[False][1:]:
+        assert result[key] == pytest.approx(recorded[key], abs=1e-5), key
 
 
 def test_resume_needs_the_same_sweep_in_out(

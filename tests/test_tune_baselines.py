@@ -174,7 +174,7 @@ def test_the_selection_score_is_the_agents_validation_score() -> None:
             zip(candidate["iae"], candidate["rmsd_nm"], candidate["stick_slip_severity"], strict=True)]  # fmt: skip
     base = [dict(zip(("iae", "rmsd_nm", "stick_slip_severity"), r, strict=True)) for r in
             zip(reference["iae"], reference["rmsd_nm"], reference["stick_slip_severity"], strict=True)]  # fmt: skip
-    assert score.score == validation_score(rows, base)[3]
+    assert score.score == validation_score(rows, base).score
     assert score.feasible
     lean = _record([50.0, 110.0], [9e3, 12e3], [0.2, 0.6])  # RMSD ratio 0.875: no penalty
     assert tune.score_of(lean, reference).score == pytest.approx(0.4)
