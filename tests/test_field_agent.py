@@ -129,7 +129,6 @@ def test_the_severity_term_prices_a_ripple_the_mean_hides() -> None:
 def test_the_field_defaults_select_on_validation_with_the_severity_term() -> None:
     config = TrainConfig.for_env(FIELD)
     assert config.validation_severity_weight > 0 and config.validate_every > 0
-    assert config.total_timesteps % config.validate_every == 0  # the last model competes
     assert TrainConfig().validation_severity_weight == 0  # the paper string's rule unchanged
     with pytest.raises(ValueError, match=r"^--validation-severity-weight = -1 is out of range"):
         TrainConfig(validation_severity_weight=-1)
@@ -138,6 +137,7 @@ def test_the_field_defaults_select_on_validation_with_the_severity_term() -> Non
 def test_a_resumed_run_keeps_the_validation_columns_it_started_with(tmp_path: Path) -> None:
     """A run of an earlier version (no ``severity_iqm_ratio`` column) goes on writing its own
     columns; the sweep runner reads both kinds of file by column."""
+    pytest.importorskip("stable_baselines3")  # the validation's TensorBoard writer
     from types import SimpleNamespace
 
     from agents.train import VALIDATION_COLUMNS, _Validation
