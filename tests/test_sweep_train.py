@@ -117,6 +117,9 @@ def test_two_trial_sweep_on_the_local_cluster(
         best_line = min(validations[1:], key=lambda line: float(line.split(",")[1]))
         assert float(row["best_iae_ratio"]) == pytest.approx(float(best_line.split(",")[1]))
         assert (run / "model" / "policy.safetensors").is_file()
+        kept = load_policy(run / "model").metadata
+        assert int(row["kept_at_timesteps"]) == kept["timesteps"]
+        assert float(row["kept_score"]) == pytest.approx(kept["validation_score"], abs=1e-5)
         assert row["stopped_early"] == "False"
     summary = json.loads((out / "summary.json").read_text())
     best = min(rows, key=lambda r: float(r["best_iae_ratio"]))
