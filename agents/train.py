@@ -74,6 +74,7 @@ __all__ = [
     "ValidationScore",
     "env_kwargs",
     "find_last_checkpoint",
+    "kept_validation",
     "make_model",
     "make_training_env",
     "planned_timesteps",
@@ -759,6 +760,29 @@ def coupled_mean_reward(env: Any, policy: Any, seeds: Sequence[int]) -> float:
     return total / max(count, 1)
 
 
+def kept_validation(run_dir: Path) -> dict[str, Any] | None:
+    """The validation whose model a run kept in ``best/`` (``best/score.json``): its selection
+    score and the decisions it was taken at (``None`` in the files of earlier versions); ``None``
+    when the run kept none (the final model is then the last one).
+
+    Raises:
+        ValueError: a score that is not a number, decisions that are not a whole number >= 0
+            (the message names the file and the field).
+    """
+    score_file = Path(run_dir) / "best" / "score.json"
+    if not score_file.is_file():
+        return None
+    record = read_json(score_file)
+    score, steps = record.get("score"), record.get("timesteps")
+    if isinstance(score, bool) or not isinstance(score, (int, float)):
+        raise ValueError(f"{str(score_file)!r}: field score = {shown(score)}: expected a number")
+    if steps is not None and (isinstance(steps, bool) or not isinstance(steps, int) or steps < 0):
+        raise ValueError(
+            f"{str(score_file)!r}: field timesteps = {shown(steps)}: expected an integer >= 0"
+        )
+    return {"score": float(score), "timesteps": steps}
+
+
 class _Validation:
     """Every ``validate_every`` decisions: roll out the validation scenarios with the current
     policy (deterministic), compare with the base controller on the same seeds, log the ratios
@@ -783,15 +807,8 @@ class _Validation:
             self.reference = [
                 episode_metrics(rollout(base_env, ZeroAction(), s)) for s in self.seeds
             ]
-        self.best = math.inf
-        score_file = self.best_dir / "score.json"
-        if score_file.is_file():
-            score = read_json(score_file).get("score")
-            if isinstance(score, bool) or not isinstance(score, (int, float)):
-                raise ValueError(
-                    f"{str(score_file)!r}: field score = {shown(score)}: expected a number"
-                )
-            self.best = float(score)
+        kept = kept_validation(run_dir)
+        self.best = math.inf if kept is None else kept["score"]
         self.next_at = 0
         if self.csv.exists():  # a resumed run goes on with its own columns
             self.columns = self.csv.read_text().partition("\n")[0].split(",")

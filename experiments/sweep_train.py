@@ -523,8 +523,8 @@ def _trial_row(result: Any, spec: SweepSpec, runs_dir: Path) -> dict[str, Any]:
     valid = [r for r in records if r.get(METRIC) is not None and math.isfinite(r[METRIC])]
     best = min(valid, key=lambda r: r[METRIC]) if valid else None
     last = valid[-1] if valid else None
-    scored = [r for r in valid if math.isfinite(r.get("score", math.nan))]
-    kept = min(scored, key=lambda r: r["score"]) if scored else None  # the run's own choice
+    # the run's own choice (best/), else its last model
+    kept = (training.kept_validation(folder) if folder is not None else None) or last
     row.update(
         {
             "validations": len(valid),
@@ -533,8 +533,8 @@ def _trial_row(result: Any, spec: SweepSpec, runs_dir: Path) -> dict[str, Any]:
             "best_at_timesteps": None if best is None else int(best["timesteps"]),
             "last_iae_ratio": None if last is None else float(last[METRIC]),
             "last_rmsd_ratio": None if last is None else float(last["rmsd_ratio"]),
-            "kept_score": None if kept is None else float(kept["score"]),
-            "kept_at_timesteps": None if kept is None else int(kept["timesteps"]),
+            "kept_score": None if kept is None else kept.get("score"),
+            "kept_at_timesteps": None if kept is None else kept["timesteps"],
             "stopped_early": bool(len(valid) < spec.validations()),
             "error": None if result.error is None else str(result.error).splitlines()[0][:200],
             "run_dir": None if folder is None else str(folder),

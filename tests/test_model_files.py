@@ -1385,3 +1385,7 @@ def test_hostile_best_score_is_refused(finished_run: Any, tmp_path: Path, marker
     (run_dir / "best" / "score.json").write_text(json.dumps({"score": _serialized(b"x")}))
     with pytest.raises(ValueError, match=r"score.json': field score = .* expected a number"):
         _resume(finished_run, run_dir, validate_every=64, validation_episodes=1)
+    for steps in (64.5, "64", -1, True):
+        (run_dir / "best" / "score.json").write_text(json.dumps({"score": 1, "timesteps": steps}))
+        with pytest.raises(ValueError, match=r"score.json': field timesteps = .* expected an int"):
+            _resume(finished_run, run_dir, validate_every=64, validation_episodes=1)
