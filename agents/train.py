@@ -811,7 +811,8 @@ class _Validation:
         self.best = math.inf if kept is None else kept["score"]
         self.next_at = 0
         if self.csv.exists():  # a resumed run goes on with its own columns
-            self.columns = self.csv.read_text().partition("\n")[0].split(",")
+            with self.csv.open() as f:
+                self.columns = f.readline().rstrip("\n").split(",")
         else:
             self.columns = list(VALIDATION_COLUMNS[self.coupled])
             write_text(self.csv, ",".join(self.columns) + "\n")

@@ -71,7 +71,7 @@ from agents.train import planned_timesteps, train, validation_scenarios, validat
 from baselines.registry import REFERENCE_CONTROLLER
 from drill_env.evaluation import ZeroAction, episode_metrics, rollout
 from drill_env.files import write_text
-from drill_env.validation import shown
+from drill_env.validation import printable, shown
 from experiments.arguments import SEED_HIGH, ArgumentParser, names_type, output_folder
 from experiments.evaluate import (
     FIELD_HELD_OUT,
@@ -425,11 +425,19 @@ def _validations(csv_file: Path) -> list[dict[str, Any]]:
     """The validations of a run as its ``validation.csv`` records them (Tune's reports): the
     decisions and each ratio and the score, by column (a run of an earlier version has no
     ``severity_iqm_ratio``)."""
+    reports = []
     with csv_file.open(newline="") as f:
-        return [
-            {k: int(v) if k == "timesteps" else float(v) for k, v in row.items() if v}
-            for row in csv.DictReader(f)
-        ]
+        for line, row in enumerate(csv.DictReader(f), start=2):
+            try:
+                reports.append(
+                    {k: int(v) if k == "timesteps" else float(v) for k, v in row.items() if v}
+                )
+            except (TypeError, ValueError):
+                raise ValueError(
+                    f"{str(csv_file)!r}: line {line} is not a validation record: "
+                    f"{printable(','.join(map(str, row.values())))}"
+                ) from None
+    return reports
 
 
 def _scheduler(spec: SweepSpec) -> Any:

@@ -274,3 +274,14 @@ def test_a_killed_sweep_resumes_only_its_missing_trials(tmp_path: Path) -> None:
     assert (training[0] / "model" / "policy.safetensors").is_file()
     if interrupted:  # it continued from its last checkpoint
         assert list(training[0].glob("progress-resumed-at-*.csv"))
+
+
+def test_a_broken_validation_record_is_named_not_a_traceback(tmp_path: Path) -> None:
+    csv_file = tmp_path / "validation.csv"
+    csv_file.write_text("timesteps,iae_ratio,score\n100,0.9,1.0\n200,x,1\n")
+    with pytest.raises(ValueError, match=r"validation.csv': line 3 is not a validation record"):
+        sweep_train._validations(csv_file)
+    csv_file.write_text("timesteps,iae_ratio,score\n100,0.9,1.0\n")
+    assert sweep_train._validations(csv_file) == [
+        {"timesteps": 100, "iae_ratio": 0.9, "score": 1.0}
+    ]
