@@ -301,3 +301,34 @@ def test_accuracy_monte_carlo(name: str) -> None:
         worst = max(worst, float(err[:, 6].max()))
     print(f"{name}: worst bit-speed error over 40 random cases {worst:.2e} rad/s")
     assert worst <= GOAL_RAD_S
+
+
+def test_the_angular_momentum_balance_holds_over_a_closed_loop_stick_slip_run() -> None:
+    """docs/specification.md section 6: summed over the four inertias the couplings cancel, so
+    over a run the torque put in is the momentum gained plus what the damping to ground and the
+    rock took (the rock's torque being the string's pull on a stuck bit), to the integrator's
+    accuracy; and a run that sticks spends less than steady drilling would."""
+    import gymnasium as gym
+
+    from drill_env.evaluation import ZeroAction, rollout
+
+    wob_n, speed = 220e3, 4.0
+    env = gym.make("DrillString-v0", randomize=False, base_controller="proposed",
+                   noise_std_rad_s=0.0, wob_n=wob_n, reference_speed_rad_s=speed,
+                   episode_s=60.0)  # fmt: skip
+    trace = rollout(env, ZeroAction(), seed=0)
+    env.close()
+    p = PRESETS["zribi2024"]
+    x, u, stuck, dt = trace.states, trace.torque_nm, trace.bit_stuck, trace.plant_dt_s
+    assert 0.2 < stuck.mean() < 1.0  # it sticks and slips
+    t_a, t_0 = p.static_torque_nm(wob_n), p.sliding_torque_nm(wob_n)
+    pull = p.c_bi * (x[:, 4] - x[:, 6]) + p.k_bi * x[:, 5] - p.c_bit * x[:, 6]
+    slip = np.sign(x[:, 6]) * (t_0 + (t_a - t_0) * np.exp(-p.xi * np.abs(x[:, 6])))
+    rock = np.where(stuck, pull, slip)
+    losses = p.c_dt * x[:, 0] + p.c_bit * x[:, 6] + rock
+    inertias = np.array([p.J_dt, p.J_pi, p.J_co, p.J_bi])
+    gained = inertias @ (x[-1, [0, 2, 4, 6]] - x[0, [0, 2, 4, 6]])
+    put_in = float(np.sum(u[:-1]) * dt)
+    taken = float(np.sum(losses[1:] + losses[:-1]) * dt / 2)
+    assert put_in == pytest.approx(gained + taken, rel=2e-5)
+    assert float(np.mean(u)) < p.steady_torque_nm(speed, wob_n)
