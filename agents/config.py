@@ -33,12 +33,18 @@ __all__ = [
     "ENV_IDS",
     "COUPLED_ENV_ID",
     "FIELD_ENV_ID",
+    "MAX_EPOCHS",
     "MAX_FRAME_STACK",
+    "MAX_TORCH_THREADS",
+    "MAX_VALIDATION_EPISODES",
     "PAPER_ENV_ID",
+    "RESUME_CHANGES",
     "TRAINING_RANGE_NAMES",
     "TrainConfig",
     "field_docs",
     "plain_text",
+    "resume_conflicts",
+    "resumed_config",
 ]
 
 
@@ -54,6 +60,29 @@ TRAINING_RANGE_NAMES: Final = ("env", "wide")
 """The named scenario ranges of training on the field string (``--training-ranges``)."""
 MAX_FRAME_STACK: Final = 256
 """Most past observations a policy may stack (``--frame-stack``)."""
+MAX_VALIDATION_EPISODES: Final = 10_000
+"""Most validation scenarios of a run (``--validation-episodes``): each is a whole episode of
+the policy and of the base controller at every validation."""
+MAX_EPOCHS: Final = 1_000
+"""Most passes over each rollout (``--n-epochs``)."""
+MAX_TORCH_THREADS: Final = max(256, os.cpu_count() or 1)
+"""Most threads of torch (``--torch-threads``): 256, or the machine's CPU count if larger
+(torch starts them all; tens of thousands crash the process)."""
+RESUME_CHANGES: Final = (
+    "total_timesteps",
+    "torch_threads",
+    "progress_bar",
+    "verbose",
+    "tensorboard",
+    "run_dir",
+    "save_dir",
+    "resume",
+    "overwrite",
+    "trust_pickle",
+)
+"""The settings a resumed run may take from the caller instead of its ``config.json``: how
+far it goes, with how many threads, what it prints and logs, and where its files are. Every
+other setting is the run's own (:func:`resumed_config`)."""
 
 _PAPER_REWARD: Final = RewardWeights()
 """The env's reward weights on ``DrillString-v0``: the defaults of the ``reward_*`` settings."""
@@ -146,8 +175,13 @@ class TrainConfig:
     no pickle) at the first rollout end after every this many decisions; the last one is
     always saved at the end of the run. 0: only the last one."""
     resume: bool = False
-    """Continue the run in ``run_dir`` from its last checkpoint up to ``total_timesteps``
-    (with the settings of the run)."""
+    """Continue the run in ``run_dir`` with its own settings: from its last checkpoint up to
+    ``total_timesteps``, with the settings the run recorded in its ``config.json``. On the
+    command line the options left out take the recorded values, and an option given with a
+    value that differs from the recorded one is an error naming it. Only ``total_timesteps``,
+    ``torch_threads``, ``progress_bar``, ``verbose``, ``tensorboard``, ``save_dir`` and
+    ``trust_pickle`` may change (the run folder is found from ``run_dir``, or from
+    ``exp_name`` and ``seed``): ``drill-gym train --resume --out RUN --total-timesteps N``."""
     overwrite: bool = False
     """Delete an existing run folder of ``drill-gym train`` first. Without it (or ``resume``)
     a run folder that already holds files is refused."""
@@ -332,9 +366,11 @@ class TrainConfig:
         return cls(**values)
 
     def __post_init__(self) -> None:
-        positive = ("total_timesteps", "num_envs", "torch_threads", "n_steps", "batch_size")
-        for name in (*positive, "n_epochs", "validation_episodes"):
+        for name in ("total_timesteps", "num_envs", "n_steps", "batch_size"):
             _check_int(name, getattr(self, name), 1)
+        _check_int("n_epochs", self.n_epochs, 1, MAX_EPOCHS)
+        _check_int("validation_episodes", self.validation_episodes, 1, MAX_VALIDATION_EPISODES)
+        _check_int("torch_threads", self.torch_threads, 1, MAX_TORCH_THREADS)
         for name in ("checkpoint_every", "validate_every"):
             _check_int(name, getattr(self, name), 0)
         _check_int("seed", self.seed, 0, 2**32 - 1)
@@ -425,6 +461,46 @@ class TrainConfig:
 def _option(name: str) -> str:
     """A field as the command line spells it."""
     return "--" + name.replace("_", "-")
+
+
+def resume_conflicts(recorded: TrainConfig, given: dict[str, Any]) -> list[str]:
+    """The settings of ``given`` (name -> value) that a resumed run may not change
+    (:data:`RESUME_CHANGES`) and whose value differs from the ``recorded`` one."""
+    return [
+        name
+        for name, value in given.items()
+        if name not in RESUME_CHANGES and value != getattr(recorded, name)
+    ]
+
+
+def resumed_config(recorded: dict[str, Any], given: dict[str, Any], source: str) -> TrainConfig:
+    """The settings of a resumed run: those ``recorded`` in its ``config.json`` (``source``,
+    for messages), with the ``given`` values of :data:`RESUME_CHANGES` and ``resume`` on.
+
+    Raises:
+        ValueError: a ``given`` setting outside :data:`RESUME_CHANGES` that differs from the
+            recorded value (naming its option and both values), or a record that is not the
+            settings of a run.
+    """
+    try:
+        stored = TrainConfig.from_dict(dict(recorded))
+    except (TypeError, ValueError) as err:
+        raise ValueError(
+            f"--resume: {source} does not hold the settings of a run: {printable(err, 300)}"
+        ) from None
+    conflicts = resume_conflicts(stored, given)
+    if conflicts:
+        name = conflicts[0]
+        more = f" (and {', '.join(_option(n) for n in conflicts[1:])})" if conflicts[1:] else ""
+        raise ValueError(
+            f"--resume: {_option(name)} = {shown(given[name])} differs from the run's "
+            f"{shown(getattr(stored, name))} ({source}){more}: a resumed run keeps its "
+            "settings; leave the option out (only "
+            f"{', '.join(_option(n) for n in RESUME_CHANGES if n not in ('resume', 'overwrite'))}"
+            " may change)"
+        )
+    changes = {k: v for k, v in given.items() if k in RESUME_CHANGES}
+    return dataclasses.replace(stored, **{**changes, "resume": True, "overwrite": False})
 
 
 def _check_int(name: str, value: Any, low: int, high: int | None = None) -> None:

@@ -29,6 +29,7 @@ Examples::
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -52,7 +53,7 @@ from agents.checkpoints import (
     load_checkpoint,
     save_checkpoint,
 )
-from agents.config import COUPLED_ENV_ID, FIELD_ENV_ID, TrainConfig
+from agents.config import COUPLED_ENV_ID, FIELD_ENV_ID, TrainConfig, resumed_config
 from agents.model_format import read_json
 from agents.policy import PICKLE_RISK, ResidualPolicy, is_model_folder, load_policy, policy_from_sb3
 from baselines import controller_names
@@ -64,7 +65,7 @@ from drill_env.limits import DEFAULT_TORQUE_LIMITS
 from drill_env.metrics import interquartile_mean
 from drill_env.options import FIELD_MAX_TORQUE_NM, FieldEnvConfig
 from drill_env.scenarios import RPM, FieldRandomization
-from drill_env.validation import shown
+from drill_env.validation import printable, shown
 
 __all__ = [
     "REFERENCE_CONTROLLER",
@@ -79,6 +80,8 @@ __all__ = [
     "make_training_env",
     "planned_timesteps",
     "policy_env_kwargs",
+    "recorded_settings",
+    "resume_settings",
     "train",
     "validation_scenarios",
     "validation_score",
@@ -363,6 +366,43 @@ def _is_run_folder(run_dir: Path) -> bool:
     return {"exp_name", "total_timesteps", "n_steps"} <= set(record)
 
 
+def recorded_settings(run_dir: Path) -> dict[str, Any] | None:
+    """The settings a run recorded in ``run_dir/config.json`` (read bounded and strict), or
+    None when it has none.
+
+    Raises:
+        ValueError: The file is there but is not a JSON object (naming the file).
+    """
+    config_file = run_dir / "config.json"
+    if not os.path.lexists(config_file):
+        return None
+    if config_file.is_symlink() or not config_file.is_file():
+        raise ValueError(
+            f"--resume: {shown(str(config_file), 300)} is not a regular file: expected the "
+            "settings drill-gym train recorded"
+        )
+    return read_json(config_file)
+
+
+def resume_settings(config: TrainConfig, run_dir: Path) -> TrainConfig:
+    """``config`` for resuming the run in ``run_dir``, checked against the settings the run
+    recorded (:func:`agents.config.resumed_config`: only :data:`agents.config.RESUME_CHANGES`
+    may differ).
+
+    Raises:
+        ValueError: A setting that differs from the recorded one, or no ``config.json``.
+    """
+    recorded = recorded_settings(run_dir)
+    source = shown(str(run_dir / "config.json"), 300)
+    if recorded is None:
+        raise ValueError(
+            f"--resume: {source} is missing: a run is resumed with the settings it recorded "
+            "there (a run folder of drill-gym train has it)"
+        )
+    given = {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
+    return resumed_config(recorded, given, source)
+
+
 RUN_SUBFOLDERS: Final = (CHECKPOINT_DIR, "best", "model", "tb")
 """Folders of a run folder that ``drill-gym train`` writes into."""
 MAX_LINK_SCAN: Final = 100_000
@@ -551,7 +591,8 @@ def _start_line(config: TrainConfig, total: int, last: Checkpoint | None) -> str
     if last is None:
         return plan
     more = max(total - last.steps, 0)
-    return f"resuming from {last.path} at {last.steps:,} decisions ({more:,} more); {plan}"
+    where = printable(str(last.path), 300)
+    return f"resuming from {where} at {last.steps:,} decisions ({more:,} more); {plan}"
 
 
 def _save_checkpoint(model: Any, venv: Any, config: TrainConfig, run_dir: Path) -> Path:
@@ -582,13 +623,17 @@ def train(config: TrainConfig, progress: bool = True) -> Path:
     Raises:
         ValueError: A setting the run cannot use (an unregistered base controller, an
             existing run folder without ``resume`` or ``overwrite``, a pickled checkpoint
-            without ``trust_pickle``, a corrupt checkpoint); one line naming the option.
+            without ``trust_pickle``, a corrupt checkpoint, a resumed run whose settings
+            differ from those it recorded beyond :data:`agents.config.RESUME_CHANGES`); one
+            line naming the option.
         FileNotFoundError: ``resume`` without a checkpoint.
     """
     run_dir = config.resolved_run_dir()
     _check_settings(config)
     _check_save_dir(config)
     last = _prepare_run_dir(config, run_dir)
+    if config.resume:
+        config = resume_settings(config, run_dir)
     start_steps = 0 if last is None else last.steps
     total = planned_timesteps(config)
     print(_start_line(config, total, last), flush=True)

@@ -46,12 +46,14 @@ from drill_env.validation import printable, shown
 
 __all__ = [
     "MODEL_PARAMETERS",
+    "PARAMETER_RANGES",
     "PLANT_FORMAT",
     "READ_FORMATS",
     "CalibratedPlant",
     "FittedParameter",
     "drill_string_parameters",
     "env_keywords",
+    "check_parameter",
     "load_plant",
     "parameter_unit",
 ]
@@ -80,6 +82,22 @@ MODEL_PARAMETERS: Final = {
     "memory_time": (P_TAU, "s"),
 }
 """Name of each model parameter -> (index in the model vector, unit without WOB)."""
+PARAMETER_RANGES: Final = {
+    "bit_inertia": (1e-9, 1e9),
+    "stiffness": (1e-9, 1e12),
+    "damping": (0.0, 1e12),
+    "static_friction": (1e-12, 1e9),
+    "sliding_friction": (1e-12, 1e9),
+    "stribeck_rate": (0.0, 1e6),
+    "viscous_friction": (0.0, 1e12),
+    "memory_time": (1e-9, 1e6),
+}
+"""Allowed ``[low, high]`` of each model parameter, in its unit (the friction torques in N m,
+or m per N of WOB). The bit inertia, the stiffness and the memory time divide in the model
+(the natural period ``2 pi sqrt(J/k)``, the lag ``h / tau``) and the friction torques must
+be positive, so their ranges start above 0; the upper ends keep every product of the
+simulation within the float range. A fitted value, a ``--fix`` value and a plant file's
+value are all checked against these."""
 FAMILY_PARAMETERS: Final = {
     "karnopp": tuple(list(MODEL_PARAMETERS)[:6]),
     "stribeck_viscous": tuple(list(MODEL_PARAMETERS)[:7]),
@@ -93,6 +111,32 @@ def parameter_unit(name: str, uses_wob: bool) -> str:
     if uses_wob and name in ("static_friction", "sliding_friction"):
         return "m"
     return MODEL_PARAMETERS[name][1]
+
+
+def parameter_range_text(name: str) -> str:
+    """The allowed range of the parameter ``name`` as a message shows it, with its unit."""
+    low, high = PARAMETER_RANGES[name]
+    unit = MODEL_PARAMETERS[name][1]
+    if name in ("static_friction", "sliding_friction"):
+        unit = f"{unit} (m per N with WOB)"
+    return f"[{low:g}, {high:g}] {unit}"
+
+
+def check_parameter(name: str, value: object, where: str = "") -> float:
+    """``value`` as a float if it is a finite number within the range of the model parameter
+    ``name`` (:data:`PARAMETER_RANGES`); else ``ValueError`` naming ``where`` (the key path
+    of the value, default ``name``) and the allowed range."""
+    if name not in PARAMETER_RANGES:
+        raise ValueError(f"unknown parameter {shown(name)}: allowed {', '.join(MODEL_PARAMETERS)}")
+    label = where or name
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+    number = float(value) if ok else math.nan  # type: ignore[arg-type]
+    low, high = PARAMETER_RANGES[name]
+    if not (math.isfinite(number) and low <= number <= high):
+        raise ValueError(
+            f"{label} = {shown(value)} is out of range: allowed {parameter_range_text(name)}"
+        )
+    return number
 
 
 @dataclass(frozen=True)
@@ -135,25 +179,9 @@ class CalibratedPlant:
             raise ValueError(
                 f"family = {shown(self.family)} is not known: allowed {', '.join(FAMILIES)}"
             )
-        expected = FAMILY_PARAMETERS[self.family]
-        missing = [n for n in expected if n not in self.parameters]
-        extra = [n for n in self.parameters if n not in expected]
-        if missing or extra:
-            raise ValueError(
-                f"parameters of family {shown(self.family)}: missing {missing}, unknown {extra}: "
-                f"expected {', '.join(expected)}"
-            )
+        _check_family_parameters(self.family, self.parameters, "parameters")
         for name, p in self.parameters.items():
-            if not (isinstance(p.value, (int, float)) and math.isfinite(p.value)):
-                raise ValueError(
-                    f"parameters.{name}.value = {shown(p.value)} is not a finite number"
-                )
-            low_zero = name in ("damping", "viscous_friction", "stribeck_rate")
-            if p.value < 0 or (not low_zero and p.value <= 0):
-                raise ValueError(
-                    f"parameters.{name}.value = {shown(p.value)} is out of range: allowed "
-                    f"{'>= 0' if low_zero else '> 0'}"
-                )
+            check_parameter(name, p.value, f"parameters.{name}.value")
             if p.unit != parameter_unit(name, self.uses_wob):
                 raise ValueError(
                     f"parameters.{name}.unit = {shown(p.unit)}: expected "
@@ -213,6 +241,20 @@ class CalibratedPlant:
         return write_text(p, json.dumps(_clean(self.to_json()), indent=1) + "\n")
 
 
+def _check_family_parameters(family: str, names: Mapping[str, Any], where: str) -> None:
+    """``ValueError`` naming the key path (``where.NAME``) of the first parameter that the
+    friction family ``family`` has and ``names`` lacks, or that ``names`` has and it does not."""
+    expected = FAMILY_PARAMETERS[family]
+    missing = [n for n in expected if n not in names]
+    extra = [printable(n) for n in names if n not in expected]
+    if missing or extra:
+        path = f"{where}.{missing[0]}: missing" if missing else f"{where}.{extra[0]}: unknown"
+        raise ValueError(
+            f"{path} (family {shown(family)}: missing {missing}, unknown {extra}: expected "
+            f"{', '.join(expected)})"
+        )
+
+
 def _clean(value: Any) -> Any:
     if isinstance(value, float) and not math.isfinite(value):
         return None
@@ -225,7 +267,7 @@ def _clean(value: Any) -> Any:
 
 def _field(data: Mapping[str, Any], name: str, kinds: tuple[type, ...], where: str) -> Any:
     if name not in data:
-        raise ValueError(f"{where}: missing field {shown(name)}")
+        raise ValueError(f"{where}.{name}: missing (a required field)")
     value = data[name]
     if not isinstance(value, kinds) or isinstance(value, bool) and bool not in kinds:
         names = "/".join(k.__name__ for k in kinds)
@@ -277,7 +319,7 @@ def plant_from_json(data: Any, where: str = "plant") -> CalibratedPlant:
         ):
             raise ValueError(f"{w}.interval_95 = {shown(interval)} is not [low, high] or null")
         parameters[name] = FittedParameter(
-            float(_field(entry, "value", number, w)),
+            check_parameter(name, _field(entry, "value", number, w), f"{w}.value"),
             _field(entry, "unit", (str,), w),
             bool(_field(entry, "identified", (bool,), w)),
             None if rel is None else float(rel),
@@ -307,8 +349,14 @@ def plant_from_json(data: Any, where: str = "plant") -> CalibratedPlant:
     log = data.get("log", "")
     if not isinstance(log, str):
         raise ValueError(f"{where}.log = {shown(log)} is not text")
+    family = _field(data, "family", (str,), where)
+    if family not in FAMILIES:
+        raise ValueError(
+            f"{where}.family = {shown(family)} is not known: allowed {', '.join(FAMILIES)}"
+        )
+    _check_family_parameters(family, parameters, f"{where}.parameters")
     return CalibratedPlant(
-        family=_field(data, "family", (str,), where),
+        family=family,
         uses_wob=bool(_field(data, "uses_wob", (bool,), where)),
         parameters=parameters,
         initial_twist_rad=float(_field(data, "initial_twist_rad", number, where)),

@@ -89,6 +89,7 @@ from drill_env.kernel import (
     _sense,
     _slot,
     _sums,
+    residual_base,
 )
 from drill_env.layout import (
     CH_ACTUATOR,
@@ -1146,7 +1147,8 @@ def _advance_coupled_one(i, b, s, c):
         tracking += tracking_error(ref, xi[X_BIT_SPEED])
         variation += abs(u - u_prev)
         torque_squared += u * u
-        residual_squared += (u - u_base) * (u - u_base)
+        residual = u - residual_base(s, u_base)
+        residual_squared += residual * residual
         u_prev = u
         u_base_last = u_base
         command_last = u_command

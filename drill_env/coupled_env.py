@@ -19,11 +19,12 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import metadata
-from typing import Any, Final, NamedTuple, Protocol, SupportsFloat, runtime_checkable
+from typing import Any, Final, NamedTuple, NoReturn, Protocol, SupportsFloat, runtime_checkable
 
 import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
+from gymnasium.envs.registration import EnvSpec
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 from numba import njit
@@ -67,7 +68,7 @@ from drill_env.coupled import (
     switch_rule,
     switching_functions,
 )
-from drill_env.env import validate_actions
+from drill_env.env import copy_env_attributes, refuse_pickling, validate_actions
 from drill_env.layout import (
     M_APPLIED_TORQUE,
     M_STATE,
@@ -78,13 +79,16 @@ from drill_env.layout import (
     N_MEASUREMENT,
 )
 from drill_env.limits import (
+    HOOK_STIFFNESS_RANGE_N_M,
     MAX_BATCH_BYTES,
     MAX_EPISODE_S,
     MAX_NUM_ENVS,
     MAX_SPEED_RAD_S,
     TorqueLimits,
 )
+from drill_env.options import check_episode_s
 from drill_env.parameters import PLANT_DT_S, PRESETS, DrillStringParameters
+from drill_env.rewards import DIVERGED_REWARD
 from drill_env.validation import (
     check_choice,
     check_finite_fields,
@@ -622,7 +626,7 @@ class CoupledEnvConfig:
         max_torque_nm: Largest top-drive torque (the range is [0, max]), N m.
         max_force_n: Largest applied force (the range is [0, max]), N.
         control_dt_s: Decision period, s (a multiple of the 1e-4 s plant step).
-        episode_s: Episode length, s (truncation).
+        episode_s: Episode length, s (truncation; a multiple of ``control_dt_s``).
         randomize: Draw the rock's intrinsic energy (x U[0.8, 1.2]) and the initial bit
             speed (x U[0.8, 1.0]) from the reset seed; otherwise nominal rock and 0.9.
         surface: Rock-surface rule, ``"max"`` or ``"delay"``.
@@ -696,7 +700,7 @@ class CoupledEnvConfig:
                 f"AxialController, got {shown(self.force_loop)}"
             )
         check_choice("axial_input", self.axial_input, AXIAL_INPUTS, "axial input")
-        check_range("hook_stiffness_n_m", self.hook_stiffness_n_m, 1e3, 1e10)
+        check_range("hook_stiffness_n_m", self.hook_stiffness_n_m, *HOOK_STIFFNESS_RANGE_N_M)
         check_range("residual_hook_speed_m_s", self.residual_hook_speed_m_s, 0.0, 10.0)
         check_range("max_hook_speed_m_s", self.max_hook_speed_m_s, 1e-6, 10.0)
         check_choice("surface", self.surface, ("max", "delay"), "surface rule")
@@ -725,7 +729,7 @@ class CoupledEnvConfig:
             f"a multiple of the plant step {PLANT_STEP_S:g} s",
             abs(steps - round(steps)) < 1e-6,
         )
-        check_range("episode_s", self.episode_s, self.control_dt_s, 1e5)
+        check_episode_s(self.episode_s, self.control_dt_s)
         if self.action_mode == "force" and self.torque_loop == "none":
             raise ValueError(
                 "action_mode = 'force' needs a torque loop (torque_loop not 'none'): something "
@@ -785,8 +789,10 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
     torque) with the bit speed lowered to 0.9 of it (``randomize``: U[0.8, 1.0] and the rock's
     intrinsic energy x U[0.8, 1.2], from the reset seed).
 
-    **Episode end.** Truncated after ``episode_s``; terminated if the state stops being finite
-    or a speed leaves 1000 rad/s (``info["termination_reason"] = "diverged"``).
+    **Episode end.** Truncated after ``episode_s`` (``env.spec.max_episode_steps`` decisions);
+    terminated if the state stops being finite or a speed leaves 1000 rad/s
+    (``info["termination_reason"] = "diverged"``, reward -1 as in ``DrillString-v0``; a further
+    step before ``reset()`` is a ``RuntimeError``).
 
     **Arguments.** The fields of :class:`CoupledEnvConfig` as keywords.
 
@@ -813,6 +819,7 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
 
     def __init__(self, render_mode: str | None = None, **keywords: Any) -> None:
         render.check_render_mode(render_mode)  # first: a bad value is refused before any work
+        self._spec: EnvSpec | None = None
         check_unknown(keywords, [f.name for f in dataclasses.fields(CoupledEnvConfig)])
         self.render_mode = render_mode
         with input_type_errors():
@@ -856,12 +863,35 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
             loop = c.force_loop
             self._axial = make_axial_controller(loop) if isinstance(loop, str) else loop
         self._ready = False
+        self._running = False  # started, and the episode has not ended by diverging
+
+    @property
+    def spec(self) -> EnvSpec | None:
+        """The registration spec, with ``max_episode_steps`` the decisions that ``episode_s``
+        and ``control_dt_s`` make (the env truncates itself there)."""
+        return self._spec
+
+    @spec.setter
+    def spec(self, value: EnvSpec | None) -> None:
+        if value is not None and value.max_episode_steps is None:
+            value = dataclasses.replace(value, max_episode_steps=self._steps_per_episode)
+        self._spec = value
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> DrillStringCoupledEnv:
+        """An independent env in the same state (its arrays, loops and generator copied)."""
+        twin: DrillStringCoupledEnv = copy_env_attributes(self, memo)
+        return twin
+
+    def __reduce_ex__(self, protocol: Any) -> NoReturn:
+        refuse_pickling(self)
 
     # ------------------------------------------------------------------------------ reset
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[npt.NDArray[np.float32], dict[str, Any]]:
         """Start an episode from steady drilling (see the class docstring)."""
+        if isinstance(seed, np.integer):  # Gymnasium takes a Python int only
+            seed = int(seed)
         super().reset(seed=seed)
         if options:
             raise ValueError(f"options = {shown(options)} is not supported: allowed None or {{}}")
@@ -936,6 +966,7 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
         self._force = c.applied_force_n
         self._base = self._u_steady
         self._ready = True
+        self._running = True
         if self._rendering is not None:
             self._record_frame(new_episode=True)
         return self._observation(), self._info({}, 0.0, 0.0, 0.0)
@@ -997,8 +1028,10 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
         self, action: Any
     ) -> tuple[npt.NDArray[np.float32], SupportsFloat, bool, bool, dict[str, Any]]:
         """Hold the inputs over one decision and advance the plant."""
-        if not self._ready:
-            raise RuntimeError("call reset() before step()")
+        if not self._running:
+            if not self._ready:
+                raise RuntimeError("call reset() before step()")
+            raise RuntimeError("the episode has ended (diverged): call reset()")
         size = 2 if self.config.action_mode == "both" else 1
         a = validate_actions(action, 1, size=size)[0].reshape(size)
         c = self.config
@@ -1055,8 +1088,9 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
         info = self._info(terms, stuck, off, acc[_A_HOLD] / span)
         info["top_drive_power_w"] = power
         if diverged:
+            reward = DIVERGED_REWARD
             info["termination_reason"] = "diverged"
-            self._ready = False
+            self._running = False
         if self._rendering is not None:
             self._record_frame()
         return self._observation(), reward, diverged, truncated, info

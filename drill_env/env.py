@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import copy
 import dataclasses
-from typing import Any, ClassVar, Final, NamedTuple, SupportsFloat
+import types
+from typing import Any, ClassVar, Final, NamedTuple, NoReturn, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
@@ -35,13 +37,16 @@ from drill_env.layout import (
     STATUS_OK,
 )
 from drill_env.options import EnvConfig, FieldEnvConfig
-from drill_env.rewards import TERMS, report_reward
+from drill_env.rewards import DIVERGED_REWARD, TERMS, report_reward
 from drill_env.validation import shown
 
 __all__ = [
     "DrillStringEnv",
     "DrillStringFieldEnv",
     "StringState",
+    "copy_batch_env",
+    "copy_env_attributes",
+    "refuse_pickling",
     "report_info",
     "validate_actions",
 ]
@@ -79,6 +84,120 @@ def report_info(report: Any, residual: bool, telemetry: bool) -> dict[str, Any]:
             info[key] = report[index]
         info["telemetry_received"] = report[REP_TELEMETRY_RECEIVED] > 0.5
     return info
+
+
+def refuse_pickling(env: object) -> NoReturn:
+    """``TypeError``: an env cannot be pickled or shallow-copied (its compiled kernel runs on
+    the addresses of its own arrays and its compiled base controller); say what to do instead."""
+    name = type(env).__name__
+    raise TypeError(
+        f"{name} cannot be pickled or shallow-copied: its compiled kernel holds the addresses "
+        "of its own memory. Use copy.deepcopy(env) for an independent copy in the same state, "
+        "or make a new env with gymnasium.make(...) (in another process: pass the id and "
+        "keywords, not the env)"
+    )
+
+
+def copy_batch_env(env: Any, memo: dict[int, Any]) -> Any:
+    """A deep copy of ``env`` (a single or vector env whose engine is a
+    :class:`drill_env.batch.StringBatch` at ``env._batch``) that runs on its own memory.
+
+    ``copy.deepcopy`` alone is not enough: the kernel takes its arrays by address
+    (:class:`drill_env.kernel.PackedArrays`, which copies itself with the copies' addresses),
+    a deep copy of a numpy view is an array of its own (the rows and noise blocks the env and
+    its batch keep as views would no longer reach the kernel's arrays), and a closure is not
+    copied at all (the coupled loop's holds its arrays). Here every view held by the env, its
+    batch and its episodes becomes the same view of the copied arrays, and every closure of
+    theirs is rebuilt on the copies of what it holds. The rendering history is copied; the
+    copy draws its own frames (and opens its own window in ``human`` mode).
+
+    Raises:
+        TypeError: when the copy would still share memory with ``env`` (then make a new env
+            with ``gymnasium.make``).
+    """
+    cls = type(env)
+    twin = copy_env_attributes(env, memo)
+    batch, twin_batch = env._batch, twin._batch
+    originals = [*batch.arrays, *(batch.coupled_arrays or ())]
+    copies = [*twin_batch.arrays, *(twin_batch.coupled_arrays or ())]
+    pairs = [(env, twin), (batch, twin_batch)]
+    pairs += [
+        (e, t) for e, t in zip(batch.episodes, twin_batch.episodes, strict=True) if e is not None
+    ]
+    for original, copied in pairs:
+        for key, value in vars(original).items():
+            if isinstance(value, np.ndarray) and value.base is not None:
+                view = _same_view(value, originals, copies)
+                if view is not None:
+                    vars(copied)[key] = view
+            elif isinstance(value, types.FunctionType) and value.__closure__:
+                vars(copied)[key] = _rebound_closure(value, memo)
+    for _, copied in pairs:
+        for key, value in vars(copied).items():
+            if isinstance(value, np.ndarray) and any(
+                np.may_share_memory(value, array) for array in originals
+            ):
+                raise TypeError(
+                    f"{cls.__name__} cannot be deep-copied: {key} of the copy would share the "
+                    "original's memory; make a new env with gymnasium.make(...)"
+                )
+    return twin
+
+
+def copy_env_attributes(env: Any, memo: dict[int, Any]) -> Any:
+    """A new object of ``env``'s class whose attributes are deep copies of ``env``'s (through
+    ``memo``); the rendering's history is copied, its frames drawn afresh."""
+    twin = object.__new__(type(env))
+    memo[id(env)] = twin
+    for key, value in vars(env).items():
+        if key == "_rendering":
+            vars(twin)[key] = _copied_rendering(value, memo)
+        else:
+            vars(twin)[key] = copy.deepcopy(value, memo)
+    return twin
+
+
+def _same_view(
+    view: npt.NDArray[Any], originals: list[npt.NDArray[Any]], copies: list[npt.NDArray[Any]]
+) -> npt.NDArray[Any] | None:
+    """The view of the copy that ``view`` is of the original array it lies in (same offset,
+    shape and strides), or None when it lies in none of ``originals``."""
+    start = view.__array_interface__["data"][0]
+    for original, twin in zip(originals, copies, strict=True):
+        low = original.__array_interface__["data"][0]
+        if original.nbytes and low <= start < low + original.nbytes:
+            return np.ndarray(
+                view.shape, view.dtype, buffer=twin, offset=start - low, strides=view.strides
+            )
+    return None
+
+
+def _rebound_closure(function: types.FunctionType, memo: dict[int, Any]) -> types.FunctionType:
+    """``function`` with each value it closes over replaced by that value's copy in ``memo``
+    (as is when it was not copied: constants, compiled code)."""
+    cells = tuple(
+        types.CellType(memo.get(id(cell.cell_contents), cell.cell_contents))
+        for cell in function.__closure__ or ()
+    )
+    rebound = types.FunctionType(
+        function.__code__, function.__globals__, function.__name__, function.__defaults__, cells
+    )
+    rebound.__kwdefaults__ = function.__kwdefaults__
+    return rebound
+
+
+def _copied_rendering(
+    rendering: render.EnvRendering | None, memo: dict[int, Any]
+) -> render.EnvRendering | None:
+    """A rendering with a copy of ``rendering``'s history that draws its own frames."""
+    if rendering is None:
+        return None
+    twin = copy.copy(rendering)
+    twin.history = copy.deepcopy(rendering.history, memo)
+    twin._renderer = None
+    if rendering.window is not None:
+        twin.window = render.HumanWindow(rendering.window.fps, rendering.window.title)
+    return twin
 
 
 _INFO_COLUMNS: Final = (
@@ -236,8 +355,8 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
     | ``T`` tracking | ``mean(min(abs(e) / max(V_ref, 1 rad/s), 1))`` (1: the bit stuck) | 0.02-1 |
     | ``C`` chattering | ``min(TV(u) / 50 kN m, 1)``, TV the total variation of the applied torque over the period | 0.3-0.4 for ``proposed`` with the 0.1 rad/s noise, 0-0.8 for random direct actions |
     | ``S`` stuck | share of the plant steps with the bit stuck (weight 0 by default: ``T`` already counts a stuck bit as a full error) | 0-1 |
-    | ``Q`` torque | ``mean(u^2) / max_torque^2`` (the paper's RMSD, an energy penalty) | 0.04-0.4 |
-    | ``R`` residual | ``mean((u - u_base)^2) / residual_scale^2`` (residual mode) | 0-0.9 for random residuals |
+    | ``Q`` torque | ``mean(u^2) / max(abs(min_torque), abs(max_torque))^2`` (the paper's RMSD, an energy penalty) | 0.04-0.4 |
+    | ``R`` residual | ``mean((u - u_base)^2) / residual_scale^2``, ``u_base`` clipped to the torque range (residual mode) | 0-0.9 for random residuals (it can exceed 1 behind the field top drive's lag) |
 
     The typical ranges are printed by ``benchmarks/reward_terms.py`` (default keywords,
     randomised episodes).
@@ -336,7 +455,7 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         self._running = False  # started, and the episode has not ended by diverging
         # The hot path's constants: the reward of a report row, the info columns, the rows.
         self._reward = report_reward(
-            self.config.reward_weights, self.config.max_torque_nm, self._residual_scale
+            self.config.reward_weights, self.config.torque_scale_nm, self._residual_scale
         )
         b = self._batch
         self._extra_columns = (*(_RESIDUAL_COLUMNS if b.residual else ()),) + (
@@ -390,6 +509,8 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[npt.NDArray[np.float32], dict[str, Any]]:
+        if isinstance(seed, np.integer):  # Gymnasium takes a Python int only
+            seed = int(seed)
         super().reset(seed=seed)
         root = None
         if seed is None and not self._started:
@@ -431,12 +552,21 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         if was_clipped:
             info["action_clipped"] = True
         if terminated:
-            reward = -1.0
+            reward = DIVERGED_REWARD
             self._running = False
             info["termination_reason"] = b.end_reason(0)
         if self._rendering is not None:
             self._record(report)
         return self._obs_row.copy(), reward, terminated, truncated, info
+
+    # ------------------------------------------------------------------ copies
+    def __deepcopy__(self, memo: dict[int, Any]) -> DrillStringEnv:
+        """An independent env in the same state (:func:`copy_batch_env`): given the same
+        actions it continues bit for bit as this one would, on its own memory."""
+        return copy_batch_env(self, memo)
+
+    def __reduce_ex__(self, protocol: Any) -> NoReturn:
+        refuse_pickling(self)
 
     # ------------------------------------------------------------------ rendering
     def _record(self, report: list[float], new_episode: bool = False) -> None:
@@ -570,7 +700,7 @@ class DrillStringFieldEnv(DrillStringEnv):
     | ``rgd_parameters`` | the RGD bit (``drill_env.coupled.RGD_PRESETS`` name or parameters) | ``"rgd_a"`` |
     | ``axial_top`` | ``"force"`` (``wob_n`` is the applied force at the top) or ``"hook"`` | ``"force"`` |
     | ``hook_speed_m_s`` | hook speed with ``axial_top="hook"``, m/s | ``None`` |
-    | ``hook_stiffness_n_m`` | derrick/hook stiffness, N/m (``inf``: rigid) | ``inf`` |
+    | ``hook_stiffness_n_m`` | derrick/hook stiffness, N/m: 1e3 to 1e10, or ``inf`` (rigid) | ``inf`` |
 
     With ``bit="rgd"`` (docs/field-coupled.md) the string starts at rest on the bottom under the
     applied force, the observation ends with the weight on bit (1e5 N) and the rate of

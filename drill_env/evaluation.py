@@ -33,6 +33,7 @@ from drill_env.layout import (
 )
 from drill_env.metrics import episode_metrics_from_samples
 from drill_env.parameters import PLANT_DT_S
+from drill_env.validation import shown
 
 __all__ = [
     "PlantSamples",
@@ -43,6 +44,7 @@ __all__ = [
     "reset_each",
     "rollout",
     "run_episode",
+    "termination_note",
 ]
 
 
@@ -232,7 +234,12 @@ def rollout(
 
 def episode_metrics(trace: Trace) -> dict[str, Any]:
     """The docs/specification.md section 4 metrics of ``trace`` (see
-    :func:`drill_env.metrics.episode_metrics_from_samples`), plus ``diverged``."""
+    :func:`drill_env.metrics.episode_metrics_from_samples`), plus ``diverged``: whether the
+    episode was terminated (a state that left its bounds, a base controller's NaN or infinite
+    torque) or its base controller returned a torque that is not finite at any step (a
+    compiled law's infinite torque is held at the torque limit and does not end the episode);
+    :func:`termination_note` says why. The metrics of a diverged run cover only the steps
+    before its end."""
     metrics = episode_metrics_from_samples(
         trace.bit_speed_rad_s,
         trace.reference_rad_s,
@@ -240,8 +247,30 @@ def episode_metrics(trace: Trace) -> dict[str, Any]:
         trace.bit_stuck,
         trace.plant_dt_s,
     )
-    metrics["diverged"] = trace.termination_reason == "diverged"
+    metrics["diverged"] = (
+        trace.termination_reason is not None or _first_non_finite(trace.base_torque_nm) is not None
+    )
     return metrics
+
+
+def _first_non_finite(values: npt.NDArray[np.float64]) -> float | None:
+    """The first value of ``values`` that is NaN or infinite, or None."""
+    bad = ~np.isfinite(values)
+    return float(values[int(np.argmax(bad))]) if bad.any() else None
+
+
+def termination_note(trace: Trace) -> str:
+    """Why the run of ``trace`` diverged when more is known than that its state left its
+    bounds: the env's reason (``"base_controller Name returned nan N m"``), or the first NaN or
+    infinite torque its base controller returned (a compiled law's). Empty when the run did
+    not diverge, or its state left its bounds with every torque finite."""
+    reason = trace.termination_reason
+    if reason is not None and reason != "diverged":
+        return reason
+    value = _first_non_finite(trace.base_torque_nm)
+    if value is not None:
+        return f"the base controller returned a non-finite torque ({shown(value)} N m)"
+    return ""
 
 
 def run_episode(

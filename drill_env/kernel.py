@@ -43,6 +43,7 @@ plant step on the views of one string instead of compiling a loop of its own.
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Callable
 from typing import Any, Final, NamedTuple
@@ -178,6 +179,7 @@ __all__ = [
     "fast_entry",
     "measure",
     "observe",
+    "residual_base",
     "write_observation",
     "write_report",
 ]
@@ -336,6 +338,24 @@ class PackedArrays:
         """String ``i``'s rows (views of shape ``(1, ...)``), packed."""
         return PackedArrays(BatchArrays._make(array[i : i + 1] for array in self.arrays))
 
+    def __reduce__(self) -> tuple[type[PackedArrays], tuple[BatchArrays]]:
+        """Pickled as its arrays: unpickling packs the new arrays (their own addresses)."""
+        return PackedArrays, (self.arrays,)
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> PackedArrays:
+        """The copies of the arrays, packed: the copy's ``meta`` holds the copies' addresses
+        (a copy of this ``meta`` would point into this object's arrays). A holder of ``meta``
+        copied in the same :func:`copy.deepcopy` gets the new ``meta`` (or, when it was copied
+        first, its copy is rewritten with the new addresses)."""
+        twin = PackedArrays(copy.deepcopy(self.arrays, memo))
+        copied_meta = memo.get(id(self.meta))
+        if copied_meta is not None:
+            copied_meta[...] = twin.meta
+            twin.meta = copied_meta
+        else:
+            memo[id(self.meta)] = twin.meta
+        return twin
+
 
 @intrinsic
 def _void_pointer(typingctx, address):
@@ -467,6 +487,14 @@ def _base_torque(s, lp, ls, meas, external: float, ref: float) -> float:
         value: float = call_law(s.law_address, lp, ls, meas, ref, s.dt)  # type: ignore[call-arg]
         return value
     return external
+
+
+@njit(cache=True, inline="always")
+def residual_base(s, u_base: float) -> float:
+    """The base torque the residual reward term compares the applied torque with, N m: the
+    base controller's torque clipped to the top drive's range (a base torque beyond it, even
+    1e200 N m, then costs at most the range, and the term stays in [0, 1])."""
+    return min(max(u_base, s.u_min), s.u_max)
 
 
 @njit(cache=True, inline="always")
@@ -725,7 +753,8 @@ def _string_loop(i, b, s, state):
         tracking += tracking_error(ref, xi[X_BIT_SPEED])
         variation += abs(u - u_prev)
         torque_squared += u * u
-        residual_squared += (u - u_base) * (u - u_base)
+        residual = u - residual_base(s, u_base)
+        residual_squared += residual * residual
         u_prev = u
         u_base_last = u_base
         command_last = u_command

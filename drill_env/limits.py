@@ -10,6 +10,7 @@ from typing import Final, NamedTuple
 
 __all__ = [
     "DEFAULT_TORQUE_LIMITS",
+    "HOOK_STIFFNESS_RANGE_N_M",
     "MAX_BATCH_BYTES",
     "MAX_ELEMENTS",
     "MAX_EPISODE_S",
@@ -36,6 +37,12 @@ class TorqueLimits(NamedTuple):
 
 DEFAULT_TORQUE_LIMITS: Final = TorqueLimits(0.0, 50_000.0)
 """The top-drive torque range of ``DrillString-v0`` by default, N m."""
+
+HOOK_STIFFNESS_RANGE_N_M: Final = (1e3, 1e10)
+"""Accepted finite axial stiffness of the string between hook and bit (an elastic hook), N/m:
+``DrillStringCoupled-v0``'s ``hook_stiffness_n_m``, and ``DrillStringField-v0``'s with
+``bit="rgd"`` (which also takes ``inf``, a rigid hook). A stiffer spring is no longer resolved
+by the plant step: the coupled chain diverges at its first step."""
 
 MAX_TORQUE_ABS_NM: Final = 1e6
 """Largest accepted torque limit or residual scale, N m."""

@@ -44,6 +44,7 @@ __all__ = [
     "COLUMN_UNITS",
     "MAX_LOG_BYTES",
     "MAX_LOG_ROWS",
+    "MIN_SAMPLE_PERIOD_S",
     "OPTIONAL_COLUMNS",
     "REQUIRED_COLUMNS",
     "Defect",
@@ -75,6 +76,11 @@ MAX_LOG_ROWS: Final = 50_000_000
 """Most data rows accepted."""
 MIN_LOG_ROWS: Final = 3
 """Fewest data rows a log can have."""
+MIN_SAMPLE_PERIOD_S: Final = 1e-5
+"""Shortest median sample period of a log (and of any window of it), s: sampling at up to
+100 kHz, above the fastest torsional sensors. The fit's smoothing and stick detection work in
+windows of a fixed duration, whose length in samples grows as the period shrinks; a clock in
+the wrong unit (ns written as s) is refused here rather than allocated."""
 MAX_LINE_CHARS: Final = 64 * 1024
 """Longest line of a CSV log (header, comment or data row), characters."""
 MAX_SHOWN_NAMES: Final = 8
@@ -191,7 +197,8 @@ def check_log_arrays(
     time_s: npt.NDArray[np.float64], columns: Mapping[str, npt.NDArray[np.float64]]
 ) -> None:
     """Check a log's arrays: known names, the required ones there, one length, finite values,
-    a strictly increasing clock; ``ValueError`` naming the column and the row otherwise."""
+    a strictly increasing clock with a median step of at least :data:`MIN_SAMPLE_PERIOD_S`;
+    ``ValueError`` naming the column and the row otherwise."""
     names = ["time_s", *columns]
     _check_names(names)
     _check_rows(time_s, columns)
@@ -243,6 +250,13 @@ def _check_rows(
         raise ValueError(
             f"column 'time_s', row {i + 1}: {shown(float(time_s[i]))} s is not after row {i}'s "
             f"{shown(float(time_s[i - 1]))} s: time must be strictly increasing"
+        )
+    period = float(np.median(steps))
+    if not period >= MIN_SAMPLE_PERIOD_S * (1 - 1e-6):  # a clock's rounding is no excess
+        raise ValueError(
+            f"column 'time_s': the median sample period {period:.3g} s is out of range: allowed "
+            f"at least {MIN_SAMPLE_PERIOD_S:g} s (at most {1 / MIN_SAMPLE_PERIOD_S:.0f} samples "
+            "per second; is the clock in seconds?)"
         )
 
 

@@ -16,7 +16,7 @@ from typing import Any, ClassVar, Final
 import numpy as np
 
 from drill_env.control import Controller
-from drill_env.coupled import RgdParameters
+from drill_env.coupled import RGD_PRESETS, RgdParameters
 from drill_env.coupled_chain import check_bit_keywords
 from drill_env.distributed import (
     DISTRIBUTED_PRESETS,
@@ -27,6 +27,7 @@ from drill_env.distributed import (
 from drill_env.layout import OBSERVATION_MODES
 from drill_env.limits import (
     DEFAULT_TORQUE_LIMITS,
+    HOOK_STIFFNESS_RANGE_N_M,
     MAX_EPISODE_S,
     MAX_REFERENCE_RAD_S,
     MAX_TORQUE_ABS_NM,
@@ -51,6 +52,7 @@ from drill_env.scenarios import (
 )
 from drill_env.sensors import MeasurementChannel
 from drill_env.validation import (
+    InputTypeError,
     check_bool,
     check_choice,
     check_range,
@@ -64,6 +66,7 @@ from drill_env.validation import (
 
 __all__ = [
     "FIELD_MAX_TORQUE_NM",
+    "check_episode_s",
     "PER_EPISODE_KEYWORDS",
     "REALISM_KEYWORDS",
     "REALISM_LEVELS",
@@ -186,12 +189,7 @@ class EnvConfig:
                 f"control_dt_s = {shown(self.control_dt_s)} is out of range: allowed a multiple of "
                 f"plant_dt = {PLANT_DT_S} s"
             )
-        check_range("episode_s", self.episode_s, self.control_dt_s, MAX_EPISODE_S)
-        if abs(self.episode_s / self.control_dt_s - self.max_steps) > 1e-6:
-            raise ValueError(
-                f"episode_s = {shown(self.episode_s)} is out of range: allowed a multiple of "
-                f"control_dt_s = {self.control_dt_s}"
-            )
+        check_episode_s(self.episode_s, self.control_dt_s)
         bc = self.base_controller
         if bc is not None and not isinstance(bc, str) and not isinstance(bc, Controller):
             raise TypeError(
@@ -418,6 +416,23 @@ def _check_steps(name: str, value: object, low: float, high: float) -> float:
     return v
 
 
+def check_episode_s(episode_s: object, control_dt_s: float) -> int:
+    """``episode_s`` (s) in ``[control_dt_s, MAX_EPISODE_S]`` and a whole number of decision
+    periods of ``control_dt_s`` (s); returns that number.
+
+    Raises:
+        ValueError: naming ``episode_s`` and what is allowed.
+    """
+    v = check_range("episode_s", episode_s, control_dt_s, MAX_EPISODE_S)
+    steps = round(v / control_dt_s)
+    if abs(v / control_dt_s - steps) > 1e-6:
+        raise ValueError(
+            f"episode_s = {shown(episode_s)} is out of range: allowed a multiple of "
+            f"control_dt_s = {control_dt_s}"
+        )
+    return steps
+
+
 def steps_of(seconds: float) -> int:
     """A duration in whole plant steps."""
     return round(seconds / PLANT_DT_S)
@@ -463,10 +478,27 @@ class FieldEnvConfig(EnvConfig):
             )
         super().__post_init__()
         check_step_bound(self.string(), PLANT_DT_S)
+        rgd = isinstance(self.bit, str) and self.bit == "rgd"
+        if rgd:  # named here: the bit law's own check calls it "parameters"
+            if isinstance(self.rgd_parameters, str):
+                check_choice("rgd_parameters", self.rgd_parameters, RGD_PRESETS, "preset")
+            elif not isinstance(self.rgd_parameters, RgdParameters):
+                raise InputTypeError(
+                    "rgd_parameters must be a preset name "
+                    f"{sorted(RGD_PRESETS)} or an RgdParameters, got {shown(self.rgd_parameters)}"
+                )
         check_bit_keywords(
             self.bit, self.rgd_parameters, self.axial_top, self.hook_speed_m_s,
             self.hook_stiffness_n_m,
         )  # fmt: skip
+        if rgd:
+            stiffness = float(self.hook_stiffness_n_m)  # a real number > 0 (checked above)
+            low, high = HOOK_STIFFNESS_RANGE_N_M
+            require(
+                "hook_stiffness_n_m", self.hook_stiffness_n_m,
+                f"[{low:g}, {high:g}] N/m or inf (a rigid hook)",
+                math.isinf(stiffness) or low <= stiffness <= high,
+            )  # fmt: skip
 
     def bit_parameters(self) -> RgdParameters | None:
         """The RGD bit's parameters with ``bit="rgd"``, else ``None``."""

@@ -10,6 +10,13 @@ Terms (each in [0, 1]) over one decision period of n plant steps::
     torque     = mean(u^2) / torque_scale_nm^2               (the paper's RMSD measure)
     residual   = mean((u - u_base)^2) / residual_scale_nm^2  (residual mode; 0 otherwise)
 
+with ``torque_scale_nm = max(|min_torque_nm|, |max_torque_nm|)`` (the torque range's largest
+magnitude) and ``u_base`` the base controller's torque clipped to the torque range
+(:func:`drill_env.kernel.residual_base`). The residual term is in [0, 1] where the applied
+torque follows the command; behind a top drive with dead time, lag or a rate limit the applied
+torque ``u`` can stray from ``u_base`` by more than the residual scale, and the term exceed 1
+(``benchmarks/reward_terms.py`` prints its range on ``DrillStringField-v0``).
+
 Total::
 
     r = -(w_t tracking + w_c chattering + w_s stuck) / (w_t + w_c + w_s)
@@ -42,9 +49,10 @@ from drill_env.layout import (
     REP_TRACKING_SUM,
     REP_VARIATION,
 )
-from drill_env.validation import check_range, check_real, require
+from drill_env.validation import check_real, require
 
 __all__ = [
+    "DIVERGED_REWARD",
     "FIELD_REWARD_WEIGHTS",
     "TERMS",
     "RewardWeights",
@@ -59,6 +67,9 @@ Term = TypeVar("Term", float, npt.NDArray[np.float64])
 
 TERMS = ("tracking", "chattering", "stuck", "torque", "residual")
 """The names of the reward terms, as in ``info["reward_terms"]``."""
+
+DIVERGED_REWARD: Final = -1.0
+"""The reward of a step that ends the episode by diverging (every env)."""
 
 
 @njit(cache=True, inline="always")
@@ -81,10 +92,12 @@ class RewardWeights:
             already counts a stuck bit as a full error; the term stays in ``info``).
         chattering_scale_nm: Torque variation within one decision period that saturates the
             chattering term, N m (> 0).
-        torque: Weight of the mean squared torque over the squared upper torque limit (an
-            energy penalty, the paper's RMSD).
-        residual: Weight of the mean squared torque added to the base controller's, over the
-            squared residual scale (residual mode only; 0 by default).
+        torque: Weight of the mean squared torque over the squared largest torque magnitude
+            of the range, ``max(|min_torque_nm|, |max_torque_nm|)`` (an energy penalty, the
+            paper's RMSD).
+        residual: Weight of the mean squared torque added to the base controller's (clipped to
+            the torque range), over the squared residual scale (residual mode only; 0 by
+            default).
     """
 
     tracking: float = 1.0
@@ -97,7 +110,8 @@ class RewardWeights:
     def __post_init__(self) -> None:
         for name in ("tracking", "chattering", "stuck", "torque", "residual"):
             value = getattr(self, name)
-            check_range(f"reward weight {name}", value, 0.0, float("inf"))
+            v = check_real(f"reward weight {name}", value, "finite >= 0")
+            require(f"reward weight {name}", value, "finite >= 0", 0.0 <= v < np.inf)
         if self.tracking + self.chattering + self.stuck <= 0:
             raise ValueError(
                 "reward weights tracking, chattering and stuck are all zero: at least one must "
@@ -127,7 +141,8 @@ def reward_terms(
     Args:
         report: A report row or rows.
         weights: The reward weights (for the chattering scale).
-        torque_scale_nm: Scale of the torque term, N m (the upper torque limit).
+        torque_scale_nm: Scale of the torque term, N m (the torque range's largest
+            magnitude, ``EnvConfig.torque_scale_nm``).
         residual_scale_nm: Scale of the residual term, N m; ``None`` outside residual mode
             (the term is then 0).
     """
@@ -181,7 +196,8 @@ def report_reward(
 
     Args:
         weights: The reward weights.
-        torque_scale_nm: Scale of the torque term, N m (the upper torque limit).
+        torque_scale_nm: Scale of the torque term, N m (the torque range's largest
+            magnitude, ``EnvConfig.torque_scale_nm``).
         residual_scale_nm: Scale of the residual term, N m; ``None`` outside residual mode.
     """
     chattering_scale = weights.chattering_scale_nm
@@ -225,7 +241,8 @@ def report_rewards(
 
     Args:
         weights: The reward weights.
-        torque_scale_nm: Scale of the torque term, N m (the upper torque limit).
+        torque_scale_nm: Scale of the torque term, N m (the torque range's largest
+            magnitude, ``EnvConfig.torque_scale_nm``).
         residual_scale_nm: Scale of the residual term, N m; ``None`` outside residual mode.
     """
     assert TERMS == ("tracking", "chattering", "stuck", "torque", "residual")

@@ -140,8 +140,11 @@ def check_real(name: str, value: object, allowed: str = "a finite real number") 
 
 
 def check_range(name: str, value: object, low: float, high: float) -> float:
-    """``value`` as a float if it is a finite real number in ``[low, high]``."""
-    allowed = f"[{low:g}, {high:g}]"
+    """``value`` as a float if it is a finite real number in ``[low, high]`` (an infinite end
+    is open: infinities are refused)."""
+    allowed = (
+        f"{'(' if math.isinf(low) else '['}{low:g}, {high:g}{')' if math.isinf(high) else ']'}"
+    )
     v = check_real(name, value, allowed)
     if not (math.isfinite(v) and low <= v <= high):
         raise ValueError(f"{name} = {shown(value)} is out of range: allowed {allowed}")

@@ -8,7 +8,7 @@ bit. Autoreset follows Gymnasium's next-step mode.
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NoReturn
 
 import gymnasium as gym
 import numpy as np
@@ -17,7 +17,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from drill_env.batch import StringBatch
-from drill_env.env import report_info, validate_actions
+from drill_env.env import copy_batch_env, refuse_pickling, report_info, validate_actions
 from drill_env.evaluation import PlantSamples
 from drill_env.layout import (
     OBS_BOUND,
@@ -29,7 +29,7 @@ from drill_env.layout import (
 from drill_env.limits import MAX_EPISODE_S, MAX_NUM_ENVS
 from drill_env.options import EnvConfig, FieldEnvConfig
 from drill_env.parameters import PLANT_DT_S
-from drill_env.rewards import TERMS, report_rewards
+from drill_env.rewards import DIVERGED_REWARD, TERMS, report_rewards
 from drill_env.validation import check_int, check_seeds, shown
 
 __all__ = ["DrillStringFieldVectorEnv", "DrillStringVectorEnv"]
@@ -65,7 +65,7 @@ class DrillStringVectorEnv(VectorEnv):
         residual_scale = self.config.residual_scale_nm if self.config.residual else None
         # The reward weights are fixed at make: the same for every string.
         self._report_rewards = report_rewards(
-            self.config.reward_weights, self.config.max_torque_nm, residual_scale
+            self.config.reward_weights, self.config.torque_scale_nm, residual_scale
         )
         self._needs_reset = np.zeros(num_envs, dtype=bool)
         self._started = False
@@ -81,6 +81,13 @@ class DrillStringVectorEnv(VectorEnv):
     def batch(self) -> StringBatch:
         """The engine."""
         return self._batch
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> DrillStringVectorEnv:
+        """Independent strings in the same state (:func:`drill_env.env.copy_batch_env`)."""
+        return copy_batch_env(self, memo)
+
+    def __reduce_ex__(self, protocol: Any) -> NoReturn:
+        refuse_pickling(self)
 
     @property
     def observation_names(self) -> tuple[str, ...]:
@@ -200,7 +207,7 @@ class DrillStringVectorEnv(VectorEnv):
         terms, rewards = self._report_rewards(report)
         terminated = b.status == STATUS_DIVERGED
         if terminated.any():
-            rewards[terminated] = -1.0
+            rewards[terminated] = DIVERGED_REWARD
         truncated = report[:, REP_TIME] >= self._end_s
         truncated &= ~terminated
         if resetting:

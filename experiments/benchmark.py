@@ -78,10 +78,11 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 import numpy.typing as npt
 
+import baselines  # noqa: F401  (registers the built-in controllers a suite may name)
 from agents.policy import is_model_folder, load_policy
 from drill_env.control import controller_names
 from drill_env.distributed import DISTRIBUTED_PRESETS
-from drill_env.evaluation import Policy, ZeroAction, episode_metrics
+from drill_env.evaluation import Policy, ZeroAction, episode_metrics, termination_note
 from drill_env.files import write_text
 from drill_env.metrics import METRIC_KEYS, interquartile_mean
 from drill_env.scenarios import WobProfile
@@ -106,6 +107,7 @@ from experiments.field import (
     run_on,
 )
 from experiments.heldout import HeldOutScenario, held_out_scenario
+from experiments.paths import output_file
 from experiments.plots import METRIC_LABELS, save_figure
 from experiments.results_db import Fields, Flag, Number, Schema, Text, exactly
 from experiments.spec_cli import option, spec_from_args, spec_options
@@ -447,6 +449,12 @@ def parse_suite(data: Any, where: str) -> Suite:
     env_id = r.choice("env_id", ENV_IDS)
     on_field = is_field(env_id)
     reference = r.text("reference")
+    if reference not in controller_names():  # a file never names code to import and run
+        raise r.fail(
+            "reference",
+            f"a registered controller name: {', '.join(controller_names())} (a suite file "
+            "cannot name MODULE:CLASS or PATH.py:CLASS)",
+        )
     observation = r.choice("observation", ("state", "surface") if on_field else (None,))
     controller_model = r.choice("controller_model", CONTROLLER_MODELS if on_field else (None,))
     episode_s = r.real("episode_s", 1.0, 1e5)
@@ -814,9 +822,11 @@ class BenchmarkRun:
 
 
 def run_once(run: BenchmarkRun) -> dict[str, Any]:
-    """The row of one run: its head, the metrics of :func:`episode_metrics` and an empty
-    ``note``; on the field string, for a controller that cannot be made for the string (its
-    tuning or model has no solution there), metrics ``None`` and the reason in ``note``."""
+    """The row of one run: its head, the metrics of :func:`episode_metrics` and a ``note``
+    (empty, or why the run ended early: a controller's NaN or infinite torque,
+    :func:`drill_env.evaluation.termination_note`); on the field string, for a controller
+    that cannot be made for the string (its tuning or model has no solution there), metrics
+    ``None`` and the reason in ``note``."""
     suite, scenario = run.suite, run.scenario
     try:
         trace = run_on(
@@ -833,7 +843,7 @@ def run_once(run: BenchmarkRun) -> dict[str, Any]:
             f"{run.label} failed on {suite.label} {scenario.id} seed {run.seed}: "
             f"{type(err).__name__}: {err}"
         ) from err
-    return {**run.head(), **episode_metrics(trace), "note": ""}
+    return {**run.head(), **episode_metrics(trace), "note": one_line(termination_note(trace))}
 
 
 def benchmark_runs_task(runs: Sequence[BenchmarkRun]) -> TaskResult:
@@ -1082,7 +1092,8 @@ def score_suite(
     number of runs, the IQM and its interval, the normalised score and its interval, the
     reference's and the best entry's labels; of a method whose runs carry a
     ``training_seed``, also ``training_seeds`` (their number), its interval resampling them
-    (:func:`iqm_interval`).
+    (:func:`iqm_interval`). An entry with a diverged run (its metrics cover only the steps
+    before the end) is never the best and has no score.
 
     Raises:
         ValueError: when the suite's reference controller has no runs in ``rows``.
@@ -1133,8 +1144,10 @@ def score_suite(
     }
     out: list[dict[str, Any]] = []
     for metric in METRICS:
-        finite = {
-            lb: stats[(lb, metric)][0] for lb in labels if math.isfinite(stats[(lb, metric)][0])
+        finite = {  # the best entry: of those with a value whose runs all ran to their end
+            lb: stats[(lb, metric)][0]
+            for lb in labels
+            if math.isfinite(stats[(lb, metric)][0]) and not counts[(lb, metric)]["diverged"]
         }
         best = min(finite, key=lambda lb: finite[lb]) if finite else None
         ref_value = stats[(reference, metric)][0]
@@ -1145,6 +1158,8 @@ def score_suite(
             # the score falls as the metric rises: the IQM's high end is the score's low end
             score_low = normalised_score(high, ref_value, best_value)
             score_high = normalised_score(low, ref_value, best_value)
+            if counts[(label, metric)]["diverged"]:  # cut-short runs: never scored as good
+                score = score_low = score_high = math.nan
             out.append(
                 {
                     "suite": suite.label,
@@ -1195,13 +1210,20 @@ def _interval(row: Mapping[str, Any], keys: tuple[str, str, str], metric: str | 
 
 
 def suite_table(suite: Suite, scores: Sequence[Mapping[str, Any]]) -> str:
-    """The markdown table of ``suite``: one line per entry (by IQM of the first metric), each
-    metric's IQM [95 % interval] and normalised score [interval]."""
+    """The markdown table of ``suite``: one line per entry (by IQM of the first metric, those
+    with a diverged run after every other), each metric's IQM [95 % interval] and normalised
+    score [interval]."""
     mine = [s for s in scores if s["suite"] == suite.label]
     by = {(s["entry"], s["metric"]): s for s in mine}
     labels = list(dict.fromkeys(s["entry"] for s in mine))
     first = METRICS[0]
-    labels.sort(key=lambda lb: (not math.isfinite(by[(lb, first)]["iqm"]), by[(lb, first)]["iqm"]))
+    labels.sort(
+        key=lambda lb: (
+            bool(by[(lb, first)]["diverged"]),
+            not math.isfinite(by[(lb, first)]["iqm"]),
+            by[(lb, first)]["iqm"],
+        )
+    )
     head = "| entry | " + " | ".join(f"{metric_title(m)} | score" for m in METRICS) + " |"
     lines = [head, "|---|" + "---:|---:|" * len(METRICS)]
     for label in labels:
@@ -1530,14 +1552,16 @@ def run_benchmark(
     text = scorecard_markdown(
         suites, scores, entries, spec.resamples, spec.seed, command, wall, rows
     )
-    write_text(out / "scorecard.md", text + "\n")
     written = [
-        out / "scorecard.md",
-        write_csv(json_clean(scores), out / "scorecard.csv", csv_columns(SCORE_KEYS, scores)),
-        write_csv(rows, out / "runs.csv", csv_columns(RUN_KEYS, rows)),
+        write_text(output_file(out, "scorecard.md"), text + "\n"),
+        write_csv(
+            json_clean(scores), output_file(out, "scorecard.csv"), csv_columns(SCORE_KEYS, scores)
+        ),
+        write_csv(rows, output_file(out, "runs.csv"), csv_columns(RUN_KEYS, rows)),
     ]
     if not spec.no_plots:
-        written.append(save_figure(profiles_figure(suites, rows), out / "profiles.png"))
+        figure = profiles_figure(suites, rows)
+        written.append(save_figure(figure, output_file(out, "profiles.png")))
     for suite in suites:
         print(f"{suite.label} ({suite.env_id}, reference {suite.reference}):")
         print(suite_table(suite, scores))

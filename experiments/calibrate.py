@@ -27,9 +27,10 @@ import numpy as np
 import numpy.typing as npt
 
 from drill_env.bit_model import FAMILIES
-from drill_env.calibrated_plant import MODEL_PARAMETERS, PLANT_FORMAT, load_plant
+from drill_env.calibrated_plant import MODEL_PARAMETERS, PLANT_FORMAT, check_parameter, load_plant
 from drill_env.files import replacing, write_text
 from drill_env.measured_log import MeasuredLog, find_defects, read_log
+from drill_env.validation import printable
 from drill_env.validation import shown as shown_value
 from experiments.arguments import ArgumentParser
 from experiments.calibration_fit import (
@@ -87,7 +88,8 @@ def window_type(text: str) -> Window:
 
 
 def fix_type(text: str) -> tuple[str, float]:
-    """Parse ``NAME=VALUE`` for ``--fix``."""
+    """Parse ``NAME=VALUE`` for ``--fix``: a model parameter and a value within its range
+    (:data:`drill_env.calibrated_plant.PARAMETER_RANGES`)."""
     name, _, value = text.partition("=")
     if name not in MODEL_PARAMETERS:
         raise argparse.ArgumentTypeError(
@@ -99,9 +101,27 @@ def fix_type(text: str) -> tuple[str, float]:
         raise argparse.ArgumentTypeError(
             f"{shown_value(text)} is not NAME=VALUE with a number"
         ) from None
-    if not (math.isfinite(number) and number >= 0):
-        raise argparse.ArgumentTypeError(f"{shown_value(text)}: allowed a finite value >= 0")
-    return name, number
+    try:
+        return name, check_parameter(name, number)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
+def check_simulation(
+    what: str, window: MeasuredLog, arrays: dict[str, npt.NDArray[np.float64]]
+) -> None:
+    """``ValueError`` when a simulation of ``what`` on ``window`` diverged (the simulator
+    returns NaN once a speed or twist leaves its bounds): the first column and time it did,
+    instead of a table of NaN."""
+    for name, values in arrays.items():
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            at = float(window.time_s[int(bad[0])])
+            raise ValueError(
+                f"the simulation of {what} diverged: {name} is not finite from t = {at:g} s "
+                f"({bad.size} of {values.size} samples); the plant's parameters do not fit "
+                "this log (a plant too stiff or too light for its sample period)"
+            )
 
 
 def _head(path: Path) -> str:
@@ -443,6 +463,9 @@ def calibrate_main(argv: Sequence[str]) -> int:
     result = calibrate(log, spec.window, families, not spec.no_wob, dict(spec.fix or ()))
     window = log.window(*spec.window)
     speed, torque = simulate_plant(result.plant, window, result.plant.initial_twist_rad)
+    check_simulation(
+        "the fitted plant", window, {"bit_speed_rad_s": speed, "bit_torque_nm": torque}
+    )
     result.plant.save(out / "plant.json")
     title = f"{result.plant.family} fit on {spec.window[0]:g}-{spec.window[1]:g} s"
     _save(_fit_figure(window, speed, torque, title), out / "fit.png")
@@ -450,7 +473,7 @@ def calibrate_main(argv: Sequence[str]) -> int:
     _save(_uncertainty_figure(result), out / "uncertainty.png")
     command = "drill-gym calibrate " + " ".join(argv)
     write_text(out / "report.md", _report(result, log, spec.window, command))
-    print(f"family {result.plant.family}; wrote {', '.join(CALIBRATE_FILES)} in {out}")
+    print(f"family {result.plant.family}; wrote {', '.join(CALIBRATE_FILES)} in {printable(out)}")
     for name, p in result.plant.parameters.items():
         shown = f"{p.value:.6g} {p.unit}" if p.identified else f"not identified ({p.note})"
         print(f"  {name}: {shown}")
@@ -565,6 +588,11 @@ def replay_main(argv: Sequence[str]) -> int:
     else:
         speed, torque = simulate_plant(plant, window)
         columns |= {"bit_speed_rad_s": speed, "bit_torque_nm": torque}
+    check_simulation(
+        f"the plant {printable(spec.plant)}",
+        window,
+        {k: v for k, v in columns.items() if k != "time_s"},
+    )
     for name in ("top_speed_rad_s", "bit_speed_rad_s", "bit_torque_nm", "wob_n",
                  "surface_torque_nm"):  # fmt: skip
         if window.has(name):
@@ -625,7 +653,7 @@ def replay_main(argv: Sequence[str]) -> int:
     else:
         lines.append("The log lacks bit_speed_rad_s or bit_torque_nm: no features compared.")
     write_text(out / "replay.md", "\n".join(lines) + "\n")
-    print(f"wrote replay.csv and replay.md in {out}")
+    print(f"wrote replay.csv and replay.md in {printable(out)}")
     for line in lines:
         if line.startswith("| ") and not line.startswith("| feature"):
             print(line)

@@ -40,6 +40,7 @@ from drill_env.calibrated_plant import (
     MODEL_PARAMETERS,
     CalibratedPlant,
     FittedParameter,
+    check_parameter,
     parameter_unit,
 )
 from drill_env.measured_log import Defect, MeasuredLog, find_defects, spike_mask
@@ -984,12 +985,9 @@ def calibrate(
                 f"the log has no column {shown(name)}: calibrate fits the bit speed and the torque "
                 "on bit, and needs both"
             )
-    user_fixed = dict(fixed or {})
-    for name in user_fixed:
-        if name not in MODEL_PARAMETERS:
-            raise ValueError(
-                f"unknown parameter {shown(name)}: allowed {', '.join(MODEL_PARAMETERS)}"
-            )
+    user_fixed = {
+        name: check_parameter(name, value, f"fixed {name}") for name, value in (fixed or {}).items()
+    }
     window = log.window(*window_s)
     uses_wob = use_wob and window.has("wob_n")
     if uses_wob and not np.all(window.column("wob_n") > 0):

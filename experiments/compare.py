@@ -49,12 +49,12 @@ from agents.config import TrainConfig
 from agents.policy import is_model_folder
 from baselines.registry import family_members
 from drill_env.control import controller_names, make_controller
-from drill_env.evaluation import Trace, ZeroAction, episode_metrics
+from drill_env.evaluation import Trace, ZeroAction, episode_metrics, termination_note
 from drill_env.files import write_text
 from drill_env.metrics import METRIC_KEYS
 from drill_env.parameters import PLANT_DT_S, resolve_parameters
 from drill_env.scenarios import UNCERTAINTY_CONDITIONS, Scenario, SpeedProfile, WobProfile
-from drill_env.validation import shown
+from drill_env.validation import printable, shown
 from experiments.arguments import (
     SEED_HIGH,
     ArgumentParser,
@@ -63,7 +63,12 @@ from experiments.arguments import (
     one_line,
     output_folder,
 )
-from experiments.controllers import CONTROLLERS_OPTION_HELP, controller_type, refuse_on_ray
+from experiments.controllers import (
+    CONTROLLERS_OPTION_HELP,
+    controller_type,
+    refuse_on_ray,
+    user_controller_errors,
+)
 from experiments.field import (
     COMPARE_CONDITIONS,
     COMPARE_DEPTHS_M,
@@ -82,7 +87,7 @@ from experiments.field import (
     run_label,
     run_on,
 )
-from experiments.paths import output_file
+from experiments.paths import inside_output, output_file, output_path
 from experiments.plots import (
     Envelope,
     adaptive_gains_figure,
@@ -95,7 +100,7 @@ from experiments.plots import (
     time_window,
     value_label,
 )
-from experiments.results_db import Exactly, Fields, Flag, Name, Number, Schema, exactly
+from experiments.results_db import Exactly, Fields, Flag, Name, Number, Schema, Text, exactly
 from experiments.spec_cli import option, spec_from_args, spec_parser
 from experiments.sweep import (
     COMPARE_TASK_RUNS,
@@ -203,10 +208,13 @@ ROW_KEYS: Final = (
     "uncertainty_reading",
     "seed",
     "duration_s",
+    "note",
 )
 """Columns of ``compare.csv`` and keys of each row of ``compare.json``: the docs/specification.md section 4
 metrics, plus ``static_error_rad_s`` (mean of ``V_ref - w_bit`` over the last
-:data:`STATIC_WINDOW_S`, the paper's "static error") and the run's settings."""
+:data:`STATIC_WINDOW_S`, the paper's "static error"), the run's settings and ``note``, why a
+run ended early when the env named a cause (a controller's NaN or infinite torque; empty
+otherwise, :func:`drill_env.evaluation.termination_note`)."""
 
 FIELD_ROW_KEYS: Final = (
     "controller",
@@ -231,6 +239,7 @@ FIELD_ROW_KEYS: Final = (
     "controller_model",
     "seed",
     "duration_s",
+    "note",
 )
 """The columns of a comparison on ``DrillStringField-v0``: the controller and the observation
 mode it ran with, the field scenario (:class:`experiments.field.FieldCase`: string, depth,
@@ -396,6 +405,7 @@ def _row(
     row.update(case.tail)
     row["seed"] = seed
     row["duration_s"] = duration_s
+    row["note"] = str(metrics.get("note", ""))
     return row
 
 
@@ -426,9 +436,15 @@ def compare_run(
         }
         if job.observation is not None:
             kwargs["observation"] = job.observation
-        trace = run_on(env_id, kwargs, ZeroAction(), seed)
+        where = f" on {job.case.name}, noise {job.noise:g} rad/s"
+        with user_controller_errors(job.label, where):
+            trace = run_on(env_id, kwargs, ZeroAction(), seed)
         gain_label = gains if overrides is not None else "default"
-    metrics = {**episode_metrics(trace), "static_error_rad_s": static_error(trace)}
+    metrics = {
+        **episode_metrics(trace),
+        "static_error_rad_s": static_error(trace),
+        "note": termination_note(trace),
+    }
     row = _row(
         job.label, job.observation, job.case, job.noise, metrics, gain_label, seed, duration_s
     )
@@ -776,14 +792,22 @@ def write_figures(
     folder: Path,
     cases: Sequence[str] | None = None,
     focus: str | None = None,
+    *,
+    out: Path | None = None,
 ) -> list[Path]:
-    """Write :func:`comparison_figures` as PNG files into ``folder``; returns their paths."""
+    """Write :func:`comparison_figures` as PNG files into ``folder``; returns their paths.
 
+    Every file is checked to lie inside ``folder`` and, when given, inside the output folder
+    ``out`` (a ``folder`` inside ``out`` that is a link to elsewhere is refused with a
+    ``ValueError`` before anything is written; :func:`experiments.paths.output_path`)."""
+    if out is not None:
+        inside_output(out, folder)
     folder.mkdir(parents=True, exist_ok=True)
-    return [
-        save_figure(fig, output_file(folder, name))
-        for name, fig in comparison_figures(rows, runs, cases, focus)
-    ]
+    written = []
+    for name, fig in comparison_figures(rows, runs, cases, focus):
+        path = output_file(folder, name)
+        written.append(save_figure(fig, path if out is None else inside_output(out, path)))
+    return written
 
 
 # ---------------------------------------------------------------------------- the agent
@@ -962,6 +986,7 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
     except ValueError as err:
         parser.error(str(err))
     refuse_on_ray(parser.fail, runner.backend().distributed, spec.controller_names)
+    figure_folder = None if spec.no_plots else output_path(spec.out, "figures")  # before the runs
     agent = load_agent(agent_loader, spec.env_id) if not spec.no_agent else None
     try:
         study = CompareStudy.from_spec(
@@ -999,9 +1024,9 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
         )
     keys = FIELD_ROW_KEYS if field_env else ROW_KEYS
     written = [
-        write_csv(rows, out / "compare.csv", keys),
-        write_json([{k: r[k] for k in keys} for r in rows], out / "compare.json"),
-        _write_text(markdown_table(rows) + "\n", out / "compare.md"),
+        write_csv(rows, output_file(out, "compare.csv"), keys),
+        write_json([{k: r[k] for k in keys} for r in rows], output_file(out, "compare.json")),
+        _write_text(markdown_table(rows) + "\n", output_file(out, "compare.md")),
     ]
     cases = study.cases()
     per = len(rows) // max(1, len({run_label(r) for r in rows}))
@@ -1013,13 +1038,22 @@ def main(argv: Sequence[str] | None = None, agent_loader: Callable[[], Any] | No
         f"that settle. Every run: {out / 'compare.md'} (also .csv, .json).\n"
     )
     print(summary_table(rows))
+    ended = [r for r in rows if r["diverged"]]
+    if ended:
+        print(f"\nDiverged runs ({len(ended)}), ranked after every controller without one:")
+        for r in ended:
+            case = r.get("scenario", r.get("condition"))
+            why = printable(r["note"] or "the state left its bounds")
+            noise = f"noise {r['noise_std_rad_s']:g} rad/s"
+            print(f"  {printable(run_label(r))} on {case}, {noise}: {why}")
     if figures and rows:
         chosen, focus = (
             figure_cases([c.field for c in cases if c.field is not None])
             if field_env
             else (None, None)
         )
-        written += write_figures(rows, traces, out / "figures", chosen, focus)
+        assert figure_folder is not None
+        written += write_figures(rows, traces, figure_folder, chosen, focus, out=out)
     total = time.perf_counter() - start
     print(
         f"\n{len(rows)} runs simulated in {simulated:.1f} s ({total:.1f} s with output); "
@@ -1245,7 +1279,8 @@ class CompareStudy:
                 **exactly(job.case.tail),
                 "seed": Exactly(int(self.seed)),
                 "duration_s": Exactly(float(self.duration_s)),
-            }
+            },
+            optional={"note": Text()},
         )
 
     def tasks(self, missing: Sequence[str]) -> list[Task]:
@@ -1275,7 +1310,8 @@ class CompareStudy:
         self, outcome: SweepOutcome
     ) -> tuple[list[dict[str, Any]], dict[tuple[str, str, float], Any]]:
         """The rows in table order and the traces of the runs made this time."""
-        rows = [outcome.records[k] for k in self.items()]
+        records = [outcome.records[k] for k in self.items()]
+        rows = [{**r, "note": r.get("note", "")} for r in records]  # older files have none
         traces: dict[tuple[str, str, float], Any] = {}
         for extras in outcome.extras.values():
             traces.update(extras)

@@ -23,6 +23,7 @@ inside the compiled plant loop at the built-in controllers' speed.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import importlib
 import importlib.util
@@ -30,21 +31,23 @@ import inspect
 import os
 import re
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, Final
 
 from drill_env.control import controller_names, register_controller
-from drill_env.validation import shown
+from drill_env.validation import printable, shown
 
 __all__ = [
     "CONTROLLERS_OPTION_HELP",
+    "ControllerError",
     "controller_type",
     "is_user_controller",
     "load_controller",
     "refuse_on_ray",
     "resolve_controller_name",
     "user_code_fingerprints",
+    "user_controller_errors",
     "user_controllers",
 ]
 
@@ -70,6 +73,32 @@ def is_user_controller(name: str) -> bool:
 def user_controllers(names: Sequence[str]) -> list[str]:
     """Those of ``names`` that are users' classes loaded by :func:`load_controller`."""
     return [n for n in names if is_user_controller(n)]
+
+
+class ControllerError(ValueError):
+    """A user's controller (:func:`load_controller`) failed while it ran: its ``torque()``
+    returned something that is not a real number (a string, an array of several values) or it
+    raised. A user error, reported on one line naming the controller."""
+
+
+@contextlib.contextmanager
+def user_controller_errors(name: str, where: str = "") -> Iterator[None]:
+    """Run the block; when ``name`` is a user's controller (:func:`is_user_controller`), an
+    exception raised in the block becomes a :class:`ControllerError` naming the controller
+    (and ``where``, the run: `` on nominal``), the exception's type and its message on one
+    line. A built-in controller's exceptions pass unchanged, with their traceback."""
+    try:
+        yield
+    except ControllerError:
+        raise
+    except Exception as err:
+        if not is_user_controller(name):
+            raise
+        message = " ".join(str(err).split())
+        raise ControllerError(
+            f"controller {printable(name)} failed{where}: {type(err).__name__}: "
+            f"{printable(message, 400)}"
+        ) from err
 
 
 def _identifier(text: str) -> str:

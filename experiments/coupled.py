@@ -48,6 +48,7 @@ from drill_env.coupled import (
 )
 from drill_env.validation import shown
 from experiments.arguments import ArgumentParser
+from experiments.paths import output_file
 from experiments.plots import save_figure
 from experiments.results_db import Fields, Name, Number, Schema
 from experiments.spec_cli import option, spec_from_args, spec_parser
@@ -534,7 +535,7 @@ def run_coupled(spec: CoupledSpec, runner: RunnerSpec | None = None) -> int:
             simulated,
             f"{spec.parameters}: steady drilling stability and simulated stick-slip/bounce",
         )
-        written.append(save_figure(fig, out / "figures" / "coupled_stability_map.png"))
+        written.append(save_figure(fig, output_file(out, "figures", "coupled_stability_map.png")))
     total_s = time.perf_counter() - started
     print(f"\nwrote {', '.join(str(w) for w in written)} ({total_s:.1f} s wall in all)")
     return 0

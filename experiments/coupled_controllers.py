@@ -40,6 +40,7 @@ from agents import load_policy
 from drill_env.coupled_env import DrillStringCoupledEnv
 from experiments.arguments import ArgumentParser, names_type, output_folder
 from experiments.controllers import refuse_on_ray
+from experiments.paths import output_file
 from experiments.plots import save_figure
 from experiments.results_db import Exactly, Fields, Flag, Name, Number, Schema, Values, exactly
 from experiments.spec_cli import option, spec_from_args, spec_parser
@@ -689,7 +690,7 @@ def run_study(spec: CoupledControllersSpec, runner: RunnerSpec | None = None) ->
     ]
     if not spec.no_plots:
         fig = map_figure(rows, spec.torque_loops, spec.forces_kn, spec.speeds_rad_s)
-        written.append(save_figure(fig, out / "figures" / "coupled_controllers_map.png"))
+        written.append(save_figure(fig, output_file(out, "figures", "coupled_controllers_map.png")))
     print(f"\nwrote {', '.join(str(w) for w in written)} ({wall:.1f} s wall for the runs)")
     return 0
 

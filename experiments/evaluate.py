@@ -49,11 +49,17 @@ from agents.policy import (
 )
 from baselines.registry import REFERENCE_CONTROLLER, rig_loops
 from drill_env.control import controller_names
-from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics
+from drill_env.evaluation import Policy, Trace, ZeroAction, episode_metrics, termination_note
 from drill_env.metrics import METRIC_KEYS
 from drill_env.validation import printable, shown
 from experiments.arguments import ArgumentParser, check_output_option, names_type, output_folder
-from experiments.controllers import CONTROLLERS_OPTION_HELP, controller_type, refuse_on_ray
+from experiments.controllers import (
+    CONTROLLERS_OPTION_HELP,
+    ControllerError,
+    controller_type,
+    refuse_on_ray,
+    user_controller_errors,
+)
 from experiments.field import (
     ENV_IDS,
     FIELD_ENV,
@@ -73,7 +79,7 @@ from experiments.heldout import (
     HeldOutScenario,
     held_out_set,
 )
-from experiments.paths import output_file
+from experiments.paths import inside_output, output_file, output_path
 from experiments.plots import (
     downsample,
     envelope,
@@ -164,9 +170,15 @@ def evaluate(
         observations: The observation modes of the field string.
 
     Returns:
-        One row per (scenario, controller or agent) with the scenario, ``prone`` and the metrics
-        (and the ``observation`` mode on the field string); and the kept traces by (scenario
-        id, label), a label being :func:`experiments.field.run_label` of the row.
+        One row per (scenario, controller or agent) with the scenario, ``prone``, the metrics
+        and ``note`` (and the ``observation`` mode on the field string); and the kept traces by
+        (scenario id, label), a label being :func:`experiments.field.run_label` of the row.
+        The note is empty, or why the run ended early (a controller's NaN or infinite torque:
+        then ``diverged``), or on the field string why it could not run (no metrics).
+
+    Raises:
+        experiments.controllers.ControllerError: a user's controller raised or returned
+            something that is not a torque.
     """
     field = is_field(env_id)
     names = list(controller_names() if controllers is None else controllers)
@@ -199,7 +211,10 @@ def evaluate(
             if obs is not None:
                 head["observation"] = obs
             try:
-                trace = run_scenario(scenario, policy, kwargs, env_id)
+                with user_controller_errors(label, f" on {scenario.id}"):
+                    trace = run_scenario(scenario, policy, kwargs, env_id)
+            except ControllerError:
+                raise
             except ValueError as err:
                 if not field:
                     raise
@@ -208,7 +223,7 @@ def evaluate(
                 missing: dict[str, Any] = dict.fromkeys(METRIC_KEYS)
                 rows.append({**head, **row, **missing, "diverged": False, "note": str(err)})
             else:
-                note = {"note": ""} if field else {}
+                note = {"note": termination_note(trace)}
                 rows.append({**head, **row, **episode_metrics(trace), **note})
                 if run_label(head) in keep_traces:
                     traces[(scenario.id, run_label(head))] = trace
@@ -243,15 +258,16 @@ def summarize(
     base controller's, a mean chattering no higher than the base's, and in no scenario an
     IAE above ``GOAL_WORST_IAE_RATIO`` times the base's. ``agents`` names the learned
     controllers (labels); every other label is an engineered one (``None``: every label but
-    the one checked). Rows with a ``note`` (a controller that could not be made for the
-    string) are left out. Rows are grouped by :func:`experiments.field.run_label` (on the
-    field string: controller and observation mode, so ``base`` is then for example
-    ``proposed (state)``).
+    the one checked). Rows of runs that could not be made (a ``note``, no metrics: a
+    controller that cannot be made for the string) are left out. A controller with a
+    diverged run never sets the bar, and an agent with one misses the goal. Rows are
+    grouped by :func:`experiments.field.run_label` (on the field string: controller and
+    observation mode, so ``base`` is then for example ``proposed (state)``).
     """
     labels = list(dict.fromkeys(run_label(r) for r in rows))
     means: dict[str, dict[str, float]] = {}
     for label in labels:
-        mine = [r for r in rows if run_label(r) == label and not r.get("note")]
+        mine = [r for r in rows if run_label(r) == label and not _not_run(r)]
         prone = [r for r in mine if r["prone"]]
         entry = {key: _mean([r[key] for r in mine]) for key in METRIC_KEYS}
         entry["severity_prone"] = _mean([r["stick_slip_severity"] for r in prone])
@@ -269,7 +285,7 @@ def summarize(
         for label in labels:
             m = means[label]
             engineered = [e for e in labels if e != label and (agents is None or e not in agents)]
-            complete = [e for e in engineered if "runs" not in means[e]]
+            complete = [e for e in engineered if _comparable(means[e])]
             best_iae = min((means[e]["iae"] for e in complete), default=math.inf)
             best_severity = min((means[e]["severity_prone"] for e in complete), default=math.inf)
             worst = max(
@@ -303,18 +319,32 @@ def summarize(
                     worst > GOAL_WORST_IAE_RATIO
                 ),
             }
+            if m["diverged"]:
+                checks["no diverged run"] = False
             goal["missed"] = [name for name, ok in checks.items() if not ok]
             goal["met"] = not goal["missed"]
             summary["goal"][label] = goal
     return summary
 
 
+def _not_run(row: Mapping[str, Any]) -> bool:
+    """Whether ``row`` is of a run that could not be made (a note and no metrics), not of one
+    that ran (a diverged run may have a note too: why it ended)."""
+    return bool(row.get("note")) and not row.get("diverged")
+
+
+def _comparable(means: Mapping[str, float]) -> bool:
+    """Whether a controller's means may set the bar of the goal: it ran every scenario and
+    none of its runs diverged (a diverged run's metrics cover only its steps before the end)."""
+    return "runs" not in means and not means["diverged"]
+
+
 def _best_engineered(
     means: Mapping[str, Mapping[str, float]], label: str, agents: Sequence[str], key: str
 ) -> str | None:
     """The engineered controller with the lowest mean ``key`` (as :func:`summarize` picks it:
-    every label but ``label`` and the agents, run on every scenario)."""
-    engineered = [e for e in means if e != label and e not in agents and "runs" not in means[e]]
+    every label but ``label`` and the agents, run on every scenario, none diverged)."""
+    engineered = [e for e in means if e != label and e not in agents and _comparable(means[e])]
     return min(engineered, key=lambda e: means[e][key], default=None)
 
 
@@ -370,6 +400,8 @@ def goal_report(
                 not g["worst_iae_ratio"] > GOAL_WORST_IAE_RATIO,
             ),
         ]
+        if m["diverged"]:
+            checks.append((f"{int(m['diverged'])} diverged runs (allowed none)", False))
         held = sum(ok for _, ok in checks)
         kind = f", {kinds[label]}" if kinds and label in kinds else ""
         verdict = "goal met" if g["met"] else "goal not met"
@@ -423,6 +455,8 @@ def markdown_table(summary: Mapping[str, Any]) -> str:
         rmsd_r = f"{(g['rmsd_ratio'] - 1) * 100:+.1f} %" if g else ""
         if "runs" in m:  # some scenarios could not be run for it
             label = f"{label} ({int(m['runs'])} runs)"
+        if m.get("diverged"):  # its means cover only the steps before each end
+            label = f"{label} ({int(m['diverged'])} diverged)"
         lines.append(
             f"| {label} | {m['iae']:.1f} | {iae_r} | {m['rmsd_nm'] / 1e3:.2f} | {rmsd_r} | "
             f"{m['severity_prone']:.3f} | {m['stick_slip_severity']:.3f} | "
@@ -479,9 +513,9 @@ def write_outputs(
     """``heldout.csv``, ``heldout.json`` and ``summary.json`` in ``out``."""
     keys = list(rows[0]) if rows else []
     return [
-        write_csv(rows, out / "heldout.csv", keys),
-        write_json(list(rows), out / "heldout.json"),
-        write_json(summary, out / "summary.json", indent=2),
+        write_csv(rows, output_file(out, "heldout.csv"), keys),
+        write_json(list(rows), output_file(out, "heldout.json")),
+        write_json(summary, output_file(out, "summary.json"), indent=2),
     ]
 
 
@@ -571,13 +605,19 @@ def write_figures(
     traces: Mapping[tuple[str, str], Trace],
     labels: Sequence[str],
     out: Path,
+    *,
+    root: Path | None = None,
 ) -> list[Path]:
-    """Write :func:`heldout_figures` as PNG files into ``out``; returns their paths."""
-
-    return [
-        save_figure(fig, output_file(out, name))
-        for name, fig in heldout_figures(rows, traces, labels)
-    ]
+    """Write :func:`heldout_figures` as PNG files into ``out``; returns their paths. Every
+    file is checked to lie inside ``out`` and, when given, inside the output folder ``root``
+    (``out`` a link inside it to elsewhere is refused with a ``ValueError``)."""
+    if root is not None:
+        inside_output(root, out)
+    written = []
+    for name, fig in heldout_figures(rows, traces, labels):
+        path = output_file(out, name)
+        written.append(save_figure(fig, path if root is None else inside_output(root, path)))
+    return written
 
 
 def shipped_models() -> list[Path]:
@@ -728,6 +768,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             a.name = f"{a.name}:{p}"
         labels = [a.name for a in agents]
     scenarios = spec.held_out()
+    figure_folder = None if spec.no_plots else output_path(out, "figures")  # before the runs
     t0 = time.perf_counter()
     base_names = sorted({a.env_kwargs.get("base_controller") or BASE_CONTROLLER for a in agents})
     if field_env and not agents:
@@ -787,7 +828,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     summary["models"] = {a.name: str(p) for a, p in zip(agents, paths, strict=True)}
     written = write_outputs(rows, summary, out)
     if figures:
-        written += write_figures(rows, traces, keep, out / "figures")
+        assert figure_folder is not None
+        written += write_figures(rows, traces, keep, figure_folder, root=out)
     total = time.perf_counter() - t0
     print(markdown_table(summary))
     print()

@@ -17,7 +17,7 @@ from typing import Final
 
 from drill_env.validation import shown
 
-__all__ = ["MAX_NAME_CHARS", "output_file", "output_path", "safe_file_name"]
+__all__ = ["MAX_NAME_CHARS", "inside_output", "output_file", "output_path", "safe_file_name"]
 
 MAX_NAME_CHARS: Final = 120
 """Longest file name :func:`safe_file_name` returns (file systems allow 255 bytes)."""
@@ -80,21 +80,44 @@ def output_path(out: Path | str, *parts: object, suffix: str = "") -> Path:
     if len(last) > room:
         last = safe_file_name(parts[-1], room)
     names[-1] = last + suffix
-    path = base.joinpath(*names)
-    root = base.resolve()
-    resolved = path.resolve()
+    return inside_output(base, base.joinpath(*names))
+
+
+def inside_output(out: Path | str, path: Path | str) -> Path:
+    """``path`` as a ``Path`` after checking that it lies inside the output folder ``out``
+    once symbolic links are resolved (a folder inside ``out`` that is a link to elsewhere, a
+    ``..``); for a path built from ``out`` by a caller (a figure written into a subfolder).
+
+    Raises:
+        ValueError: one line naming the path, where it resolves and the output folder.
+    """
+    target = Path(path)
+    try:
+        root = Path(out).resolve()
+        resolved = target.resolve()
+    except (OSError, RuntimeError) as err:  # a loop of links (RuntimeError before 3.13)
+        raise ValueError(
+            f"refusing to write {str(target)!r}: its path cannot be resolved ({err}): remove "
+            "the link or choose another output folder"
+        ) from None
     if resolved != root and root not in resolved.parents:
         raise ValueError(
-            f"refusing to write {str(path)!r}: it resolves to {str(resolved)!r}, outside the "
-            f"output folder {str(root)!r}"
+            f"refusing to write {str(target)!r}: it resolves to {str(resolved)!r}, outside the "
+            f"output folder {str(root)!r} (a link inside it leads elsewhere: remove the link or "
+            "choose another output folder)"
         )
-    return path
+    return target
 
 
-def output_file(out: Path | str, file_name: str) -> Path:
-    """:func:`output_path` of a file name with its extension (``"speed_torque_csmc.png"``):
-    the stem is reduced by :func:`safe_file_name`, a short alphanumeric extension is kept."""
+def output_file(out: Path | str, *names: str) -> Path:
+    """:func:`output_path` of a file name with its extension (``"speed_torque_csmc.png"``),
+    the last of ``names``, in the subfolders the others name (``"figures"``): the stem is
+    reduced by :func:`safe_file_name`, a short alphanumeric extension is kept; the whole path
+    is checked against ``out``, so a subfolder that is a link to elsewhere is refused."""
+    if not names:
+        raise ValueError("output_file needs a file name under the output folder")
+    *folders, file_name = names
     stem, dot, extension = str(file_name).rpartition(".")
     if dot and stem and re.fullmatch(r"[A-Za-z0-9]{1,8}", extension):
-        return output_path(out, stem, suffix=f".{extension}")
-    return output_path(out, file_name)
+        return output_path(out, *folders, stem, suffix=f".{extension}")
+    return output_path(out, *folders, file_name)

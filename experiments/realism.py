@@ -1052,7 +1052,7 @@ def run_study(spec: RealismSpec, runner: RunnerSpec | None = None) -> int:
     written = write_outputs(means, runs, breaks, summary, out)
     if not spec.no_plots:
         written += [
-            save_figure(fig, output_file(out / "figures", name))
+            save_figure(fig, output_file(out, "figures", name))
             for name, fig in realism_figures(means, breaks)
         ]
     for env_id in envs:

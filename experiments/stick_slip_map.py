@@ -65,7 +65,12 @@ from experiments.arguments import (
     check_output_option,
     output_folder,
 )
-from experiments.controllers import CONTROLLERS_OPTION_HELP, controller_type, refuse_on_ray
+from experiments.controllers import (
+    CONTROLLERS_OPTION_HELP,
+    controller_type,
+    refuse_on_ray,
+    user_controller_errors,
+)
 from experiments.field import (
     ENV_IDS,
     FIELD_ENV,
@@ -505,12 +510,16 @@ def compute_map(
                     observations, policy_state, np.full(n, k == 0), deterministic=True
                 )
             observations, _, terminated, _, _ = venv.step(actions)
-            diverged |= terminated
+            samples = venv.unwrapped.plant_samples()  # type: ignore[attr-defined]
+            # a base controller's NaN or infinite torque at a step the string moved diverges
+            # the cell (a compiled law's infinite torque is held at the limit, not ended)
+            moved = np.isfinite(samples.states[..., 0])
+            bad_torque = (moved & ~np.isfinite(samples.base_torque_nm)).any(axis=-1)
+            diverged |= terminated | bad_torque
             bar.update()
             first = max(window_start - k * chunk, 0)
             if first >= chunk:
                 continue
-            samples = venv.unwrapped.plant_samples()  # type: ignore[attr-defined]
             stats.add(samples.bit_speed_rad_s[:, first:], samples.bit_stuck[:, first:])
     venv.close()
     severity = stats.severity()
@@ -916,21 +925,23 @@ def map_rows_task(
     reports them (every field of :class:`StickSlipMap` but its arrays and wall time)."""
     first = int(rows[0])
     assert list(rows) == list(range(first, first + len(rows))), "rows must be consecutive"
-    result = compute_map(
-        controller,
-        list(wob_n),
-        list(reference_speed_rad_s),
-        duration_s=duration_s,
-        window_s=window_s,
-        noise_std_rad_s=noise_std_rad_s,
-        seed=seed + first * len(reference_speed_rad_s),
-        parameters=parameters,
-        progress=False,
-        env_id=env_id,
-        observation=observation,
-        measured_depth_m=measured_depth_m,
-        **dict(keywords or {}),
-    )
+    name = controller if isinstance(controller, str) else ""
+    with user_controller_errors(name, " on the map"):  # a user's class: one line naming it
+        result = compute_map(
+            controller,
+            list(wob_n),
+            list(reference_speed_rad_s),
+            duration_s=duration_s,
+            window_s=window_s,
+            noise_std_rad_s=noise_std_rad_s,
+            seed=seed + first * len(reference_speed_rad_s),
+            parameters=parameters,
+            progress=False,
+            env_id=env_id,
+            observation=observation,
+            measured_depth_m=measured_depth_m,
+            **dict(keywords or {}),
+        )
     settings = {
         f.name: getattr(result, f.name)
         for f in dataclasses.fields(result)

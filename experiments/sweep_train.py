@@ -55,6 +55,7 @@ import dataclasses
 import json
 import math
 import shutil
+import sys
 import time
 import typing
 from collections.abc import Iterator, Mapping, Sequence
@@ -544,12 +545,33 @@ def _trial_row(result: Any, spec: SweepSpec, runs_dir: Path) -> dict[str, Any]:
             "kept_score": None if kept is None else kept.get("score"),
             "kept_at_timesteps": None if kept is None else kept["timesteps"],
             "stopped_early": bool(len(valid) < spec.validations()),
-            "error": None if result.error is None else str(result.error).splitlines()[0][:200],
+            "error": None if result.error is None else _error_line(result.error),
             "run_dir": None if folder is None else str(folder),
             **dict.fromkeys(HELDOUT_KEYS),
         }
     )
     return row
+
+
+def _error_line(error: BaseException | str) -> str:
+    """The line of a trial's error that names it: the last non-empty line of its text (Ray's
+    text starts with the worker's address and ends with the exception), made printable."""
+    lines = [line.strip() for line in str(error).splitlines() if line.strip()]
+    return printable(lines[-1] if lines else type(error).__name__, 200)
+
+
+def failed_trials_line(rows: Sequence[Mapping[str, Any]], out: Path) -> str | None:
+    """The line that reports the trials of ``rows`` that ended with an error and where their
+    errors are, or None when none did."""
+    failed = [row for row in rows if row.get("error")]
+    if not failed:
+        return None
+    count = f"all {len(rows)}" if len(failed) == len(rows) else f"{len(failed)} of {len(rows)}"
+    return (
+        f"{count} trial(s) failed: their errors are in the column error of "
+        f"{printable(out / 'trials.csv')} and in full in "
+        f"{printable(out / TUNE_FOLDER)}/TRIAL/error.txt (first: {failed[0]['error']})"
+    )
 
 
 def _model_folder(run_dir: Path) -> Path | None:
@@ -904,12 +926,18 @@ def run_study(options: SweepTrainSpec) -> int:
     best = summary["best"]
     print(
         (
-            f"best trial {best['trial']}: model exported to {best['model']}; "
+            f"best trial {best['trial']}: model exported to {printable(best['model'])}; "
             if best
             else "no trial reported a validation; "
         )
-        + f"summary in {options.out / 'summary.json'} ({summary['wall_time_s']} s)"
+        + f"summary in {printable(options.out / 'summary.json')} ({summary['wall_time_s']} s)"
     )
+    rows = summary["trials"]
+    failed = failed_trials_line(rows, options.out)
+    if failed is not None:
+        print(f"drill-gym sweep-train: {failed}", file=sys.stderr)
+        if all(row.get("error") for row in rows):
+            return 1  # nothing trained: not a success, though the tables are written
     return 0
 
 

@@ -37,8 +37,9 @@ from agents.config import (
     TrainConfig,
     field_docs,
     plain_text,
+    resumed_config,
 )
-from agents.train import train
+from agents.train import recorded_settings, train
 from drill_env.validation import printable
 from experiments.arguments import ArgumentParser
 from experiments.spec_cli import Option, option_name, spec_from_args, spec_options
@@ -165,7 +166,8 @@ def _parser(full: bool = False) -> ArgumentParser:
             "help": f"{text} (default: {shown})".replace("%", "%%") if listed else unset,
         }
         if hint is bool:
-            kwargs.update(nargs="?", const=True, type=_parse_bool, metavar="true|false")
+            parse = _parse_resume if f.name == "resume" else _parse_bool
+            kwargs.update(nargs="?", const=True, type=parse, metavar="true|false")
         elif typing.get_origin(hint) in (list, tuple):
             element = typing.get_args(hint)[0]
             kwargs.update(nargs="+", type=element, metavar="SIZE" if element is int else "FILE")
@@ -196,6 +198,17 @@ def _parse_bool(text: str) -> bool:
     raise argparse.ArgumentTypeError(f"expected true or false, got {printable(text)}")
 
 
+def _parse_resume(text: str) -> bool:
+    """``--resume [true|false]``; a folder given as its value is pointed to ``--out``."""
+    try:
+        return _parse_bool(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(
+            f"expected true or false, got {printable(text)} (the run folder is given with "
+            "--out: --resume --out RUN)"
+        ) from None
+
+
 def _show_default(value: Any) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
@@ -209,16 +222,36 @@ def _show_default(value: Any) -> str:
 def config_from_namespace(args: argparse.Namespace) -> TrainConfig:
     """The :class:`TrainConfig` of parsed arguments (other attributes are ignored): the
     options given, the others the defaults of the chosen env (:meth:`TrainConfig.for_env`).
+    With ``--resume`` of a run folder that holds the ``config.json`` of a run, the options
+    left out take the run's recorded values instead, and an option given with another value
+    than the recorded one is an error (:func:`agents.config.resumed_config`).
 
     Raises:
-        ValueError: A value out of range (one line naming the option and the allowed range).
+        ValueError: A value out of range (one line naming the option and the allowed range),
+            or, with ``--resume``, an option that conflicts with the run's settings.
     """
     names = {f.name for f in dataclasses.fields(TrainConfig)}
     given = {k: v for k, v in vars(args).items() if k in names}
     try:
-        return TrainConfig.for_env(given.pop("env_id", PAPER_ENV_ID), **given)
+        values = dict(given)
+        config = TrainConfig.for_env(values.pop("env_id", PAPER_ENV_ID), **values)
+        if not config.resume:
+            return config
+        return _resumed(config, given)
     except ValueError as err:
         raise ValueError(_both_names(str(err))) from None
+
+
+def _resumed(config: TrainConfig, given: dict[str, Any]) -> TrainConfig:
+    """``config`` (the options ``given``, checked) as the settings of the run it resumes: the
+    run's ``config.json`` with the changes a resume allows. A folder without ``config.json``
+    keeps ``config``: the training then reports what is missing (a checkpoint, the record)."""
+    run_dir = config.resolved_run_dir()
+    recorded = recorded_settings(run_dir)
+    if recorded is None:
+        return config
+    source = repr(str(run_dir / "config.json"))
+    return resumed_config(recorded, {**given, "run_dir": str(run_dir)}, printable(source, 300))
 
 
 def parse_config(argv: Sequence[str] | None) -> TrainConfig:
@@ -247,7 +280,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     out = train(config, progress=not command.no_progress)
     record = json.loads((out / "config.json").read_text())
     print(
-        f"model saved to {out}: {record.get('selected')}, at {record.get('timesteps')} of "
+        f"model saved to {printable(out, 300)}: {record.get('selected')}, at "
+        f"{record.get('timesteps')} of "
         f"{record.get('run_timesteps')} decisions; {record.get('wall_time_s')} s of training"
     )
     return 0

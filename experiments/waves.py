@@ -883,7 +883,7 @@ def run_waves(spec: WavesSpec, runner: RunnerSpec | None = None) -> int:
         print("no figures: runs read from the results file keep no node history (rerun "
               "without --resume for the figures)")  # fmt: skip
     elif not spec.no_plots and runs:
-        written += write_figures(runs, case, out / "figures", spec.duration_s)
+        written += write_figures(runs, case, out, spec.duration_s)
     print(
         f"\n{len(run_rows)} recorded runs in {time.perf_counter() - start:.1f} s; wrote "
         f"{len(written)} files to {out}/"
@@ -892,9 +892,10 @@ def run_waves(spec: WavesSpec, runner: RunnerSpec | None = None) -> int:
 
 
 def write_figures(
-    runs: Sequence[RunRecord], case: FieldCase, folder: Path, duration_s: float
+    runs: Sequence[RunRecord], case: FieldCase, out: Path, duration_s: float
 ) -> list[Path]:
-    """``field_response.png`` and one ``field_space_time_<run>.png`` per run."""
+    """``field_response.png`` and one ``field_space_time_<run>.png`` per run, in the
+    ``figures`` folder of the output folder ``out``."""
 
     title = (
         f"{case.measured_depth_m:,.0f} m of field_2500m, WOB {case.wob.initial_n / 1e3:g} kN, "
@@ -904,13 +905,13 @@ def write_figures(
     paths = [
         save_figure(
             string_response_figure(histories, f"{title}: last {RESPONSE_S:g} s of each run"),
-            folder / "field_response.png",
+            output_file(out, "figures", "field_response.png"),
         )
     ]
     for r in runs:
         fig = space_time_figure(r.history.window(duration_s - SPACE_TIME_S), f"{r.label}, {title}")
         name = f"field_space_time_{file_label(r.label)}.png"
-        paths.append(save_figure(fig, output_file(folder, name)))
+        paths.append(save_figure(fig, output_file(out, "figures", name)))
     return paths
 
 

@@ -1246,8 +1246,13 @@ def finished_run(tmp_path_factory: pytest.TempPathFactory) -> Any:
 
 
 def _resume(config: Any, run_dir: Path, **changes: Any) -> None:
+    """Resume the run in ``run_dir`` to 256 decisions with the settings ``changes``, recorded
+    in its ``config.json`` first (a resumed run keeps its recorded settings)."""
     from agents.train import train
 
+    if changes:
+        record = json.loads((run_dir / "config.json").read_text())
+        (run_dir / "config.json").write_text(json.dumps({**record, **changes}))
     train(
         dataclasses.replace(
             config, run_dir=str(run_dir), resume=True, total_timesteps=256, **changes
