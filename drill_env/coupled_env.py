@@ -68,7 +68,12 @@ from drill_env.coupled import (
     switch_rule,
     switching_functions,
 )
-from drill_env.env import copy_env_attributes, refuse_pickling, validate_actions
+from drill_env.env import (
+    EpisodeStepsSpec,
+    copy_env_attributes,
+    refuse_pickling,
+    validate_actions,
+)
 from drill_env.layout import (
     M_APPLIED_TORQUE,
     M_STATE,
@@ -764,7 +769,9 @@ def _string_bytes() -> int:
     return 2 * 8 * _ring_capacity()
 
 
-class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
+class DrillStringCoupledEnv(
+    EpisodeStepsSpec, gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]
+):
     """The paper's 4-DOF torsional drill string with an axial BHA and the regenerative bit.
 
     **Description.** Top drive, pipes, collars and bit of ``DrillString-v0``; the bit also
@@ -866,16 +873,8 @@ class DrillStringCoupledEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.floa
         self._running = False  # started, and the episode has not ended by diverging
 
     @property
-    def spec(self) -> EnvSpec | None:
-        """The registration spec, with ``max_episode_steps`` the decisions that ``episode_s``
-        and ``control_dt_s`` make (the env truncates itself there)."""
-        return self._spec
-
-    @spec.setter
-    def spec(self, value: EnvSpec | None) -> None:
-        if value is not None and value.max_episode_steps is None:
-            value = dataclasses.replace(value, max_episode_steps=self._steps_per_episode)
-        self._spec = value
+    def _episode_steps(self) -> int:
+        return self._steps_per_episode
 
     def __deepcopy__(self, memo: dict[int, Any]) -> DrillStringCoupledEnv:
         """An independent env in the same state (its arrays, loops and generator copied)."""

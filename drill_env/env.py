@@ -43,6 +43,7 @@ from drill_env.validation import shown
 __all__ = [
     "DrillStringEnv",
     "DrillStringFieldEnv",
+    "EpisodeStepsSpec",
     "StringState",
     "copy_batch_env",
     "copy_env_attributes",
@@ -306,7 +307,30 @@ class StringState(NamedTuple):
     torque_nm: npt.NDArray[np.float64]
 
 
-class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
+class EpisodeStepsSpec:
+    """Mixin of an env that truncates its own episodes after ``_episode_steps`` decisions: its
+    ``spec`` (set by ``gymnasium.make``) carries that count as ``max_episode_steps``."""
+
+    _spec: EnvSpec | None = None
+
+    @property
+    def _episode_steps(self) -> int:
+        raise NotImplementedError
+
+    @property
+    def spec(self) -> EnvSpec | None:
+        """The registration spec, with ``max_episode_steps`` the decisions that ``episode_s``
+        and ``control_dt_s`` make (the env truncates itself there)."""
+        return self._spec
+
+    @spec.setter
+    def spec(self, value: EnvSpec | None) -> None:
+        if value is not None and value.max_episode_steps is None:
+            value = dataclasses.replace(value, max_episode_steps=self._episode_steps)
+        self._spec = value
+
+
+class DrillStringEnv(EpisodeStepsSpec, gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
     """Torsional stick-slip control of a 4-DOF drill string.
 
     ## Description
@@ -481,16 +505,8 @@ class DrillStringEnv(gym.Env[npt.NDArray[np.float32], npt.NDArray[np.float32]]):
         )
 
     @property
-    def spec(self) -> EnvSpec | None:
-        """The registration spec, with ``max_episode_steps`` the decisions that ``episode_s``
-        and ``control_dt_s`` make (the env truncates itself there)."""
-        return self._spec
-
-    @spec.setter
-    def spec(self, value: EnvSpec | None) -> None:
-        if value is not None and value.max_episode_steps is None:
-            value = dataclasses.replace(value, max_episode_steps=self.config.max_steps)
-        self._spec = value
+    def _episode_steps(self) -> int:
+        return self.config.max_steps
 
     @property
     def batch(self) -> StringBatch:
