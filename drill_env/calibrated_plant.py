@@ -55,6 +55,7 @@ __all__ = [
     "env_keywords",
     "check_parameter",
     "load_plant",
+    "parameter_range_text",
     "parameter_unit",
 ]
 

@@ -38,9 +38,11 @@ from drill_env.bit_model import (
 from drill_env.calibrated_plant import (
     FAMILY_PARAMETERS,
     MODEL_PARAMETERS,
+    PARAMETER_RANGES,
     CalibratedPlant,
     FittedParameter,
     check_parameter,
+    parameter_range_text,
     parameter_unit,
 )
 from drill_env.measured_log import Defect, MeasuredLog, find_defects, spike_mask
@@ -1106,6 +1108,15 @@ def _plant_of(
                 value, parameter_unit(name, uses_wob), True, fit.relative_std.get(name),
                 "fitted (output error on bit speed and torque on bit); uncertainty: Laplace",
             )  # fmt: skip
+        low, high = PARAMETER_RANGES[name]
+        if not low <= value <= high:  # an unpinned value that ran off: the plant keeps the end
+            held = parameters[name]
+            parameters[name] = dataclasses.replace(
+                held,
+                value=min(max(value, low), high),
+                note=f"{held.note}; the fit's {value:.3g} held at the end of the allowed range "
+                f"{parameter_range_text(name)}",
+            )
     bit = window.column("bit_speed_rad_s")
     # The noise of the bit-speed sensor: the robust spread of the second differences (white
     # noise of std s gives std s sqrt(6); a smooth signal's trend cancels).

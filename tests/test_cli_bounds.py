@@ -295,3 +295,28 @@ def test_resumed_config_keeps_what_may_change_only() -> None:
         resumed_config(recorded, {"learning_rate": 0.1}, "c.json")
     with pytest.raises(ValueError, match=r"c.json does not hold the settings of a run"):
         resumed_config({"nope": 1}, {}, "c.json")
+
+
+def test_a_fitted_value_beyond_its_range_is_held_at_the_end_and_said() -> None:
+    """An unpinned parameter that the fit drives beyond its allowed range (a stiffness of
+    1e13 N m/rad) makes a plant at the range's end, with a note, instead of failing."""
+    from drill_env.bit_model import P_K
+    from drill_env.calibrated_plant import PARAMETER_RANGES
+    from drill_env.measured_log import MeasuredLog
+    from experiments.calibration_fit import FamilyFit, _plant_of
+
+    t = np.arange(200) * 1e-2
+    ones = np.ones_like(t)
+    window = MeasuredLog(
+        t, {"top_speed_rad_s": 5 * ones, "bit_speed_rad_s": 5 * ones, "bit_torque_nm": 1e3 * ones}
+    )
+    p = np.zeros(8)
+    p[:6] = 300.0, 1.0, 50.0, 8e3, 5e3, 1.0
+    p[P_K] = 1e13
+    fit = FamilyFit("karnopp", p, 0.0, 1.0, 200, 200.0, [], {}, {}, {}, 0.0, 1)
+    plant = _plant_of(fit, window, False, (0.0, 2.0), "log.csv", {"karnopp": fit}, [],
+                      np.ones_like(t))  # fmt: skip
+    stiffness = plant.parameters["stiffness"]
+    assert stiffness.value == PARAMETER_RANGES["stiffness"][1]
+    assert "held at the end of the allowed range" in stiffness.note
+    assert plant.parameters["bit_inertia"].value == 300.0
