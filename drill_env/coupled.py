@@ -38,6 +38,7 @@ import numpy.typing as npt
 from numba import njit
 
 from drill_env.validation import (
+    InputTypeError,
     check_choice,
     check_finite_fields,
     check_int,
@@ -237,14 +238,17 @@ rock, stuck on the rock, stuck off the rock."""
 _DOWN, _UP, _HOLD, _AIR, _STUCK, _STUCK_AIR = range(6)
 
 
-def _resolve(parameters: str | RgdParameters) -> RgdParameters:
+def _resolve(parameters: str | RgdParameters, name: str = "parameters") -> RgdParameters:
+    """The RGD bit's parameters: ``parameters`` itself or the preset it names; errors name the
+    keyword ``name`` that gave it."""
     if isinstance(parameters, RgdParameters):
         return parameters
     if isinstance(parameters, str):
-        check_choice("parameters", parameters, RGD_PRESETS, "preset")
+        check_choice(name, parameters, RGD_PRESETS, "preset")
         return RGD_PRESETS[parameters]
-    raise TypeError(
-        f"parameters must be a preset name or an RgdParameters, got {type(parameters).__name__}"
+    raise InputTypeError(
+        f"{name} must be a preset name {sorted(RGD_PRESETS)} or an RgdParameters, got "
+        f"{shown(parameters)}"
     )
 
 

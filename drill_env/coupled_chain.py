@@ -1367,6 +1367,6 @@ def check_bit_keywords(
             if not (value is default or value == default):
                 raise ValueError(f"{name} = {shown(value)} applies only with bit='rgd'")
         return None
-    p = _resolve(rgd_parameters)  # type: ignore[arg-type]
+    p = _resolve(rgd_parameters, "rgd_parameters")  # type: ignore[arg-type]
     _check_top(axial_top, hook_speed_m_s, hook_stiffness_n_m)
     return p

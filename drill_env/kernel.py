@@ -493,7 +493,7 @@ def _base_torque(s, lp, ls, meas, external: float, ref: float) -> float:
 def residual_base(s, u_base: float) -> float:
     """The base torque the residual reward term compares the applied torque with, N m: the
     base controller's torque clipped to the top drive's range (a base torque beyond it, even
-    1e200 N m, then costs at most the range, and the term stays in [0, 1])."""
+    1e200 N m, then costs at most the range, and the term stays finite)."""
     return min(max(u_base, s.u_min), s.u_max)
 
 

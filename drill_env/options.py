@@ -16,7 +16,7 @@ from typing import Any, ClassVar, Final
 import numpy as np
 
 from drill_env.control import Controller
-from drill_env.coupled import RGD_PRESETS, RgdParameters
+from drill_env.coupled import RgdParameters
 from drill_env.coupled_chain import check_bit_keywords
 from drill_env.distributed import (
     DISTRIBUTED_PRESETS,
@@ -52,7 +52,6 @@ from drill_env.scenarios import (
 )
 from drill_env.sensors import MeasurementChannel
 from drill_env.validation import (
-    InputTypeError,
     check_bool,
     check_choice,
     check_range,
@@ -478,20 +477,11 @@ class FieldEnvConfig(EnvConfig):
             )
         super().__post_init__()
         check_step_bound(self.string(), PLANT_DT_S)
-        rgd = isinstance(self.bit, str) and self.bit == "rgd"
-        if rgd:  # named here: the bit law's own check calls it "parameters"
-            if isinstance(self.rgd_parameters, str):
-                check_choice("rgd_parameters", self.rgd_parameters, RGD_PRESETS, "preset")
-            elif not isinstance(self.rgd_parameters, RgdParameters):
-                raise InputTypeError(
-                    "rgd_parameters must be a preset name "
-                    f"{sorted(RGD_PRESETS)} or an RgdParameters, got {shown(self.rgd_parameters)}"
-                )
         check_bit_keywords(
             self.bit, self.rgd_parameters, self.axial_top, self.hook_speed_m_s,
             self.hook_stiffness_n_m,
         )  # fmt: skip
-        if rgd:
+        if self.bit == "rgd":  # a known bit law (checked above)
             stiffness = float(self.hook_stiffness_n_m)  # a real number > 0 (checked above)
             low, high = HOOK_STIFFNESS_RANGE_N_M
             require(

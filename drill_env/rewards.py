@@ -49,7 +49,7 @@ from drill_env.layout import (
     REP_TRACKING_SUM,
     REP_VARIATION,
 )
-from drill_env.validation import check_real, require
+from drill_env.validation import check_range, check_real, require
 
 __all__ = [
     "DIVERGED_REWARD",
@@ -110,8 +110,7 @@ class RewardWeights:
     def __post_init__(self) -> None:
         for name in ("tracking", "chattering", "stuck", "torque", "residual"):
             value = getattr(self, name)
-            v = check_real(f"reward weight {name}", value, "finite >= 0")
-            require(f"reward weight {name}", value, "finite >= 0", 0.0 <= v < np.inf)
+            check_range(f"reward weight {name}", value, 0.0, float("inf"))
         if self.tracking + self.chattering + self.stuck <= 0:
             raise ValueError(
                 "reward weights tracking, chattering and stuck are all zero: at least one must "
