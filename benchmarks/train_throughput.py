@@ -7,7 +7,8 @@
 (b) with torch and stable-baselines3 installed: PPO with the default hyperparameters for
     ``--rollouts`` rollouts of ``n_steps * num_envs`` decisions, timed while it collects them
     (policy inference and the environment) and end to end (with the updates), and what the
-    updates alone cost per decision;
+    updates alone cost per decision; alternately, the same with SB3's own ``collect_rollouts``
+    (the baseline of ``agents.ppo.LeanPPO``'s loop, in the same process);
 (c) where a step of the training env goes: the compiled plant loops, the measurement-noise
     draws, the rest of the native vector env, and SB3's side (the adapter, episode statistics
     and normalisation), microseconds per step of all ``num_envs`` strings.
@@ -60,10 +61,16 @@ def env_rate(config: TrainConfig, decisions: int, action: str, repeat: int) -> f
     return best
 
 
-def ppo_rates(config: TrainConfig, rollouts: int, repeat: int) -> tuple[float, float, float]:
-    """(b) Decisions per CPU second of PPO while collecting rollouts, and end to end; CPU
-    microseconds of the updates per decision (the least of the runs)."""
+def ppo_rates(config: TrainConfig, rollouts: int, repeat: int) -> dict[str, float]:
+    """(b) Decisions per CPU second of PPO while collecting rollouts (``collect``), and end to
+    end (``total``); CPU microseconds of the updates per decision (``update_us``, the least of
+    the runs). Where ``make_model`` collects with a loop of its own (``agents.ppo.LeanPPO``),
+    each run is followed by one of the same model collecting with SB3's ``collect_rollouts``
+    (``sb3_collect``, ``sb3_total``): the same transitions, a baseline in the same process."""
+    import types
+
     import torch as th
+    from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback
 
     class RolloutTimer(BaseCallback):
@@ -82,20 +89,31 @@ def ppo_rates(config: TrainConfig, rollouts: int, repeat: int) -> tuple[float, f
             return True
 
     th.set_num_threads(config.torch_threads)
-    best_collect = best_total = 0.0
-    update_us = float("inf")
+    probe = make_training_env(config)
+    own_loop = type(make_model(config, probe)).collect_rollouts
+    probe.close()
+    collectors = ("own", "sb3") if own_loop is not PPO.collect_rollouts else ("own",)
+    rates = {"collect": 0.0, "total": 0.0, "update_us": float("inf")}
+    rates.update(dict.fromkeys(("sb3_collect", "sb3_total"), 0.0) if len(collectors) > 1 else {})
     for _ in range(repeat):
-        venv = make_training_env(config)
-        model = make_model(config, venv)
-        timer = RolloutTimer()
-        start = time.process_time()
-        model.learn(total_timesteps=rollouts * config.n_steps * config.num_envs, callback=timer)
-        total_s = time.process_time() - start
-        best_collect = max(best_collect, model.num_timesteps / timer.collecting_s)
-        best_total = max(best_total, model.num_timesteps / total_s)
-        update_us = min(update_us, 1e6 * (total_s - timer.collecting_s) / model.num_timesteps)
-        venv.close()
-    return best_collect, best_total, update_us
+        for collector in collectors:  # alternately
+            venv = make_training_env(config)
+            model = make_model(config, venv)
+            if collector == "sb3":
+                model.collect_rollouts = types.MethodType(PPO.collect_rollouts, model)
+            timer = RolloutTimer()
+            start = time.process_time()
+            model.learn(total_timesteps=rollouts * config.n_steps * config.num_envs, callback=timer)
+            total_s = time.process_time() - start
+            prefix = "sb3_" if collector == "sb3" else ""
+            collect_rate = model.num_timesteps / timer.collecting_s
+            rates[prefix + "collect"] = max(rates[prefix + "collect"], collect_rate)
+            rates[prefix + "total"] = max(rates[prefix + "total"], model.num_timesteps / total_s)
+            if collector == "own":
+                update_us = 1e6 * (total_s - timer.collecting_s) / model.num_timesteps
+                rates["update_us"] = min(rates["update_us"], update_us)
+            venv.close()
+    return rates
 
 
 def step_parts(config: TrainConfig, steps: int, repeat: int) -> dict[str, float]:
@@ -153,10 +171,19 @@ def measure(args: argparse.Namespace) -> None:
         rate = env_rate(config, args.decisions, action, args.repeat)
         print(f"(a) training env alone, {action + ' actions:':<16} {rate:10,.0f} decisions/s")
     if importlib.util.find_spec("torch") is not None:
-        collect, total, update_us = ppo_rates(config, args.rollouts, args.repeat)
-        print(f"(b) PPO collecting rollouts:              {collect:10,.0f} decisions/s")
-        print(f"(b) PPO end to end (rollouts + updates):  {total:10,.0f} decisions/s")
-        print(f"(b) PPO updates alone:                    {update_us:10.1f} us per decision")
+        rates = ppo_rates(config, args.rollouts, args.repeat)
+        print(f"(b) PPO collecting rollouts:              {rates['collect']:10,.0f} decisions/s")
+        print(f"(b) PPO end to end (rollouts + updates):  {rates['total']:10,.0f} decisions/s")
+        print(
+            f"(b) PPO updates alone:                    {rates['update_us']:10.1f} us per decision"
+        )
+        if "sb3_collect" in rates:
+            print(
+                f"    the same with SB3's collect_rollouts: collecting {rates['sb3_collect']:,.0f}"
+                f" decisions/s, end to end {rates['sb3_total']:,.0f} (this version's loop: "
+                f"x{rates['collect'] / rates['sb3_collect']:.2f} and "
+                f"x{rates['total'] / rates['sb3_total']:.2f})"
+            )
     else:
         print("(b) PPO: torch is not installed (pip install '.[rl]')")
     parts = step_parts(config, max(1, args.decisions // config.num_envs), args.repeat)

@@ -37,6 +37,7 @@ def _sources(package: str) -> list[Path]:
 
 LAZY_IMPORTS: Final[dict[tuple[str, str], str]] = {
     ("agents.train", "agents.vec_env"): "imports Stable-Baselines3, the optional [rl] extra",
+    ("agents.train", "agents.ppo"): "imports Stable-Baselines3 and torch, the optional [rl] extra",
     ("experiments.cli", "drill_env.validation"): "loads NumPy and Numba: experiments.preflight "
     "refuses a path no command can use before that",
     ("experiments.cli", "experiments.arguments"): "loads drill_env (NumPy, Numba): "
