@@ -16,7 +16,8 @@
 Each rate is the best of ``--repeat`` runs (CPU time of this process: steadier than the wall
 clock on a shared machine). ``--against <checkout>`` compares with another version of the
 code: this file runs ``--rounds`` times with each checkout on ``PYTHONPATH``, alternately, and
-prints each rate's range and the ratio of the best rates (the other version needs only
+prints each rate's range, the ratio of the best rates and the median (and range) of the
+rounds' ratios, each round's two runs being one after the other (the other version needs only
 ``drill_env`` and ``agents``).
 
 Run: ``OMP_NUM_THREADS=1 .venv/bin/python benchmarks/train_throughput.py`` (from the checkout
@@ -200,7 +201,7 @@ RATE_LINE = re.compile(r"^\((a|b)\) (.+?):?\s+([\d,.]+) (decisions/s|us per deci
 
 def compare(args: argparse.Namespace) -> None:
     """Run this file alternately with this checkout and ``args.against`` on the path; print
-    each rate's range per version and the ratio of the best."""
+    each rate's range per version, the ratio of the best and the rounds' ratios."""
     here = Path(__file__).resolve().parents[1]
     versions = {"this version": here, "other version": Path(args.against).resolve()}
     if not (versions["other version"] / "drill_env").is_dir():
@@ -222,7 +223,10 @@ def compare(args: argparse.Namespace) -> None:
                 if match:
                     key = f"({match[1]}) {match[2]}"
                     rates[name].setdefault(key, []).append(float(match[3].replace(",", "")))
-    print(f"\n{'':42} {'other version':>17} {'this version':>17} {'speed-up':>8}")
+    print(
+        f"\n{'':42} {'other version':>17} {'this version':>17} {'best/best':>9}"
+        f" {'round by round':>20}"
+    )
     for key, ours in rates["this version"].items():
         theirs = rates["other version"].get(key)
         if not theirs:
@@ -230,9 +234,11 @@ def compare(args: argparse.Namespace) -> None:
         # A rate's best is its highest; the updates' is a cost, the lowest.
         cost = key.startswith("(b) PPO updates alone")
         ratio = min(theirs) / min(ours) if cost else max(ours) / max(theirs)
+        # each round's pair, run one after the other: steadier when the machine's speed drifts
+        paired = sorted(t / o if cost else o / t for o, t in zip(ours, theirs, strict=True))
         print(
             f"{key:42} {min(theirs):8,.0f}-{max(theirs):<8,.0f} {min(ours):8,.0f}-{max(ours):<8,.0f}"
-            f" {ratio:6.2f}"
+            f" {ratio:9.2f} {float(np.median(paired)):8.2f} ({paired[0]:.2f}-{paired[-1]:.2f})"
         )
 
 
