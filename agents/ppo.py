@@ -1,15 +1,15 @@
-"""Stable-Baselines3's PPO with a leaner rollout collection.
+"""The policy PPO trains: Stable-Baselines3's ``MlpPolicy`` with leaner forward passes.
 
 At every step of a rollout SB3's ``ActorCriticPolicy.forward`` calls a dozen ``nn.Module``
-wrappers and builds a ``torch.distributions.Normal`` (with its argument checks) to draw 16
-actions from two small MLPs: about two thirds of the policy's time during collection is that
-Python, not arithmetic. :class:`LeanPPO` collects with the same torch operations on the same
-tensors in the same order (``F.linear``, the activation, one ``normal_`` draw, the Gaussian
-log-density as ``Normal.log_prob`` writes it), so the rollout buffer, the random stream and the
-trained weights are SB3's bit for bit (``tests/test_agents.py`` trains both side by side). The
-updates are SB3's own. A policy this module does not know layer by layer (another feature
-extractor, another distribution, state-dependent exploration, squashed or image observations)
-is collected by SB3's ``collect_rollouts`` unchanged.
+wrappers and builds a ``torch.distributions.Normal`` (with its argument checks) to draw the
+actions of two small MLPs, and every minibatch of the update does the same in
+``evaluate_actions``: most of that time is Python, not arithmetic.
+:class:`LeanActorCriticPolicy` runs the same torch operations on the same tensors in the same
+order (``F.linear``, the activation, one ``normal_`` draw, the Gaussian's log-density and
+entropy as ``Normal`` writes them), so the actions, values, random stream, gradients and
+trained weights are SB3's bit for bit (``tests/test_lean_ppo.py`` trains both side by side).
+A configuration it does not know layer by layer (another feature extractor or distribution,
+state-dependent exploration, squashed or non-flat observations) takes SB3's own methods.
 """
 
 from __future__ import annotations
@@ -18,39 +18,38 @@ import math
 from collections.abc import Callable
 from typing import Any, Final
 
-import numpy as np
 import torch as th
 import torch.nn.functional as F
 from gymnasium import spaces
-from stable_baselines3 import PPO
-from stable_baselines3.common.buffers import RolloutBuffer
-from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.distributions import DiagGaussianDistribution
 from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.torch_layers import FlattenExtractor, MlpExtractor
-from stable_baselines3.common.utils import obs_as_tensor
-from stable_baselines3.common.vec_env import VecEnv
 
-__all__ = ["LeanPPO", "policy_step"]
+__all__ = ["LeanActorCriticPolicy"]
 
 Tensor = th.Tensor
-PolicyStep = Callable[[Tensor], tuple[Tensor, Tensor, Tensor]]
-"""Observations -> (actions, values, log-probabilities), as ``ActorCriticPolicy.forward``."""
+Layer = Callable[[Tensor], Tensor]
 
-_ACTIVATIONS: Final[dict[type[th.nn.Module], Callable[[Tensor], Tensor]]] = {
+_ACTIVATIONS: Final[dict[type[th.nn.Module], Layer]] = {
     th.nn.Tanh: th.tanh,  # nn.Tanh.forward is torch.tanh
     th.nn.ReLU: th.relu,  # nn.ReLU(inplace=False).forward is F.relu, i.e. torch.relu
 }
 _LOG_SQRT_2PI: Final = math.log(math.sqrt(2 * math.pi))
 """The constant of ``torch.distributions.Normal.log_prob``, computed as it computes it."""
+_ENTROPY_CONSTANT: Final = 0.5 + 0.5 * math.log(2 * math.pi)
+"""The constant of ``torch.distributions.Normal.entropy``, computed as it computes it."""
 
 
-def _layers(network: th.nn.Module) -> list[Callable[[Tensor], Tensor]] | None:
-    """The functions of a ``Sequential`` of ``Linear`` and tanh/ReLU layers bound to the
-    layers' parameter tensors (the optimizer and ``load_state_dict`` update them in place);
-    None for any other module."""
+def _linear(weight: Tensor, bias: Tensor | None) -> Layer:
+    """``nn.Linear.forward`` on these parameter tensors."""
+    return lambda x: F.linear(x, weight, bias)
+
+
+def _layers(network: th.nn.Module) -> list[Layer] | None:
+    """The functions of a ``Sequential`` of ``Linear`` and tanh/ReLU layers (or of one
+    ``Linear``) on the layers' parameter tensors as they are now; None for any other module."""
     modules = list(network) if type(network) is th.nn.Sequential else [network]
-    layers: list[Callable[[Tensor], Tensor]] = []
+    layers: list[Layer] = []
     for module in modules:
         if type(module) is th.nn.Linear:
             layers.append(_linear(module.weight, module.bias))
@@ -61,121 +60,85 @@ def _layers(network: th.nn.Module) -> list[Callable[[Tensor], Tensor]] | None:
     return layers
 
 
-def _linear(weight: Tensor, bias: Tensor | None) -> Callable[[Tensor], Tensor]:
-    """``nn.Linear.forward`` on these parameter tensors."""
-    return lambda x: F.linear(x, weight, bias)
-
-
-def _run(layers: list[Callable[[Tensor], Tensor]], x: Tensor) -> Tensor:
+def _run(layers: list[Layer], x: Tensor) -> Tensor:
     for layer in layers:
         x = layer(x)
     return x
 
 
-def policy_step(policy: Any) -> PolicyStep | None:
-    """``policy.forward(obs)`` (stochastic actions) as the same torch operations without the
-    module calls and the distribution object, for the policy's parameters as they are now (the
-    Gaussian's spread is read once: build a new step after each update), or None when ``policy`` is not SB3's plain MLP
-    actor-critic on flat observations with a diagonal Gaussian (no state-dependent noise, no
-    squashing): then only ``policy.forward`` itself is SB3's answer."""
-    if not (
-        type(policy) is ActorCriticPolicy
-        and type(policy.action_dist) is DiagGaussianDistribution
-        and not policy.use_sde
-        and not policy.squash_output
-        and policy.share_features_extractor
-        and type(policy.features_extractor) is FlattenExtractor
-        and type(policy.mlp_extractor) is MlpExtractor
-        and type(policy.observation_space) is spaces.Box
-        and len(policy.observation_space.shape) == 1
-        and type(policy.action_space) is spaces.Box
-    ):
-        return None
-    actor = _layers(policy.mlp_extractor.policy_net)
-    critic = _layers(policy.mlp_extractor.value_net)
-    action_net = _layers(policy.action_net)
-    value_net = _layers(policy.value_net)
-    if actor is None or critic is None or action_net is None or value_net is None:
-        return None
-    actor += action_net
-    critic += value_net
-    action_shape = (-1, *policy.action_space.shape)
-    with th.no_grad():  # the Gaussian's per-action constants until the next update
-        # DiagGaussianDistribution.proba_distribution: std = ones_like(mean) * log_std.exp(),
-        # the same numbers in every row; Normal.log_prob's 2 * scale**2 and scale.log()
-        std = policy.log_std.exp()
-        two_var = 2 * std**2
-        log_std = std.log()
+class _Networks:
+    """The four networks of a plain MLP actor-critic as lists of functions."""
 
-    def step(obs: Tensor) -> tuple[Tensor, Tensor, Tensor]:
-        features = obs.float()  # preprocess_obs of a flat Box; Flatten of (n, d) is itself
-        mean = _run(actor, features)
-        values = _run(critic, features)
-        # Normal.rsample (one normal_ draw of the batch's shape), then Normal.log_prob
-        actions = mean + th.empty(mean.shape, dtype=mean.dtype).normal_() * std
-        log_prob = -((actions - mean) ** 2) / two_var - log_std - _LOG_SQRT_2PI
-        return actions.reshape(action_shape), values, log_prob.sum(dim=1)
+    def __init__(
+        self, actor: list[Layer], critic: list[Layer], action: list[Layer], value: list[Layer]
+    ) -> None:
+        self.actor, self.critic, self.action, self.value = actor, critic, action, value
 
-    return step
+    def latents(self, obs: Tensor) -> tuple[Tensor, Tensor]:
+        """``MlpExtractor.forward`` after ``extract_features`` of a flat Box (``float()``,
+        and a flatten of a (batch, size) tensor is itself)."""
+        features = obs.float()
+        return _run(self.actor, features), _run(self.critic, features)
 
 
-class LeanPPO(PPO):
-    """SB3's ``PPO``; its rollouts are collected through :func:`policy_step` when the policy
-    allows it (the same transitions, random draws and buffer, bit for bit)."""
+class LeanActorCriticPolicy(ActorCriticPolicy):
+    """SB3's ``MlpPolicy`` (``ActorCriticPolicy``, same constructor); ``forward`` and
+    ``evaluate_actions`` skip the module calls and the distribution object when the policy is
+    the plain MLP with a diagonal Gaussian on flat observations (the same numbers)."""
 
-    def collect_rollouts(
-        self,
-        env: VecEnv,
-        callback: BaseCallback,
-        rollout_buffer: RolloutBuffer,
-        n_rollout_steps: int,
-    ) -> bool:
-        step = policy_step(self.policy)
-        if step is None or self._last_obs is None or isinstance(self._last_obs, dict):
-            return super().collect_rollouts(env, callback, rollout_buffer, n_rollout_steps)
-        # SB3's loop (stable_baselines3.common.on_policy_algorithm), with the policy step above
-        self.policy.set_training_mode(False)
-        n_steps = 0
-        rollout_buffer.reset()
-        callback.on_rollout_start()
-        assert isinstance(self.action_space, spaces.Box)
-        low, high = self.action_space.low, self.action_space.high
-        while n_steps < n_rollout_steps:
-            with th.no_grad():
-                obs_tensor = obs_as_tensor(self._last_obs, self.device)  # type: ignore[arg-type]
-                assert isinstance(obs_tensor, th.Tensor)  # a flat Box (policy_step)
-                actions_tensor, values, log_probs = step(obs_tensor)
-            actions = actions_tensor.cpu().numpy()
-            clipped_actions = np.clip(actions, low, high)  # the Gaussian is unbounded
-            new_obs, rewards, dones, infos = env.step(clipped_actions)
-            self.num_timesteps += env.num_envs
-            callback.update_locals(locals())
-            if not callback.on_step():
-                return False
-            self._update_info_buffer(infos, dones)
-            n_steps += 1
-            for idx in np.flatnonzero(dones):  # a timeout bootstraps with the value function
-                info = infos[idx]
-                if info.get("terminal_observation") is not None and info.get(
-                    "TimeLimit.truncated", False
-                ):
-                    terminal_obs = self.policy.obs_to_tensor(info["terminal_observation"])[0]
-                    with th.no_grad():
-                        terminal_value = self.policy.predict_values(terminal_obs)[0]
-                    rewards[idx] += self.gamma * terminal_value
-            rollout_buffer.add(
-                self._last_obs,  # type: ignore[arg-type]
-                actions,
-                rewards,
-                self._last_episode_starts,  # type: ignore[arg-type]
-                values,
-                log_probs,
-            )
-            self._last_obs = new_obs  # type: ignore[assignment]
-            self._last_episode_starts = dones
-        with th.no_grad():
-            values = self.policy.predict_values(obs_as_tensor(new_obs, self.device))  # type: ignore[arg-type]
-        rollout_buffer.compute_returns_and_advantage(last_values=values, dones=dones)
-        callback.update_locals(locals())
-        callback.on_rollout_end()
-        return True
+    def _networks(self) -> _Networks | None:
+        """The networks as functions of their current parameters, or None when this policy is
+        not the plain case (then SB3's methods answer)."""
+        if not (
+            type(self.action_dist) is DiagGaussianDistribution
+            and not self.use_sde
+            and not self.squash_output
+            and self.share_features_extractor
+            and type(self.features_extractor) is FlattenExtractor
+            and type(self.mlp_extractor) is MlpExtractor
+            and type(self.observation_space) is spaces.Box
+            and len(self.observation_space.shape) == 1
+        ):
+            return None
+        parts = (
+            _layers(self.mlp_extractor.policy_net),
+            _layers(self.mlp_extractor.value_net),
+            _layers(self.action_net),
+            _layers(self.value_net),
+        )
+        if any(part is None for part in parts):
+            return None
+        return _Networks(*parts)  # type: ignore[arg-type]
+
+    def forward(self, obs: Any, deterministic: bool = False) -> tuple[Tensor, Tensor, Tensor]:
+        """Actions, values and log-probabilities of ``obs`` (``ActorCriticPolicy.forward``)."""
+        networks = self._networks()
+        if networks is None or not isinstance(obs, th.Tensor):
+            return super().forward(obs, deterministic)
+        latent_pi, latent_vf = networks.latents(obs)
+        values = _run(networks.value, latent_vf)
+        mean = _run(networks.action, latent_pi)
+        # DiagGaussianDistribution.proba_distribution, Normal.rsample (one normal_ draw of
+        # the batch's shape) or its mean, then Normal.log_prob summed over the action
+        std = th.ones_like(mean) * self.log_std.exp()
+        if deterministic:
+            actions = mean
+        else:
+            actions = mean + th.empty(mean.shape, dtype=mean.dtype).normal_() * std
+        log_prob = -((actions - mean) ** 2) / (2 * std**2) - std.log() - _LOG_SQRT_2PI
+        return actions.reshape((-1, *self.action_space.shape)), values, log_prob.sum(dim=1)
+
+    def evaluate_actions(self, obs: Any, actions: Tensor) -> tuple[Tensor, Tensor, Tensor | None]:
+        """Values, log-probabilities of ``actions`` and entropies
+        (``ActorCriticPolicy.evaluate_actions``: the same graph, the same gradients)."""
+        networks = self._networks()
+        if networks is None or not isinstance(obs, th.Tensor):
+            return super().evaluate_actions(obs, actions)
+        latent_pi, latent_vf = networks.latents(obs)
+        mean = _run(networks.action, latent_pi)
+        std = th.ones_like(mean) * self.log_std.exp()
+        loc, scale = th.broadcast_tensors(mean, std)  # Normal(mean, std)
+        log_prob = -((actions - loc) ** 2) / (2 * scale**2) - scale.log() - _LOG_SQRT_2PI
+        values = _run(networks.value, latent_vf)
+        entropy = _ENTROPY_CONSTANT + th.log(scale)
+        return values, log_prob.sum(dim=1), entropy.sum(dim=1)

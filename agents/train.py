@@ -292,11 +292,12 @@ def make_model(config: TrainConfig, venv: Any) -> Any:
     """A new PPO agent for ``venv`` (separate tanh MLPs for policy and value); with
     ``zero_init_action`` its action mean is exactly 0 for every observation."""
     import torch as th
+    from stable_baselines3 import PPO
 
-    from agents.ppo import LeanPPO
+    from agents.ppo import LeanActorCriticPolicy
 
-    model = LeanPPO(  # SB3's PPO, its rollouts collected with fewer Python operations
-        "MlpPolicy",
+    model = PPO(
+        LeanActorCriticPolicy,  # SB3's MlpPolicy with fewer Python operations, same numbers
         venv,
         learning_rate=_learning_rate(config),
         n_steps=config.n_steps,
@@ -640,11 +641,10 @@ def train(config: TrainConfig, progress: bool = True) -> Path:
     print(_start_line(config, total, last), flush=True)
 
     import torch as th
+    from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.logger import CSVOutputFormat, Logger, TensorBoardOutputFormat
     from stable_baselines3.common.utils import set_random_seed
-
-    from agents.ppo import LeanPPO
 
     run_dir.mkdir(parents=True, exist_ok=True)
 
@@ -660,7 +660,7 @@ def train(config: TrainConfig, progress: bool = True) -> Path:
     if last is None:
         model = make_model(config, venv)
     elif last.legacy:  # an older run's pickled SB3 checkpoint, the file --trust-pickle names
-        model = LeanPPO.load(
+        model = PPO.load(
             last.path,
             env=venv,
             device="cpu",

@@ -7,8 +7,8 @@
 (b) with torch and stable-baselines3 installed: PPO with the default hyperparameters for
     ``--rollouts`` rollouts of ``n_steps * num_envs`` decisions, timed while it collects them
     (policy inference and the environment) and end to end (with the updates), and what the
-    updates alone cost per decision; alternately, the same with SB3's own ``collect_rollouts``
-    (the baseline of ``agents.ppo.LeanPPO``'s loop, in the same process);
+    updates alone cost per decision; alternately, the same with the policy answering through
+    SB3's own methods (the baseline of ``agents.ppo.LeanActorCriticPolicy``, same process);
 (c) where a step of the training env goes: the compiled plant loops, the measurement-noise
     draws, the rest of the native vector env, and SB3's side (the adapter, episode statistics
     and normalisation), microseconds per step of all ``num_envs`` strings.
@@ -29,6 +29,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import importlib.util
+import math
 import os
 import re
 import subprocess
@@ -65,14 +66,14 @@ def env_rate(config: TrainConfig, decisions: int, action: str, repeat: int) -> f
 def ppo_rates(config: TrainConfig, rollouts: int, repeat: int) -> dict[str, float]:
     """(b) Decisions per CPU second of PPO while collecting rollouts (``collect``), and end to
     end (``total``); CPU microseconds of the updates per decision (``update_us``, the least of
-    the runs). Where ``make_model`` collects with a loop of its own (``agents.ppo.LeanPPO``),
-    each run is followed by one of the same model collecting with SB3's ``collect_rollouts``
-    (``sb3_collect``, ``sb3_total``): the same transitions, a baseline in the same process."""
+    the runs). Where ``make_model``'s policy is ``agents.ppo.LeanActorCriticPolicy``, each run
+    is followed by one of the same model answering with SB3's own ``forward`` and
+    ``evaluate_actions`` (``sb3_*``): the same numbers, a baseline in the same process."""
     import types
 
     import torch as th
-    from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.policies import ActorCriticPolicy
 
     class RolloutTimer(BaseCallback):
         def __init__(self) -> None:
@@ -90,31 +91,29 @@ def ppo_rates(config: TrainConfig, rollouts: int, repeat: int) -> dict[str, floa
             return True
 
     th.set_num_threads(config.torch_threads)
-    probe = make_training_env(config)
-    own_loop = type(make_model(config, probe)).collect_rollouts
-    probe.close()
-    collectors = ("own", "sb3") if own_loop is not PPO.collect_rollouts else ("own",)
-    rates = {"collect": 0.0, "total": 0.0, "update_us": float("inf")}
-    rates.update(dict.fromkeys(("sb3_collect", "sb3_total"), 0.0) if len(collectors) > 1 else {})
+    lean = importlib.util.find_spec("agents.ppo") is not None  # not in versions before it
+    rates: dict[str, float] = {}
     for _ in range(repeat):
-        for collector in collectors:  # alternately
+        for prefix in ("", "sb3_") if lean else ("",):  # alternately
             venv = make_training_env(config)
             model = make_model(config, venv)
-            if collector == "sb3":
-                model.collect_rollouts = types.MethodType(PPO.collect_rollouts, model)
+            if prefix:
+                for name in ("forward", "evaluate_actions"):
+                    method = getattr(ActorCriticPolicy, name)
+                    setattr(model.policy, name, types.MethodType(method, model.policy))
             timer = RolloutTimer()
             start = time.process_time()
             model.learn(total_timesteps=rollouts * config.n_steps * config.num_envs, callback=timer)
             total_s = time.process_time() - start
-            prefix = "sb3_" if collector == "sb3" else ""
-            collect_rate = model.num_timesteps / timer.collecting_s
-            rates[prefix + "collect"] = max(rates[prefix + "collect"], collect_rate)
-            rates[prefix + "total"] = max(rates[prefix + "total"], model.num_timesteps / total_s)
-            if collector == "own":
-                update_us = 1e6 * (total_s - timer.collecting_s) / model.num_timesteps
-                rates["update_us"] = min(rates["update_us"], update_us)
+            measured = {
+                "collect": model.num_timesteps / timer.collecting_s,
+                "total": model.num_timesteps / total_s,
+                "update_us": -1e6 * (total_s - timer.collecting_s) / model.num_timesteps,
+            }
+            for key, value in measured.items():  # the best: the highest rate, the least cost
+                rates[prefix + key] = max(rates.get(prefix + key, -math.inf), value)
             venv.close()
-    return rates
+    return {key: -value if key.endswith("update_us") else value for key, value in rates.items()}
 
 
 def step_parts(config: TrainConfig, steps: int, repeat: int) -> dict[str, float]:
@@ -180,10 +179,12 @@ def measure(args: argparse.Namespace) -> None:
         )
         if "sb3_collect" in rates:
             print(
-                f"    the same with SB3's collect_rollouts: collecting {rates['sb3_collect']:,.0f}"
-                f" decisions/s, end to end {rates['sb3_total']:,.0f} (this version's loop: "
-                f"x{rates['collect'] / rates['sb3_collect']:.2f} and "
-                f"x{rates['total'] / rates['sb3_total']:.2f})"
+                f"    the same with SB3's MlpPolicy methods: collecting {rates['sb3_collect']:,.0f}"
+                f" decisions/s, end to end {rates['sb3_total']:,.0f}, updates "
+                f"{rates['sb3_update_us']:.1f} us (this version's policy: "
+                f"x{rates['collect'] / rates['sb3_collect']:.2f}, "
+                f"x{rates['total'] / rates['sb3_total']:.2f}, "
+                f"x{rates['sb3_update_us'] / rates['update_us']:.2f})"
             )
     else:
         print("(b) PPO: torch is not installed (pip install '.[rl]')")
