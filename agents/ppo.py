@@ -87,8 +87,22 @@ class LeanActorCriticPolicy(ActorCriticPolicy):
     the plain MLP with a diagonal Gaussian on flat observations (the same numbers)."""
 
     def _networks(self) -> _Networks | None:
-        """The networks as functions of their current parameters, or None when this policy is
+        """The networks as functions of their parameter tensors, built at the first call (a
+        copy of the policy builds its own: see ``__getstate__``), or None when this policy is
         not the plain case (then SB3's methods answer)."""
+        if "_lean_networks" not in self.__dict__:
+            self.__dict__["_lean_networks"] = self._build_networks()
+        networks: _Networks | None = self.__dict__["_lean_networks"]
+        return networks
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Without the built networks (functions bound to this object's tensors): what
+        ``pickle``, ``copy.copy`` and ``copy.deepcopy`` take of the policy."""
+        state = dict(self.__dict__)
+        state.pop("_lean_networks", None)
+        return state
+
+    def _build_networks(self) -> _Networks | None:
         if not (
             type(self.action_dist) is DiagGaussianDistribution
             and not self.use_sde
@@ -126,7 +140,8 @@ class LeanActorCriticPolicy(ActorCriticPolicy):
         else:
             actions = mean + th.empty(mean.shape, dtype=mean.dtype).normal_() * std
         log_prob = -((actions - mean) ** 2) / (2 * std**2) - std.log() - _LOG_SQRT_2PI
-        return actions.reshape((-1, *self.action_space.shape)), values, log_prob.sum(dim=1)
+        actions = actions.reshape((-1, *self.action_space.shape))  # type: ignore[misc]
+        return actions, values, log_prob.sum(dim=1)
 
     def evaluate_actions(self, obs: Any, actions: Tensor) -> tuple[Tensor, Tensor, Tensor | None]:
         """Values, log-probabilities of ``actions`` and entropies

@@ -163,8 +163,39 @@ def test_policies_it_does_not_know_layer_by_layer_take_sb3s_methods(kind: str) -
     if kind == "squashed":
         kwargs["policy_kwargs"] = {"squash_output": True}
     model = PPO(
-        LeanActorCriticPolicy, _space_env(observation, action), device="cpu", n_steps=32, batch_size=32, **kwargs
+        LeanActorCriticPolicy,
+        _space_env(observation, action),
+        device="cpu",
+        n_steps=32,
+        batch_size=32,
+        **kwargs,
     )
     assert model.policy._networks() is None
     model.learn(total_timesteps=64)
     assert model.num_timesteps >= 64
+
+
+def test_a_copy_of_the_policy_computes_with_its_own_parameters() -> None:
+    """The networks the policy binds at its first forward pass are not shared by a deep copy
+    or a pickled one: each answers with its own weights, as SB3's methods do."""
+    import copy
+    import pickle
+
+    from gymnasium import spaces
+
+    observation = spaces.Box(-5.0, 5.0, (4,), np.float32)
+    action = spaces.Box(-1.0, 1.0, (1,), np.float32)
+    policy = PPO(LeanActorCriticPolicy, _space_env(observation, action), device="cpu").policy
+    obs = th.as_tensor(np.ones((3, 4)), dtype=th.float32)
+    with th.no_grad():
+        policy(obs)  # binds the networks
+        for twin in (copy.deepcopy(policy), pickle.loads(pickle.dumps(policy))):
+            twin.action_net.bias.fill_(0.5)
+            twin.value_net.bias.fill_(-2.0)
+            th.manual_seed(0)
+            got = twin(obs)
+            th.manual_seed(0)
+            expected = ActorCriticPolicy.forward(twin, obs)
+            for want, have in zip(expected, got, strict=True):
+                assert th.equal(want, have)
+            assert not th.equal(policy(obs, deterministic=True)[0], twin(obs, True)[0])
