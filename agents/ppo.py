@@ -47,7 +47,8 @@ def _linear(weight: Tensor, bias: Tensor | None) -> Layer:
 
 def _layers(network: th.nn.Module) -> list[Layer] | None:
     """The functions of a ``Sequential`` of ``Linear`` and tanh/ReLU layers (or of one
-    ``Linear``) on the layers' parameter tensors as they are now; None for any other module."""
+    ``Linear``) bound to the layers' parameter tensors, which the optimizer and
+    ``load_state_dict`` update in place; None for any other module."""
     modules = list(network) if type(network) is th.nn.Sequential else [network]
     layers: list[Layer] = []
     for module in modules:
@@ -84,7 +85,8 @@ class _Networks:
 class LeanActorCriticPolicy(ActorCriticPolicy):
     """SB3's ``MlpPolicy`` (``ActorCriticPolicy``, same constructor); ``forward`` and
     ``evaluate_actions`` skip the module calls and the distribution object when the policy is
-    the plain MLP with a diagonal Gaussian on flat observations (the same numbers)."""
+    the plain MLP with a diagonal Gaussian on flat observations (the same numbers). The layers
+    are read at the first forward pass: replace none of them afterwards."""
 
     def _networks(self) -> _Networks | None:
         """The networks as functions of their parameter tensors, built at the first call (a
