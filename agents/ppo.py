@@ -61,6 +61,13 @@ def _layers(network: th.nn.Module) -> list[Layer] | None:
     return layers
 
 
+def _log_prob(actions: Tensor, loc: Tensor, scale: Tensor) -> Tensor:
+    """``Normal(loc, scale).log_prob(actions)`` summed over the action (SB3's
+    ``sum_independent_dims``), written as torch writes it."""
+    log_prob = -((actions - loc) ** 2) / (2 * scale**2) - scale.log() - _LOG_SQRT_2PI
+    return log_prob.sum(dim=1)
+
+
 def _run(layers: list[Layer], x: Tensor) -> Tensor:
     for layer in layers:
         x = layer(x)
@@ -135,15 +142,15 @@ class LeanActorCriticPolicy(ActorCriticPolicy):
         values = _run(networks.value, latent_vf)
         mean = _run(networks.action, latent_pi)
         # DiagGaussianDistribution.proba_distribution, Normal.rsample (one normal_ draw of
-        # the batch's shape) or its mean, then Normal.log_prob summed over the action
+        # the batch's shape) or its mean
         std = th.ones_like(mean) * self.log_std.exp()
         if deterministic:
             actions = mean
         else:
             actions = mean + th.empty(mean.shape, dtype=mean.dtype).normal_() * std
-        log_prob = -((actions - mean) ** 2) / (2 * std**2) - std.log() - _LOG_SQRT_2PI
+        log_prob = _log_prob(actions, mean, std)
         actions = actions.reshape((-1, *self.action_space.shape))  # type: ignore[misc]
-        return actions, values, log_prob.sum(dim=1)
+        return actions, values, log_prob
 
     def evaluate_actions(self, obs: Any, actions: Tensor) -> tuple[Tensor, Tensor, Tensor | None]:
         """Values, log-probabilities of ``actions`` and entropies
@@ -155,7 +162,7 @@ class LeanActorCriticPolicy(ActorCriticPolicy):
         mean = _run(networks.action, latent_pi)
         std = th.ones_like(mean) * self.log_std.exp()
         loc, scale = th.broadcast_tensors(mean, std)  # Normal(mean, std)
-        log_prob = -((actions - loc) ** 2) / (2 * scale**2) - scale.log() - _LOG_SQRT_2PI
+        log_prob = _log_prob(actions, loc, scale)
         values = _run(networks.value, latent_vf)
         entropy = _ENTROPY_CONSTANT + th.log(scale)
-        return values, log_prob.sum(dim=1), entropy.sum(dim=1)
+        return values, log_prob, entropy.sum(dim=1)

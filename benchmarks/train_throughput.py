@@ -29,7 +29,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import importlib.util
-import math
 import os
 import re
 import subprocess
@@ -108,12 +107,13 @@ def ppo_rates(config: TrainConfig, rollouts: int, repeat: int) -> dict[str, floa
             measured = {
                 "collect": model.num_timesteps / timer.collecting_s,
                 "total": model.num_timesteps / total_s,
-                "update_us": -1e6 * (total_s - timer.collecting_s) / model.num_timesteps,
+                "update_us": 1e6 * (total_s - timer.collecting_s) / model.num_timesteps,
             }
             for key, value in measured.items():  # the best: the highest rate, the least cost
-                rates[prefix + key] = max(rates.get(prefix + key, -math.inf), value)
+                best = min if key == "update_us" else max
+                rates[prefix + key] = best(rates.get(prefix + key, value), value)
             venv.close()
-    return {key: -value if key.endswith("update_us") else value for key, value in rates.items()}
+    return rates
 
 
 def step_parts(config: TrainConfig, steps: int, repeat: int) -> dict[str, float]:
