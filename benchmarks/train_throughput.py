@@ -226,7 +226,7 @@ def compare(args: argparse.Namespace) -> None:
                     rates[name].setdefault(key, []).append(float(match[3].replace(",", "")))
     print(
         f"\n{'':42} {'other version':>17} {'this version':>17} {'best/best':>9}"
-        f" {'round by round':>20}"
+        f" {'rounds: range, median':>22}"
     )
     for key, ours in rates["this version"].items():
         theirs = rates["other version"].get(key)
@@ -239,7 +239,7 @@ def compare(args: argparse.Namespace) -> None:
         paired = sorted(t / o if cost else o / t for o, t in zip(ours, theirs, strict=True))
         print(
             f"{key:42} {min(theirs):8,.0f}-{max(theirs):<8,.0f} {min(ours):8,.0f}-{max(ours):<8,.0f}"
-            f" {ratio:9.2f} {float(np.median(paired)):8.2f} ({paired[0]:.2f}-{paired[-1]:.2f})"
+            f" {ratio:9.2f} {paired[0]:9.2f}-{paired[-1]:<5.2f} {float(np.median(paired)):6.2f}"
         )
 
 
