@@ -31,16 +31,10 @@ import math
 import textwrap
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Final, NamedTuple
+from typing import TYPE_CHECKING, Any, Final, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
-from matplotlib.axes import Axes
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
-from matplotlib.lines import Line2D
-from matplotlib.patches import Patch
-from matplotlib.text import Text
 
 from baselines.registry import BUILT_IN
 from drill_env.evaluation import Trace
@@ -49,6 +43,12 @@ from drill_env.metrics import METRIC_LABELS as CORE_METRIC_LABELS
 from drill_env.metrics import STICK_SLIP_SEVERITY
 from drill_env.validation import printable
 from drill_env.validation import shown as shown_value
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+    from matplotlib.text import Text
 
 __all__ = [
     "DPI",
@@ -293,6 +293,9 @@ def _series(
 # ------------------------------------------------------------------- figure plumbing
 def new_figure(width_in: float, height_in: float) -> Figure:
     """An empty figure on the Agg canvas with constrained layout (no text collisions)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=(width_in, height_in), dpi=DPI, layout="constrained")
     FigureCanvasAgg(fig)
     fig.get_layout_engine().set(h_pad=0.04, w_pad=0.04)  # type: ignore[union-attr,call-arg]
@@ -323,6 +326,8 @@ def _plain_texts(fig: Figure) -> None:
     """Draw names from outside as they are written: a ``$`` in a controller's or a model's
     name does not start mathtext (which could fail to parse), and control characters other
     than newlines are shown escaped. Only the labels of :data:`METRIC_LABELS` use mathtext."""
+    from matplotlib.text import Text
+
     ours = set(METRIC_LABELS.values())
     for artist in fig.findobj(Text):
         text = artist.get_text()
@@ -376,6 +381,8 @@ def _tick_labels(fig: Figure) -> tuple[list[Text], dict[int, str]]:
 
 def _drawn_texts(fig: Figure) -> list[tuple[Text, str]]:
     """Every visible, non-empty text of ``fig`` with a short description (draws ``fig``)."""
+    from matplotlib.text import Text
+
     fig.canvas.draw()
     ticks, owner = _tick_labels(fig)
     texts = [(t, f"tick label {shown_value(t.get_text())} ({owner[id(t)]})") for t in ticks]
@@ -513,6 +520,8 @@ def _mark_clipped(
 
 def _clip_handle(bounds: _Range, scale: float, unit: str) -> Line2D | None:
     """The legend entry that explains the triangles of :func:`_mark_clipped`."""
+    from matplotlib.lines import Line2D
+
     parts = []
     if bounds.clipped_high is not None:
         parts.append(f"up to {bounds.clipped_high * scale:.3g} {unit}")
@@ -739,6 +748,9 @@ def panels_figure(
     Raises:
         ValueError: for an unknown ``quantity``, no panels or a panel without traces.
     """
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
     if quantity not in _QUANTITIES:
         raise ValueError(
             f"quantity = {shown_value(quantity)} is not valid: allowed {list(_QUANTITIES)}"
@@ -832,6 +844,8 @@ def adaptive_gains_figure(traces: Mapping[tuple[str, str], Trace], title: str = 
     Returns:
         The figure.
     """
+    from matplotlib.lines import Line2D
+
     fig = new_figure(9.0, 4.6)
     ax = fig.subplots()
     controllers: dict[str, str] = {}
@@ -923,6 +937,9 @@ def metric_bars_figure(
     Raises:
         ValueError: if ``rows`` is empty.
     """
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
     if not rows:
         raise ValueError("rows is empty: nothing to plot")
     metrics = [metric] if isinstance(metric, str) else list(metric)
@@ -1191,6 +1208,8 @@ def trace_response_figure(
     Raises:
         ValueError: if ``traces`` is empty.
     """
+    from matplotlib.lines import Line2D
+
     if not traces:
         raise ValueError("traces is empty: nothing to plot")
     fig = new_figure(8.5, 7.4)

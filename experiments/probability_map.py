@@ -47,14 +47,11 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
-from matplotlib.colors import Normalize
-from matplotlib.figure import Figure
-from matplotlib.lines import Line2D
 
 import baselines  # noqa: F401  (registers the built-in controllers, in their order)
 import drill_env
@@ -88,6 +85,9 @@ from experiments.sweep import (
     run_sweep,
 )
 from experiments.tables import write_csv
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.figure import Figure
 
 __all__ = [
     "CSV_COLUMNS",
@@ -784,6 +784,9 @@ def probability_figure(result: ProbabilityMap) -> Figure:
     """The probability of stick-slip of one controller as a heatmap over (WOB or depth) x
     reference speed, with contour lines at :data:`PROBABILITY_LEVELS` (labelled) and a
     labelled colour bar."""
+    from matplotlib.colors import Normalize
+    from matplotlib.lines import Line2D
+
     fig = new_figure(8.0, 5.6)
     ax = fig.subplots()
     label, scale = _ROW_LABELS[result.row_axis]

@@ -37,15 +37,11 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Final, NamedTuple, Protocol, TypeAlias
+from typing import TYPE_CHECKING, Any, Final, NamedTuple, Protocol, TypeAlias
 
 import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
-from matplotlib.axes import Axes
-from matplotlib.colors import Normalize
-from matplotlib.figure import Figure
-from matplotlib.lines import Line2D
 from tqdm import tqdm
 
 import baselines  # noqa: F401  (registers the built-in controllers, in their order)
@@ -101,6 +97,10 @@ from experiments.sweep import (
     chunks,
 )
 from experiments.tables import write_csv
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
 __all__ = [
     "CSV_COLUMNS",
@@ -1237,6 +1237,8 @@ BOUNDARY_LABEL: Final = (
 
 
 def _heatmap(ax: Axes, result: StickSlipMap, quantity: str, title: str) -> Any:
+    from matplotlib.colors import Normalize
+
     if quantity == "severity":
         data, norm, cmap = result.severity, Normalize(0.0, SEVERITY_LIMIT), "magma"
     else:
@@ -1266,6 +1268,8 @@ def _heatmap(ax: Axes, result: StickSlipMap, quantity: str, title: str) -> Any:
 
 
 def _boundary_legend(fig: Figure) -> None:
+    from matplotlib.lines import Line2D
+
     handle = Line2D([], [], color="white", lw=2.0, label=BOUNDARY_LABEL)
     legend = fig.legend(handles=[handle], loc="outside lower center", fontsize=10, frameon=True)
     legend.get_frame().set_facecolor("0.45")

@@ -44,15 +44,11 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
-from matplotlib.axes import Axes
-from matplotlib.colors import Normalize
-from matplotlib.figure import Figure
-from matplotlib.lines import Line2D
 
 import baselines  # noqa: F401  (registers the built-in controllers, in their order)
 from baselines.registry import family_members, needs_full_state
@@ -96,6 +92,10 @@ from experiments.sweep import (
     item_tasks,
 )
 from experiments.tables import Column, markdown_table, write_json
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
 __all__ = [
     "RECORD_DT_S",
@@ -935,6 +935,8 @@ def string_response_figure(
     Raises:
         ValueError: if ``histories`` is empty.
     """
+    from matplotlib.lines import Line2D
+
     if not histories:
         raise ValueError("histories is empty: nothing to plot")
     n = len(histories)
@@ -1021,6 +1023,9 @@ def space_time_figure(history: StringHistory, title: str = "") -> Figure:
     Raises:
         ValueError: if the history has fewer than two samples.
     """
+    from matplotlib.colors import Normalize
+    from matplotlib.lines import Line2D
+
     if history.time_s.size < 2:
         raise ValueError("history has fewer than two samples: nothing to plot")
     fig = new_figure(10.0, 7.6)

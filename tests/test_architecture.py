@@ -222,6 +222,22 @@ def test_importing_the_core_loads_no_higher_floor_nor_plotting() -> None:
     assert out.stdout.strip() == ""
 
 
+def test_the_commands_load_matplotlib_only_to_draw() -> None:
+    """Every module of ``experiments`` (each ``drill-gym`` command) imports without matplotlib,
+    which the figure functions import when they draw: a command's start, its argument errors
+    and a ``--no-plots`` run do not wait for it (about a second)."""
+    code = (
+        "import importlib, pkgutil, sys, experiments\n"
+        "for module in pkgutil.iter_modules(experiments.__path__):\n"
+        "    importlib.import_module('experiments.' + module.name)\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] == 'matplotlib'))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
+    )
+    assert out.stdout.strip() == "[]"
+
+
 def test_a_controller_name_is_found_without_importing_baselines() -> None:
     """The core finds a built-in controller by name through the registry's entry points."""
     code = (
