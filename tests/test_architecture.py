@@ -206,6 +206,14 @@ def test_records_and_reports_are_read_by_name() -> None:
                 assert not pattern.search(line), f"{path.relative_to(ROOT)}:{k}: {line.strip()}"
 
 
+def _fresh_python(code: str) -> str:
+    """What ``code`` prints in a new interpreter (modules already imported here do not count)."""
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
+    )
+    return out.stdout.strip()
+
+
 def test_importing_the_core_loads_no_higher_floor_nor_plotting() -> None:
     """``import drill_env`` and a direct-mode env pull in no controllers, agents, studies,
     plotting or torch."""
@@ -216,10 +224,7 @@ def test_importing_the_core_loads_no_higher_floor_nor_plotting() -> None:
         " 'stable_baselines3') if m in sys.modules]\n"
         "print(','.join(bad))\n"
     )
-    out = subprocess.run(
-        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
-    )
-    assert out.stdout.strip() == ""
+    assert _fresh_python(code) == ""
 
 
 def test_the_commands_load_matplotlib_only_to_draw() -> None:
@@ -232,10 +237,7 @@ def test_the_commands_load_matplotlib_only_to_draw() -> None:
         "    importlib.import_module('experiments.' + module.name)\n"
         "print(sorted(m for m in sys.modules if m.split('.')[0] == 'matplotlib'))\n"
     )
-    out = subprocess.run(
-        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
-    )
-    assert out.stdout.strip() == "[]"
+    assert _fresh_python(code) == "[]"
 
 
 def test_a_controller_name_is_found_without_importing_baselines() -> None:
@@ -245,10 +247,7 @@ def test_a_controller_name_is_found_without_importing_baselines() -> None:
         "env = gym.make('DrillString-v0', base_controller='proposed')\n"
         "print(type(env.unwrapped.batch.controllers[0]).__module__)\n"
     )
-    out = subprocess.run(
-        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
-    )
-    assert out.stdout.strip() == "baselines.proposed"
+    assert _fresh_python(code) == "baselines.proposed"
 
 
 # --------------------------------------------------------------------- one home per fact
