@@ -380,7 +380,8 @@ def _advance_rows(mode: int, u: float, p, t_a: float, t_0: float, h: float, work
     out_w, out_t = work[_OUT_W], work[_OUT_T]
     kept = False
     if mode != STUCK:
-        new_mode, kept = _slip_step(p, n, work, mode, u, t_a, t_0, h, False)
+        # kept (False here) as a computed bool: the literal False would compile _slip_step twice
+        new_mode, kept = _slip_step(p, n, work, mode, u, t_a, t_0, h, mode == STUCK)
     else:
         _rk4(p, n, work, u, t_a, t_0, mode, h)
         te_new = _torque_on_bit(p, n, out_w, out_t)

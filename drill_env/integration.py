@@ -136,7 +136,8 @@ def plant_step(x, mode: int, u: float, p, t_a: float, t_0: float, h: float):
     """
     if mode != STUCK:
         return _slip_step(x, mode, u, p, t_a, t_0, h)
-    xn = rk4(x, u, p, t_a, t_0, STUCK, h)
+    # mode (STUCK here), not the constant: a literal argument would compile rk4 a second time
+    xn = rk4(x, u, p, t_a, t_0, mode, h)
     te_new = _torque_on_bit(xn, p)
     if abs(te_new) <= t_a:
         return xn, STUCK
@@ -147,7 +148,7 @@ def plant_step(x, mode: int, u: float, p, t_a: float, t_0: float, h: float):
     if te_new != te_old:
         theta = min(max((limit - te_old) / (te_new - te_old), 0.0), 1.0)
     direction = 1 if te_new > 0.0 else -1
-    x_break = rk4(x, u, p, t_a, t_0, STUCK, theta * h) if theta > 0.0 else x
+    x_break = rk4(x, u, p, t_a, t_0, mode, theta * h) if theta > 0.0 else x
     rest = (1.0 - theta) * h
     if rest <= 0.0:
         return x_break, direction
