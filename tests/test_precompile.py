@@ -79,3 +79,35 @@ def test_precompile_fills_the_cache_so_a_new_process_compiles_nothing(tmp_path: 
         check=True,
     )
     assert first_use.stderr == ""  # loaded from the cache: no compilation, no note
+
+
+@pytest.mark.slow
+def test_the_first_step_compiles_each_function_of_the_plant_once(tmp_path: Path) -> None:
+    """An empty cache, the first step of the 4-DOF string, then of the field string: neither
+    compiles a function of the project for two signatures (a literal argument, ``0`` for a
+    variable mode, makes numba compile a second copy: seconds of a cold start)."""
+    code = (
+        "import collections, gymnasium as gym\n"
+        "from numba.core import event\n"
+        "seen = collections.defaultdict(set)\n"
+        "class Signatures(event.Listener):\n"
+        "    def on_start(self, ev):\n"
+        "        function = ev.data['dispatcher'].py_func\n"
+        "        seen[function.__module__ + '.' + function.__qualname__].add(str(ev.data['args']))\n"
+        "    def on_end(self, ev):\n"
+        "        pass\n"
+        "event.register('numba:compile', Signatures())\n"
+        "import drill_env\n"
+        "twice = []\n"
+        "for env_id in ('DrillString-v0', 'DrillStringField-v0'):\n"
+        "    seen.clear()\n"
+        "    env = gym.make(env_id); env.reset(seed=0); env.step(env.action_space.sample())\n"
+        "    twice += [(env_id, name) for name, signatures in seen.items()\n"
+        "              if name.startswith('drill_env.') and len(signatures) > 1]\n"
+        "print(sorted(twice))\n"
+    )
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path), "OMP_NUM_THREADS": "1"}
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, check=True
+    )
+    assert out.stdout.strip() == "[]"
