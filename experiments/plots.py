@@ -7,7 +7,8 @@ probability map in :mod:`experiments.probability_map`, the string's waves in
 
 Every ``*_figure`` function builds one :class:`~matplotlib.figure.Figure` with matplotlib's
 object-oriented API on the Agg canvas (no ``pyplot``, no global state, safe in worker processes)
-and returns it; :func:`save_figure` writes it as PNG. :func:`text_overlaps` lists the pairs of
+and returns it (matplotlib is imported there, when a figure is drawn, so that a command starts
+without it); :func:`save_figure` writes it as PNG. :func:`text_overlaps` lists the pairs of
 texts of a figure that overlap (titles, labels, tick labels, legends, notes) and
 :func:`text_outside` the texts cut off by its edge: the tests check every figure the commands
 write with both.
